@@ -1,0 +1,1 @@
+"""Pure control logic: SI commands, limits, position control. No Qt."""

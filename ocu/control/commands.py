@@ -1,0 +1,206 @@
+"""Commands in SI units: joint velocities to RCP axes and buttons, telemetry to radians."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+
+from ocu.profile import AXIS_MAX, CHANNEL_NAMES, Motor, RobotProfile
+from ocu.protocol import (
+    AXIS_COUNT,
+    BUTTON_COUNT,
+    Codec,
+    MotorRecord,
+    RemoteControlPacket,
+    TelemetryPacket,
+)
+
+
+class CommandError(ValueError):
+    """A command names an unknown channel or holds a value that is not a finite number."""
+
+
+def make_codec(profile: RobotProfile) -> Codec:
+    """A codec with the profile's frame type IDs."""
+    types = profile.link.frame_types
+    return Codec(rcp_type=types.rcp, telemetry_type=types.telemetry, video_type=types.video)
+
+
+@dataclass(frozen=True)
+class Command:
+    """What the OCU asks of the robot: channel velocities (m/s or rad/s) and switches."""
+
+    velocities: Mapping[str, float] = field(default_factory=dict)
+    torch: bool = False
+    camera: int | None = None
+    video_bitrate: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, value in self.velocities.items():
+            if name not in CHANNEL_NAMES:
+                raise CommandError(f"unknown velocity channel {name!r}")
+            if not math.isfinite(value):
+                raise CommandError(f"{name}: velocity must be finite, got {value!r}")
+
+    def velocity(self, channel: str) -> float:
+        """Velocity of one channel; 0.0 when unset."""
+        return float(self.velocities.get(channel, 0.0))
+
+    @property
+    def is_motion(self) -> bool:
+        """Whether any channel asks for movement."""
+        return any(v != 0.0 for v in self.velocities.values())
+
+    def with_velocity(self, channel: str, value: float) -> Command:
+        """A copy with one channel changed."""
+        velocities = dict(self.velocities)
+        velocities[channel] = value
+        return replace(self, velocities=velocities)
+
+    def with_velocities(self, values: Mapping[str, float]) -> Command:
+        """A copy with several channels changed."""
+        velocities = dict(self.velocities)
+        velocities.update(values)
+        return replace(self, velocities=velocities)
+
+    def stopped(self) -> Command:
+        """The same switches with every velocity zero (the e-stop command)."""
+        return replace(self, velocities={})
+
+
+class VelocityLimits:
+    """Current maximum velocity per channel, never above the profile's hard maximum."""
+
+    def __init__(self, profile: RobotProfile) -> None:
+        self._profile = profile
+        self._max = {name: ch.default_max for name, ch in profile.channels.items()}
+
+    def get(self, channel: str) -> float:
+        """Current maximum of a channel."""
+        return self._max[channel]
+
+    def set(self, channel: str, value: float) -> float:
+        """Set a channel's maximum, clipped to [0, hard_max]; returns the value kept."""
+        if channel not in self._max:
+            raise CommandError(f"unknown velocity channel {channel!r}")
+        if not math.isfinite(value):
+            raise CommandError(f"{channel}: maximum must be finite, got {value!r}")
+        kept = min(max(value, 0.0), self._profile.channels[channel].hard_max)
+        self._max[channel] = kept
+        return kept
+
+    def as_dict(self) -> dict[str, float]:
+        """A copy of all maxima."""
+        return dict(self._max)
+
+    def clamp(self, channel: str, value: float) -> float:
+        """A velocity bounded by the channel's current maximum, sign kept."""
+        limit = self._max[channel]
+        return min(max(value, -limit), limit)
+
+
+def _to_axis(value: float, per_unit: float) -> int:
+    return int(min(max(round(value * per_unit), -AXIS_MAX), AXIS_MAX))
+
+
+class CommandMapper:
+    """Turns SI commands into RCPs and RCPs back into SI (the simulator's side)."""
+
+    def __init__(self, profile: RobotProfile) -> None:
+        self.profile = profile
+
+    def to_packet(self, command: Command, limits: VelocityLimits | None = None) -> RemoteControlPacket:
+        """The RCP for a command, each velocity clamped to the limits (hard max if None)."""
+        axes = [0] * AXIS_COUNT
+        for name, channel in self.profile.channels.items():
+            value = command.velocity(name)
+            if limits is not None:
+                value = limits.clamp(name, value)
+            value = min(max(value, -channel.hard_max), channel.hard_max)
+            axes[channel.axis] = _to_axis(value, channel.axis_per_unit)
+        buttons = [0] * BUTTON_COUNT
+        buttons[self.profile.torch_button] = 1 if command.torch else 0
+        if command.camera is not None:
+            buttons[self.profile.camera_button] = command.camera + 1
+        return RemoteControlPacket(
+            axes=tuple(axes), buttons=tuple(buttons), video_bitrate=command.video_bitrate
+        )
+
+    def to_command(self, packet: RemoteControlPacket) -> Command:
+        """The SI command an RCP carries (inverse of to_packet up to axis rounding)."""
+        velocities = {
+            name: packet.axes[ch.axis] / ch.axis_per_unit
+            for name, ch in self.profile.channels.items()
+            if packet.axes[ch.axis] != 0
+        }
+        selector = packet.buttons[self.profile.camera_button]
+        return Command(
+            velocities=velocities,
+            torch=packet.buttons[self.profile.torch_button] != 0,
+            camera=selector - 1 if selector > 0 else None,
+            video_bitrate=packet.video_bitrate,
+        )
+
+
+@dataclass(frozen=True)
+class JointReading:
+    """One motor's telemetry in SI units."""
+
+    name: str
+    device_id: int
+    state: int
+    mode: int
+    angle_rad: float | None
+    speed_rad_s: float
+    current_a: float
+    status: int
+    target_angle_rad: float | None
+    speed_command_rad_s: float
+    current_command_a: float
+
+
+def ticks_to_rad(motor: Motor, ticks: int) -> float:
+    """Raw u32 position to radians about the motor's zero."""
+    assert motor.ticks_per_rad is not None
+    return (ticks - motor.zero_offset_ticks) / motor.ticks_per_rad
+
+
+def rad_to_ticks(motor: Motor, angle_rad: float) -> int:
+    """Radians to the raw u32 position, clipped to the u32 range."""
+    assert motor.ticks_per_rad is not None
+    raw = round(angle_rad * motor.ticks_per_rad) + motor.zero_offset_ticks
+    return int(min(max(raw, 0), 2**32 - 1))
+
+
+def read_motor(profile: RobotProfile, record: MotorRecord) -> JointReading | None:
+    """SI reading of one motor record, or None for a device the profile does not know."""
+    motor = profile.motor_by_device(record.device_id)
+    if motor is None:
+        return None
+    speed_scale = profile.telemetry_speed_per_rad_s
+    current_scale = profile.telemetry_current_per_amp
+    positioned = motor.has_position
+    return JointReading(
+        name=motor.name,
+        device_id=record.device_id,
+        state=record.state,
+        mode=record.mode,
+        angle_rad=ticks_to_rad(motor, record.position) if positioned else None,
+        speed_rad_s=record.speed / speed_scale,
+        current_a=record.current / current_scale,
+        status=record.status,
+        target_angle_rad=ticks_to_rad(motor, record.position_command) if positioned else None,
+        speed_command_rad_s=record.speed_command / speed_scale,
+        current_command_a=record.current_command / current_scale,
+    )
+
+
+def read_telemetry(profile: RobotProfile, packet: TelemetryPacket) -> dict[str, JointReading]:
+    """SI readings of every known motor in a telemetry packet, by joint name."""
+    readings: dict[str, JointReading] = {}
+    for record in packet.motors:
+        reading = read_motor(profile, record)
+        if reading is not None:
+            readings[reading.name] = reading
+    return readings

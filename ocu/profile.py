@@ -1,0 +1,346 @@
+"""Robot profile: load and validate the TOML file that holds every robot fact."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+AXIS_COUNT = 16
+BUTTON_COUNT = 16
+AXIS_MAX = 32767
+SCALE_NAMES = ("linear", "rotation", "joint")
+CHANNEL_NAMES = (
+    "drive_linear",
+    "drive_turn",
+    "flippers",
+    "waist",
+    "shoulder",
+    "elbow",
+    "neck",
+    "gripper",
+)
+
+
+class ProfileError(ValueError):
+    """The robot profile is missing a value or holds a bad one."""
+
+
+@dataclass(frozen=True)
+class FrameTypes:
+    """Wire IDs of the vendor packet types."""
+
+    rcp: int
+    telemetry: int
+    video: int
+
+
+@dataclass(frozen=True)
+class LinkSettings:
+    """Network and timing facts of the link."""
+
+    address: str
+    port: int
+    send_rate_hz: float
+    send_rate_min_hz: float
+    send_rate_max_hz: float
+    robot_watchdog_s: float
+    telemetry_rate_hz: float
+    telemetry_tick_hz: float
+    link_lost_after_s: float
+    gui_alive_timeout_s: float
+    estop_repeats: int
+    estop_window_s: float
+    default_video_bitrate: float
+    camera_names: tuple[str, ...]
+    frame_types: FrameTypes
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One velocity channel: which RCP axis carries it and how SI maps to axis units."""
+
+    name: str
+    axis: int
+    axis_per_unit: float
+    unit: str
+    min_speed: float
+    default_max: float
+    hard_max: float
+
+
+@dataclass(frozen=True)
+class Motor:
+    """One telemetry motor record: its device ID and how to read its position."""
+
+    name: str
+    device_id: int
+    channel: str | None
+    track: str | None
+    ticks_per_rad: float | None
+    zero_offset_ticks: int
+    limits_rad: tuple[float, float] | None
+
+    @property
+    def has_position(self) -> bool:
+        """Whether this motor reports a shaft position (the tracks do not)."""
+        return self.ticks_per_rad is not None
+
+
+@dataclass(frozen=True)
+class RobotProfile:
+    """Everything the OCU knows about one robot model."""
+
+    name: str
+    source: str
+    link: LinkSettings
+    channels: dict[str, Channel]
+    motors: dict[str, Motor]
+    torch_button: int
+    camera_button: int
+    track_width_m: float
+    telemetry_speed_per_rad_s: float
+    telemetry_current_per_amp: float
+    linear_axis_per_m_s: float
+    rotation_axis_per_rad_s: float
+    assumptions: tuple[str, ...]
+
+    def motor_by_device(self, device_id: int) -> Motor | None:
+        """The motor with this telemetry device ID, or None."""
+        for motor in self.motors.values():
+            if motor.device_id == device_id:
+                return motor
+        return None
+
+    def motor_for_channel(self, channel: str) -> Motor | None:
+        """The positioned motor driven by a velocity channel, or None."""
+        for motor in self.motors.values():
+            if motor.channel == channel:
+                return motor
+        return None
+
+    @property
+    def positioned_motors(self) -> list[Motor]:
+        """Motors that report a position and are driven by a channel."""
+        return [m for m in self.motors.values() if m.has_position and m.channel]
+
+
+def default_profile_path() -> Path:
+    """Path of the Engineer profile shipped with the package."""
+    return Path(str(resources.files("ocu") / "profiles" / "engineer.toml"))
+
+
+def load_profile(path: str | Path | None = None) -> RobotProfile:
+    """Read and validate a profile; the shipped Engineer profile when path is None."""
+    profile_path = Path(path) if path is not None else default_profile_path()
+    try:
+        text = profile_path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise ProfileError(f"cannot read profile {profile_path}: {err.strerror}") from err
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ProfileError(f"{profile_path}: not valid TOML: {err}") from err
+    return parse_profile(data, source=str(profile_path))
+
+
+class _Reader:
+    """Typed access to a TOML table with error messages that name the key."""
+
+    def __init__(self, table: dict[str, Any], where: str) -> None:
+        self.table = table
+        self.where = where
+
+    def _get(self, key: str) -> Any:
+        if key not in self.table:
+            raise ProfileError(f"{self.where}.{key}: missing")
+        return self.table[key]
+
+    def sub(self, key: str) -> _Reader:
+        value = self._get(key)
+        if not isinstance(value, dict):
+            raise ProfileError(f"{self.where}.{key}: must be a table")
+        return _Reader(value, f"{self.where}.{key}")
+
+    def number(self, key: str, *, low: float | None = None, high: float | None = None) -> float:
+        value = self._get(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ProfileError(f"{self.where}.{key}: must be a number, got {value!r}")
+        number = float(value)
+        if not math.isfinite(number):
+            raise ProfileError(f"{self.where}.{key}: must be finite, got {value!r}")
+        if low is not None and number < low:
+            raise ProfileError(f"{self.where}.{key}: must be >= {low}, got {value!r}")
+        if high is not None and number > high:
+            raise ProfileError(f"{self.where}.{key}: must be <= {high}, got {value!r}")
+        return number
+
+    def integer(self, key: str, *, low: int, high: int) -> int:
+        value = self._get(key)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ProfileError(f"{self.where}.{key}: must be an integer, got {value!r}")
+        if not low <= value <= high:
+            raise ProfileError(f"{self.where}.{key}: must be in [{low}, {high}], got {value}")
+        return value
+
+    def string(self, key: str) -> str:
+        value = self._get(key)
+        if not isinstance(value, str) or not value:
+            raise ProfileError(f"{self.where}.{key}: must be a non-empty string")
+        return value
+
+    def optional(self, key: str) -> bool:
+        return key in self.table
+
+
+def _parse_channel(name: str, reader: _Reader, scales: dict[str, float]) -> Channel:
+    axis = reader.integer("axis", low=0, high=AXIS_COUNT - 1)
+    scale = reader.string("scale")
+    if scale not in scales:
+        raise ProfileError(f"{reader.where}.scale: must be one of {SCALE_NAMES}, got {scale!r}")
+    per_unit = scales[scale]
+    min_speed = reader.number("min_speed", low=0.0)
+    hard_max = reader.number("hard_max", low=0.0)
+    default_max = reader.number("default_max", low=0.0, high=hard_max)
+    if min_speed > default_max:
+        raise ProfileError(f"{reader.where}.min_speed: above default_max ({default_max})")
+    if hard_max * per_unit > AXIS_MAX:
+        limit = AXIS_MAX / per_unit
+        raise ProfileError(
+            f"{reader.where}.hard_max: {hard_max} needs axis value {hard_max * per_unit:.0f}, "
+            f"over the int16 range; at most {limit:.4f}"
+        )
+    return Channel(
+        name=name,
+        axis=axis,
+        axis_per_unit=per_unit,
+        unit=reader.string("unit"),
+        min_speed=min_speed,
+        default_max=default_max,
+        hard_max=hard_max,
+    )
+
+
+def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Motor:
+    device_id = reader.integer("device_id", low=0, high=255)
+    channel = reader.string("channel") if reader.optional("channel") else None
+    if channel is not None and channel not in channels:
+        raise ProfileError(f"{reader.where}.channel: unknown channel {channel!r}")
+    track = reader.string("track") if reader.optional("track") else None
+    if track is not None and track not in ("left", "right"):
+        raise ProfileError(f"{reader.where}.track: must be 'left' or 'right'")
+    ticks_per_rad: float | None = None
+    zero_offset = 0
+    limits: tuple[float, float] | None = None
+    if reader.optional("ticks_per_rad"):
+        ticks_per_rad = reader.number("ticks_per_rad", low=1e-9)
+        zero_offset = reader.integer("zero_offset_ticks", low=0, high=2**32 - 1)
+        raw_limits = reader.table.get("limits_deg")
+        if (
+            not isinstance(raw_limits, list)
+            or len(raw_limits) != 2
+            or not all(isinstance(v, (int, float)) for v in raw_limits)
+            or not raw_limits[0] < raw_limits[1]
+        ):
+            raise ProfileError(f"{reader.where}.limits_deg: must be [low, high] with low < high")
+        limits = (math.radians(raw_limits[0]), math.radians(raw_limits[1]))
+    return Motor(
+        name=name,
+        device_id=device_id,
+        channel=channel,
+        track=track,
+        ticks_per_rad=ticks_per_rad,
+        zero_offset_ticks=zero_offset,
+        limits_rad=limits,
+    )
+
+
+def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfile:
+    """Validate a decoded TOML document and build the profile."""
+    root = _Reader(data, "profile")
+    link = root.sub("link")
+    frame_reader = link.sub("frame_types")
+    frame_types = FrameTypes(
+        rcp=frame_reader.integer("rcp", low=0, high=255),
+        telemetry=frame_reader.integer("telemetry", low=0, high=255),
+        video=frame_reader.integer("video", low=0, high=255),
+    )
+    if len({frame_types.rcp, frame_types.telemetry, frame_types.video}) != 3:
+        raise ProfileError("profile.link.frame_types: the three IDs must differ")
+    rate_min = link.number("send_rate_min_hz", low=0.1)
+    rate_max = link.number("send_rate_max_hz", low=rate_min)
+    cameras = link.table.get("camera_names")
+    if not isinstance(cameras, list) or not cameras or not all(isinstance(c, str) for c in cameras):
+        raise ProfileError("profile.link.camera_names: must be a non-empty list of names")
+    link_settings = LinkSettings(
+        address=link.string("address"),
+        port=link.integer("port", low=1, high=65535),
+        send_rate_hz=link.number("send_rate_hz", low=rate_min, high=rate_max),
+        send_rate_min_hz=rate_min,
+        send_rate_max_hz=rate_max,
+        robot_watchdog_s=link.number("robot_watchdog_s", low=0.01),
+        telemetry_rate_hz=link.number("telemetry_rate_hz", low=0.01),
+        telemetry_tick_hz=link.number("telemetry_tick_hz", low=1.0),
+        link_lost_after_s=link.number("link_lost_after_s", low=0.01),
+        gui_alive_timeout_s=link.number("gui_alive_timeout_s", low=0.01),
+        estop_repeats=link.integer("estop_repeats", low=1, high=100),
+        estop_window_s=link.number("estop_window_s", low=0.0, high=1.0),
+        default_video_bitrate=link.number("default_video_bitrate", low=0.0),
+        camera_names=tuple(cameras),
+        frame_types=frame_types,
+    )
+
+    si = root.sub("si")
+    scales = {
+        "linear": si.number("linear_axis_per_m_s", low=1e-9),
+        "rotation": si.number("rotation_axis_per_rad_s", low=1e-9),
+        "joint": si.number("joint_axis_per_rad_s", low=1e-9),
+    }
+    channels_reader = root.sub("channels")
+    channels: dict[str, Channel] = {}
+    for name in CHANNEL_NAMES:
+        channels[name] = _parse_channel(name, channels_reader.sub(name), scales)
+    unknown = set(channels_reader.table) - set(CHANNEL_NAMES)
+    if unknown:
+        raise ProfileError(f"profile.channels: unknown channels {sorted(unknown)}")
+    axes = [c.axis for c in channels.values()]
+    if len(set(axes)) != len(axes):
+        raise ProfileError("profile.channels: two channels share one axis")
+
+    motors_reader = root.sub("motors")
+    motors: dict[str, Motor] = {}
+    for name in motors_reader.table:
+        motors[name] = _parse_motor(name, motors_reader.sub(name), channels)
+    ids = [m.device_id for m in motors.values()]
+    if len(set(ids)) != len(ids):
+        raise ProfileError("profile.motors: two motors share one device_id")
+    if len(motors) > 10:
+        raise ProfileError("profile.motors: the telemetry packet carries at most 10 motors")
+
+    buttons = root.sub("buttons")
+    torch = buttons.integer("torch", low=0, high=BUTTON_COUNT - 1)
+    camera = buttons.integer("camera_select", low=0, high=BUTTON_COUNT - 1)
+    if torch == camera:
+        raise ProfileError("profile.buttons: torch and camera_select must differ")
+
+    assumptions = data.get("assumptions", [])
+    if not isinstance(assumptions, list) or not all(isinstance(a, str) for a in assumptions):
+        raise ProfileError("profile.assumptions: must be a list of key names")
+    return RobotProfile(
+        name=root.string("name"),
+        source=source,
+        link=link_settings,
+        channels=channels,
+        motors=motors,
+        torch_button=torch,
+        camera_button=camera,
+        track_width_m=root.sub("chassis").number("track_width_m", low=0.01),
+        telemetry_speed_per_rad_s=si.number("telemetry_speed_per_rad_s", low=1e-9),
+        telemetry_current_per_amp=si.number("telemetry_current_per_amp", low=1e-9),
+        linear_axis_per_m_s=scales["linear"],
+        rotation_axis_per_rad_s=scales["rotation"],
+        assumptions=tuple(assumptions),
+    )
