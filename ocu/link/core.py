@@ -1,0 +1,542 @@
+"""The UDP link to the robot: a plain Python network loop, testable without Qt.
+
+One loop thread owns the periodic work: the RCP tick, e-stop repeats, the watchdogs and the
+receive path. Command changes and the first e-stop datagram are sent from the caller's thread
+at once, so a busy loop (or Python's GIL switch interval) cannot delay them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ipaddress
+import logging
+import selectors
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import Enum
+
+from ocu.control.commands import (
+    Command,
+    CommandMapper,
+    JointReading,
+    VelocityLimits,
+    make_codec,
+    read_telemetry,
+)
+from ocu.link.stats import LinkStats, LossEstimator, RateMeter
+from ocu.profile import RobotProfile
+from ocu.protocol import (
+    ProtocolError,
+    RemoteControlPacket,
+    TelemetryPacket,
+    VideoFramePacket,
+)
+
+log = logging.getLogger("ocu.link")
+
+RECV_BUFFER_BYTES = 65536
+RECV_SOCKET_BYTES = 4 * 1024 * 1024
+MAX_DATAGRAMS_PER_WAKE = 256
+STATS_PERIOD_S = 0.5
+
+
+class LinkError(OSError):
+    """The link cannot be set up (unresolvable host, address in use)."""
+
+
+class LinkState(Enum):
+    """Whether valid packets are arriving from the robot."""
+
+    CONNECTING = "connecting"
+    CONNECTED = "connected"
+    LOST = "LINK LOST"
+    CLOSED = "closed"
+
+
+@dataclass(frozen=True)
+class TelemetryFrame:
+    """One decoded telemetry packet with its SI readings and arrival times."""
+
+    packet: TelemetryPacket
+    readings: dict[str, JointReading]
+    received_at: float
+    wall_time: float
+
+
+@dataclass(frozen=True)
+class VideoFrame:
+    """One JPEG frame from the robot and when it arrived."""
+
+    jpeg: bytes
+    camera: int | None
+    received_at: float
+    wall_time: float
+
+
+class LinkListener:
+    """Receives the link's events on the loop thread; override what you need."""
+
+    def telemetry_received(self, frame: TelemetryFrame) -> None:
+        """A valid telemetry packet arrived."""
+
+    def video_frame_received(self, frame: VideoFrame) -> None:
+        """A valid video frame arrived."""
+
+    def link_state_changed(self, state: LinkState, reason: str) -> None:
+        """The link changed state."""
+
+    def stats_updated(self, stats: LinkStats) -> None:
+        """Periodic counters and rates."""
+
+    def safety_event(self, message: str) -> None:
+        """The link stopped the robot by itself or on request (e-stop, watchdogs)."""
+
+    def datagram_sent(self, data: bytes, sent_at: float) -> None:
+        """A datagram went on the wire (for recording)."""
+
+    def datagram_received(self, data: bytes, received_at: float) -> None:
+        """A datagram from the robot arrived, valid or not (for recording)."""
+
+
+def is_loopback(host: str) -> bool:
+    """Whether a host string names a loopback address."""
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
+class LinkCore:
+    """Sends RCPs to the robot and turns what comes back into events."""
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        robot_address: tuple[str, int],
+        *,
+        listener: LinkListener | None = None,
+        bind_address: tuple[str, int] | None = None,
+        link_lost_after_s: float | None = None,
+        gui_alive_timeout_s: float | None = -1.0,
+        send_rate_hz: float | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.profile = profile
+        self.listener = listener or LinkListener()
+        self.clock = clock
+        self.limits = VelocityLimits(profile)
+        self._mapper = CommandMapper(profile)
+        self._codec = make_codec(profile)
+        settings = profile.link
+        self.link_lost_after_s = (
+            settings.link_lost_after_s if link_lost_after_s is None else link_lost_after_s
+        )
+        # None disables the GUI-alive watchdog (a caller with its own timeout, e.g. ROS).
+        self.gui_alive_timeout_s = (
+            settings.gui_alive_timeout_s
+            if gui_alive_timeout_s is not None and gui_alive_timeout_s < 0
+            else gui_alive_timeout_s
+        )
+
+        try:
+            robot_host = socket.gethostbyname(robot_address[0])
+        except OSError as err:
+            raise LinkError(f"cannot resolve robot host {robot_address[0]!r}: {err}") from err
+        self.robot_address = (robot_host, robot_address[1])
+        if bind_address is None:
+            bind_address = ("127.0.0.1" if is_loopback(robot_host) else "0.0.0.0", 0)
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind(bind_address)
+        except OSError as err:
+            self._sock.close()
+            raise LinkError(f"cannot bind {bind_address[0]}:{bind_address[1]}: {err}") from err
+        # Room for a burst of video frames; the kernel caps this at net.core.rmem_max.
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECV_SOCKET_BYTES)
+        self._sock.setblocking(False)
+        self.address: tuple[str, int] = self._sock.getsockname()
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+
+        self._lock = threading.RLock()
+        self._send_lock = threading.Lock()
+        self._command = Command(video_bitrate=settings.default_video_bitrate)
+        self._rate_hz = settings.send_rate_hz if send_rate_hz is None else send_rate_hz
+        self._check_rate(self._rate_hz)
+        self._estop_due: list[float] = []
+        self._estop_latched = False
+        self._gui_alive_at = clock()
+        self._gui_tripped = False
+        self._stop_requested = threading.Event()
+        self._loop_exited = threading.Event()
+        self._loop_exited.set()
+        self._closed = False
+        self._thread: threading.Thread | None = None
+
+        self._state = LinkState.CONNECTING
+        self._started_at = clock()
+        self._last_valid_at: float | None = None
+        self._sent = 0
+        self._send_errors = 0
+        self._received = 0
+        self._telemetry = 0
+        self._video = 0
+        self._malformed = 0
+        self._foreign = 0
+        self._rcp_rate = RateMeter()
+        self._telemetry_rate = RateMeter()
+        self._video_rate = RateMeter(window_s=1.0)
+        self._loss = LossEstimator()
+
+    # ---- commands (any thread) -------------------------------------------------------------
+
+    @property
+    def command(self) -> Command:
+        """The command currently being sent."""
+        with self._lock:
+            return self._command
+
+    @property
+    def state(self) -> LinkState:
+        """The current link state."""
+        with self._lock:
+            return self._state
+
+    def set_command(self, command: Command) -> None:
+        """Replace the command; sends it at once when it differs from the current one."""
+        with self._lock:
+            self._gui_alive_at = self.clock()
+            self._gui_tripped = False
+            if command.is_motion:
+                self._estop_latched = False
+            if command == self._command:
+                return
+            self._command = command
+        self._send_current()
+
+    def set_velocities(self, **velocities: float) -> None:
+        """Change some channels of the current command (SI units)."""
+        with self._lock:
+            command = self._command.with_velocities(velocities)
+        self.set_command(command)
+
+    def set_max_velocity(self, channel: str, value: float) -> float:
+        """Change a channel's maximum (clipped to the hard maximum); resends if that matters."""
+        with self._lock:
+            kept = self.limits.set(channel, value)
+        self._send_current()
+        return kept
+
+    def emergency_stop(self, reason: str = "operator") -> None:
+        """Zero every velocity now and repeat the zero command within the e-stop window."""
+        settings = self.profile.link
+        with self._lock:
+            self._command = self._command.stopped()
+            self._estop_latched = True
+            now = self.clock()
+            repeats = settings.estop_repeats - 1
+            step = settings.estop_window_s / repeats if repeats > 0 else 0.0
+            self._estop_due = [now + step * (k + 1) for k in range(repeats)]
+        self._send_current()
+        self._wake()
+        self._notify_safety(f"EMERGENCY STOP ({reason})")
+
+    def heartbeat(self) -> None:
+        """Confirm that the thread owning the commands is alive."""
+        with self._lock:
+            self._gui_alive_at = self.clock()
+
+    def set_rate_hz(self, rate_hz: float) -> None:
+        """Change the periodic send rate (bounded by the profile, 1-50 Hz for the Engineer)."""
+        self._check_rate(rate_hz)
+        with self._lock:
+            self._rate_hz = rate_hz
+        self._wake()
+
+    @property
+    def rate_hz(self) -> float:
+        """The periodic send rate."""
+        with self._lock:
+            return self._rate_hz
+
+    def _check_rate(self, rate_hz: float) -> None:
+        low, high = self.profile.link.send_rate_min_hz, self.profile.link.send_rate_max_hz
+        if not low <= rate_hz <= high:
+            raise ValueError(f"send rate must be within {low:g}-{high:g} Hz, got {rate_hz!r}")
+
+    # ---- loop ------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Run the loop in a named daemon thread (for users without Qt)."""
+        if self._thread is not None:
+            return
+        self._loop_exited.clear()
+        self._thread = threading.Thread(target=self._run_loop, name="ocu-link", daemon=True)
+        self._thread.start()
+
+    def run(self) -> None:
+        """Run the loop in the calling thread until shutdown() (the QThread adapter's body)."""
+        self._loop_exited.clear()
+        self._run_loop()
+
+    def _run_loop(self) -> None:
+        selector = selectors.DefaultSelector()
+        selector.register(self._sock, selectors.EVENT_READ, "sock")
+        selector.register(self._wake_r, selectors.EVENT_READ, "wake")
+        buffer = bytearray(RECV_BUFFER_BYTES)
+        now = self.clock()
+        next_tick = now
+        next_stats = now + STATS_PERIOD_S
+        try:
+            while not self._stop_requested.is_set():
+                now = self.clock()
+                if now >= next_tick:
+                    self._send_current()
+                    next_tick = max(next_tick + 1.0 / self.rate_hz, now)
+                if now >= next_stats:
+                    self._emit_stats(now)
+                    next_stats = now + STATS_PERIOD_S
+                self._check_watchdogs(now)
+                due = self._send_due_estops(now)
+                deadline = min(next_tick, next_stats, due) if due else min(next_tick, next_stats)
+                timeout = max(deadline - self.clock(), 0.0)
+                for key, _ in selector.select(min(timeout, 0.1)):
+                    if key.data == "wake":
+                        self._drain_wake()
+                    else:
+                        self._receive_all(buffer)
+                with self._lock:
+                    # A rate change takes effect at once rather than after the old period.
+                    next_tick = min(next_tick, self.clock() + 1.0 / self._rate_hz)
+        except Exception:
+            log.exception("link loop failed; sending zeros")
+            self._send_zeros()
+            raise
+        finally:
+            selector.close()
+            self._loop_exited.set()
+
+    def _send_due_estops(self, now: float) -> float | None:
+        with self._lock:
+            due = [t for t in self._estop_due if t <= now]
+            self._estop_due = [t for t in self._estop_due if t > now]
+            next_due = min(self._estop_due) if self._estop_due else None
+        for _ in due:
+            self._send_current()
+        return next_due
+
+    def _check_watchdogs(self, now: float) -> None:
+        message = None
+        with self._lock:
+            timeout = self.gui_alive_timeout_s
+            stalled_s = now - self._gui_alive_at
+            if (
+                timeout is not None
+                and self._command.is_motion
+                and not self._gui_tripped
+                and stalled_s > timeout
+            ):
+                self._gui_tripped = True
+                self._command = self._command.stopped()
+                message = f"control thread silent for {stalled_s:.2f} s: motion commands zeroed"
+            last = self._last_valid_at if self._last_valid_at is not None else self._started_at
+            lost = self._state in (LinkState.CONNECTED, LinkState.CONNECTING) and (
+                now - last > self.link_lost_after_s
+            )
+        if message:
+            self._send_current()
+            self._notify_safety(message)
+        if lost:
+            silence = now - last
+            reason = f"no valid packet from the robot for {silence:.1f} s"
+            with self._lock:
+                had_motion = self._command.is_motion
+                self._command = self._command.stopped()
+            self._set_state(LinkState.LOST, reason)
+            if had_motion:
+                self._send_current()
+                self._notify_safety("link lost: motion commands zeroed")
+
+    def _drain_wake(self) -> None:
+        try:
+            while self._wake_r.recv(4096):
+                pass
+        except BlockingIOError:
+            pass
+
+    def _wake(self) -> None:
+        # A full wake pipe already guarantees a wake-up; a closed one means shutdown.
+        with contextlib.suppress(OSError):
+            self._wake_w.send(b"\0")
+
+    # ---- receive ---------------------------------------------------------------------------
+
+    def _receive_all(self, buffer: bytearray) -> None:
+        view = memoryview(buffer)
+        for _ in range(MAX_DATAGRAMS_PER_WAKE):
+            try:
+                size, source = self._sock.recvfrom_into(buffer)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as err:
+                # ICMP port-unreachable from a closed robot port surfaces here on Linux.
+                log.debug("receive error: %s", err)
+                continue
+            self.handle_datagram(bytes(view[:size]), source)
+
+    def handle_datagram(self, data: bytes, source: tuple[str, int]) -> None:
+        """Count, decode and dispatch one datagram; never raises on bad input."""
+        now = self.clock()
+        if source[:2] != self.robot_address:
+            with self._lock:
+                self._foreign += 1
+            return
+        self._call(self.listener.datagram_received, data, now)
+        try:
+            packet = self._codec.decode(data)
+        except ProtocolError as err:
+            with self._lock:
+                self._malformed += 1
+            log.debug("malformed datagram (%d bytes): %s", len(data), err)
+            return
+        if isinstance(packet, RemoteControlPacket):
+            with self._lock:
+                self._foreign += 1  # an RCP never comes from the robot
+            return
+        with self._lock:
+            self._received += 1
+            self._last_valid_at = now
+            if isinstance(packet, TelemetryPacket):
+                self._telemetry += 1
+                self._telemetry_rate.add(now)
+                self._loss.add(packet.tick, now)
+            else:
+                self._video += 1
+                self._video_rate.add(now)
+            became_connected = self._state != LinkState.CONNECTED
+            camera = self._command.camera
+        if became_connected:
+            self._set_state(LinkState.CONNECTED, f"packets from {source[0]}:{source[1]}")
+        wall = time.time()
+        if isinstance(packet, TelemetryPacket):
+            frame = TelemetryFrame(packet, read_telemetry(self.profile, packet), now, wall)
+            self._call(self.listener.telemetry_received, frame)
+        elif isinstance(packet, VideoFramePacket):
+            self._call(
+                self.listener.video_frame_received, VideoFrame(packet.jpeg, camera, now, wall)
+            )
+
+    # ---- send ------------------------------------------------------------------------------
+
+    def current_packet(self) -> RemoteControlPacket:
+        """The RCP for the current command under the current limits."""
+        with self._lock:
+            return self._mapper.to_packet(self._command, self.limits)
+
+    def _send_current(self) -> None:
+        self._send_packet(self.current_packet())
+
+    def _send_zeros(self) -> None:
+        with self._lock:
+            zero = self._mapper.to_packet(self._command.stopped(), self.limits)
+        self._send_packet(zero)
+
+    def _send_packet(self, packet: RemoteControlPacket) -> None:
+        data = self._codec.encode(packet)
+        with self._send_lock:
+            if self._closed:
+                return
+            try:
+                self._sock.sendto(data, self.robot_address)
+            except OSError as err:
+                with self._lock:
+                    self._send_errors += 1
+                log.debug("send failed: %s", err)
+                return
+            now = self.clock()
+        with self._lock:
+            self._sent += 1
+            self._rcp_rate.add(now)
+        self._call(self.listener.datagram_sent, data, now)
+
+    # ---- state and stats -------------------------------------------------------------------
+
+    def _set_state(self, state: LinkState, reason: str) -> None:
+        with self._lock:
+            if self._state == state:
+                return
+            self._state = state
+        log.info("link %s: %s", state.value, reason)
+        self._call(self.listener.link_state_changed, state, reason)
+
+    def stats(self) -> LinkStats:
+        """Counters and rates now."""
+        now = self.clock()
+        with self._lock:
+            return LinkStats(
+                sent=self._sent,
+                received=self._received,
+                telemetry=self._telemetry,
+                video=self._video,
+                malformed=self._malformed,
+                foreign=self._foreign,
+                send_errors=self._send_errors,
+                rcp_rate_hz=self._rcp_rate.rate(now),
+                telemetry_rate_hz=self._telemetry_rate.rate(now),
+                video_rate_hz=self._video_rate.rate(now),
+                loss_estimate=self._loss.loss(now),
+                duplicates=self._loss.duplicates,
+                reordered=self._loss.reordered,
+                last_valid_age_s=None if self._last_valid_at is None else now - self._last_valid_at,
+                send_rate_hz=self._rate_hz,
+                estop_latched=self._estop_latched,
+            )
+
+    def _emit_stats(self, now: float) -> None:
+        self._call(self.listener.stats_updated, self.stats())
+
+    def _notify_safety(self, message: str) -> None:
+        log.warning("%s", message)
+        self._call(self.listener.safety_event, message)
+
+    def _call(self, callback: Callable[..., None], *args: object) -> None:
+        # A faulty listener must not take the link (and with it the robot's safety) down.
+        try:
+            callback(*args)
+        except Exception:
+            log.exception("link listener %s failed", getattr(callback, "__name__", callback))
+
+    # ---- shutdown --------------------------------------------------------------------------
+
+    def shutdown(self, timeout_s: float = 2.0) -> None:
+        """Stop the loop, send zeros last and close the socket; safe to call twice."""
+        with self._send_lock:
+            if self._closed:
+                return
+        self._stop_requested.set()
+        self._wake()
+        if not self._loop_exited.wait(timeout_s):
+            log.error("link loop did not stop within %.1f s", timeout_s)
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+        with self._lock:
+            self._command = self._command.stopped()
+            self._estop_due = []
+        for _ in range(self.profile.link.estop_repeats):
+            self._send_zeros()
+        with self._send_lock:
+            self._closed = True
+            self._sock.close()
+        self._wake_r.close()
+        self._wake_w.close()
+        self._set_state(LinkState.CLOSED, "shut down")
+
+    def __enter__(self) -> LinkCore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shutdown()

@@ -1,0 +1,56 @@
+"""Shared fixtures: offscreen Qt, the shipped profile, and a check that no thread is left running."""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Iterator
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+import pytest
+
+from ocu.profile import RobotProfile, load_profile
+
+_started_qthreads: list[object] = []
+
+
+@pytest.fixture(scope="session")
+def profile() -> RobotProfile:
+    """The shipped Engineer profile."""
+    return load_profile()
+
+
+@pytest.fixture(autouse=True)
+def _no_thread_left_running() -> Iterator[None]:
+    """Fail a test that leaves a QThread or an ocu-* Python thread running (napari's habit)."""
+    before = {t.ident for t in threading.enumerate()}
+    yield
+    leftovers = [
+        t.name
+        for t in threading.enumerate()
+        if t.ident not in before and t.name.startswith("ocu") and t.is_alive()
+    ]
+    for thread in list(_started_qthreads):
+        if thread.isRunning():  # type: ignore[attr-defined]
+            leftovers.append(f"QThread {thread.objectName()}")  # type: ignore[attr-defined]
+    _started_qthreads.clear()
+    assert not leftovers, f"threads left running: {leftovers}"
+
+
+def _track_qthreads() -> None:
+    """Record every QThread started, so the fixture above can check it stopped."""
+    try:
+        from PySide6.QtCore import QThread
+    except ImportError:
+        return
+    original = QThread.start
+
+    def start(self: QThread, *args: object) -> None:
+        _started_qthreads.append(self)
+        original(self, *args)  # type: ignore[arg-type]
+
+    QThread.start = start  # type: ignore[method-assign]
+
+
+_track_qthreads()
