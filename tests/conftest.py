@@ -1,4 +1,4 @@
-"""Shared fixtures: offscreen Qt, the shipped profile, and a check that no thread is left running."""
+"""Shared fixtures: offscreen Qt, the shipped profile, no thread left running."""
 
 from __future__ import annotations
 

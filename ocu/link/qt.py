@@ -32,7 +32,7 @@ class _SignalListener(LinkListener):
         self.owner.telemetry_received.emit(frame)
 
     def video_frame_received(self, frame: VideoFrame) -> None:
-        image = QImage.fromData(frame.jpeg, b"JPG")
+        image = QImage.fromData(frame.jpeg)
         self.owner.video_frame_received.emit(DecodedVideoFrame(frame, image))
 
     def link_state_changed(self, state: LinkState, reason: str) -> None:

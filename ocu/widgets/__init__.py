@@ -1,0 +1,1 @@
+"""Qt widgets of the console: telemetry table, 3D model, video."""

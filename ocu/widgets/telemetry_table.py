@@ -1,0 +1,75 @@
+"""A table with the latest telemetry of every motor, in SI units next to the raw values."""
+
+from __future__ import annotations
+
+import math
+
+from PySide6.QtWidgets import QHeaderView, QTableWidget, QTableWidgetItem, QWidget
+
+from ocu.link.core import TelemetryFrame
+from ocu.profile import RobotProfile
+from ocu.protocol import MOTOR_SLOTS
+
+COLUMNS = (
+    "device",
+    "joint",
+    "state",
+    "mode",
+    "angle °",
+    "speed",
+    "current A",
+    "status",
+    "target °",
+    "speed cmd",
+    "current cmd A",
+)
+
+
+def _deg(angle_rad: float | None) -> str:
+    return "—" if angle_rad is None else f"{math.degrees(angle_rad):.2f}"
+
+
+class TelemetryTable(QTableWidget):
+    """Ten rows, one per motor slot of the telemetry packet."""
+
+    def __init__(self, profile: RobotProfile, parent: QWidget | None = None) -> None:
+        super().__init__(MOTOR_SLOTS, len(COLUMNS), parent)
+        self.profile = profile
+        self.setObjectName("telemetry_table")
+        self.setHorizontalHeaderLabels(list(COLUMNS))
+        self.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        self.verticalHeader().setVisible(False)
+        self.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+        for row in range(MOTOR_SLOTS):
+            for column in range(len(COLUMNS)):
+                self.setItem(row, column, QTableWidgetItem("—"))
+
+    def cell_text(self, row: int, column: str) -> str:
+        """Text shown in one cell (for tests and screenshots)."""
+        item = self.item(row, COLUMNS.index(column))
+        return item.text() if item is not None else ""
+
+    def show_frame(self, frame: TelemetryFrame) -> None:
+        """Fill the rows from one telemetry packet."""
+        for row in range(MOTOR_SLOTS):
+            values = ["—"] * len(COLUMNS)
+            if row < len(frame.packet.motors):
+                record = frame.packet.motors[row]
+                motor = self.profile.motor_by_device(record.device_id)
+                reading = frame.readings.get(motor.name) if motor else None
+                values[0] = str(record.device_id)
+                values[1] = motor.name if motor else "(unknown)"
+                values[2] = str(record.state)
+                values[3] = str(record.mode)
+                values[7] = f"0x{record.status & 0xFFFF:04x}"
+                if reading is not None:
+                    values[4] = _deg(reading.angle_rad)
+                    values[5] = f"{reading.speed_rad_s:+.3f}"
+                    values[6] = f"{reading.current_a:.2f}"
+                    values[8] = _deg(reading.target_angle_rad)
+                    values[9] = f"{reading.speed_command_rad_s:+.3f}"
+                    values[10] = f"{reading.current_command_a:.2f}"
+            for column, text in enumerate(values):
+                item = self.item(row, column)
+                if item is not None and item.text() != text:
+                    item.setText(text)
