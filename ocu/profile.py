@@ -140,6 +140,8 @@ def load_profile(path: str | Path | None = None) -> RobotProfile:
         text = profile_path.read_text(encoding="utf-8")
     except OSError as err:
         raise ProfileError(f"cannot read profile {profile_path}: {err.strerror}") from err
+    except UnicodeDecodeError as err:
+        raise ProfileError(f"{profile_path}: not UTF-8 text: {err}") from err
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -242,10 +244,16 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
         if (
             not isinstance(raw_limits, list)
             or len(raw_limits) != 2
-            or not all(isinstance(v, (int, float)) for v in raw_limits)
+            or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in raw_limits
+            )
             or not raw_limits[0] < raw_limits[1]
         ):
-            raise ProfileError(f"{reader.where}.limits_deg: must be [low, high] with low < high")
+            raise ProfileError(
+                f"{reader.where}.limits_deg: two finite numbers; "
+                "must be [low, high] with low < high"
+            )
         limits = (math.radians(raw_limits[0]), math.radians(raw_limits[1]))
     return Motor(
         name=name,

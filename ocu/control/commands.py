@@ -42,6 +42,8 @@ class Command:
                 raise CommandError(f"unknown velocity channel {name!r}")
             if not math.isfinite(value):
                 raise CommandError(f"{name}: velocity must be finite, got {value!r}")
+        if self.camera is not None and not 0 <= self.camera < 255:
+            raise CommandError(f"camera index must be in [0, 254], got {self.camera}")
 
     def velocity(self, channel: str) -> float:
         """Velocity of one channel; 0.0 when unset."""
@@ -110,7 +112,9 @@ class CommandMapper:
     def __init__(self, profile: RobotProfile) -> None:
         self.profile = profile
 
-    def to_packet(self, command: Command, limits: VelocityLimits | None = None) -> RemoteControlPacket:
+    def to_packet(
+        self, command: Command, limits: VelocityLimits | None = None
+    ) -> RemoteControlPacket:
         """The RCP for a command, each velocity clamped to the limits (hard max if None)."""
         axes = [0] * AXIS_COUNT
         for name, channel in self.profile.channels.items():

@@ -37,7 +37,16 @@ _U32 = (0, 2**32 - 1)
 _U64 = (0, 2**64 - 1)
 
 
+def _pack(layout: struct.Struct, *values: object) -> bytes:
+    try:
+        return layout.pack(*values)
+    except struct.error as err:
+        raise ProtocolError(f"cannot encode: {err}") from err
+
+
 def _check_range(name: str, value: int, bounds: tuple[int, int]) -> None:
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise ProtocolError(f"{name}={value!r} is not an integer")
     if not bounds[0] <= value <= bounds[1]:
         raise ProtocolError(f"{name}={value} out of range [{bounds[0]}, {bounds[1]}]")
 
@@ -61,7 +70,7 @@ class RemoteControlPacket:
             _check_range(f"axis[{index}]", axis, _I16)
         for index, button in enumerate(self.buttons):
             _check_range(f"button[{index}]", button, _U8)
-        return RCP_STRUCT.pack(frame_type, *self.axes, *self.buttons, self.video_bitrate)
+        return _pack(RCP_STRUCT, frame_type, *self.axes, *self.buttons, self.video_bitrate)
 
     @classmethod
     def decode(cls, data: bytes, frame_type: int) -> RemoteControlPacket:
@@ -105,7 +114,8 @@ class MotorRecord:
             ("current_command", _I16),
         ):
             _check_range(f"motor.{name}", getattr(self, name), bounds)
-        return MOTOR_STRUCT.pack(
+        return _pack(
+            MOTOR_STRUCT,
             self.device_id,
             self.state,
             self.mode,
@@ -138,7 +148,7 @@ class TelemetryPacket:
         if len(self.motors) > MOTOR_SLOTS:
             raise ProtocolError(f"motor count {len(self.motors)} over {MOTOR_SLOTS}")
         _check_range("tick", self.tick, _U64)
-        parts = [TELEMETRY_HEADER_STRUCT.pack(frame_type, self.tick, len(self.motors))]
+        parts = [_pack(TELEMETRY_HEADER_STRUCT, frame_type, self.tick, len(self.motors))]
         parts.extend(motor.encode() for motor in self.motors)
         parts.append(bytes(MOTOR_SIZE * (MOTOR_SLOTS - len(self.motors)) + TELEMETRY_UNUSED_BYTES))
         return b"".join(parts)

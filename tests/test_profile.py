@@ -1,0 +1,450 @@
+"""The robot profile: the shipped Engineer profile, and every validation error by key."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from ocu.profile import (
+    AXIS_MAX,
+    CHANNEL_NAMES,
+    ProfileError,
+    RobotProfile,
+    default_profile_path,
+    load_profile,
+    parse_profile,
+)
+
+SHIPPED_TEXT = default_profile_path().read_text(encoding="utf-8")
+SHIPPED_DATA: dict[str, Any] = tomllib.loads(SHIPPED_TEXT)
+
+# Paper constants (seed 000, section 3.1): axis value per m/s and per rad/s of the chassis.
+LINEAR_AXIS_PER_M_S = 71553.837
+ROTATION_AXIS_PER_RAD_S = 25171.216
+
+DELETE = object()
+
+
+def _edited(path: tuple[str, ...], value: object) -> dict[str, Any]:
+    """A deep copy of the shipped profile with one key set or deleted."""
+    data = copy.deepcopy(SHIPPED_DATA)
+    table = data
+    for key in path[:-1]:
+        table = table[key]
+    if value is DELETE:
+        del table[path[-1]]
+    else:
+        table[path[-1]] = value
+    return data
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "robot.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _replace_once(text: str, old: str, new: str) -> str:
+    assert text.count(old) == 1, f"{old!r} is not unique in the shipped profile"
+    return text.replace(old, new)
+
+
+@pytest.fixture(scope="module")
+def profile() -> RobotProfile:
+    return load_profile()
+
+
+# --- the shipped profile ------------------------------------------------------------------
+
+
+def test_shipped_profile_loads(profile: RobotProfile) -> None:
+    assert profile.name == "Servosila Engineer"
+    assert profile.source == str(default_profile_path())
+    assert Path(profile.source).name == "engineer.toml"
+
+
+def test_paper_si_constants(profile: RobotProfile) -> None:
+    assert profile.linear_axis_per_m_s == LINEAR_AXIS_PER_M_S
+    assert profile.rotation_axis_per_rad_s == ROTATION_AXIS_PER_RAD_S
+    assert profile.channels["drive_linear"].axis_per_unit == LINEAR_AXIS_PER_M_S
+    assert profile.channels["drive_turn"].axis_per_unit == ROTATION_AXIS_PER_RAD_S
+
+
+def test_documented_link_facts(profile: RobotProfile) -> None:
+    assert profile.link.send_rate_hz == 5.0
+    assert profile.link.robot_watchdog_s == 1.0
+    assert profile.link.telemetry_rate_hz == 1.0
+    assert profile.link.send_rate_min_hz <= profile.link.send_rate_hz
+    assert profile.link.send_rate_hz <= profile.link.send_rate_max_hz
+    assert len(profile.link.camera_names) == 4
+    types = profile.link.frame_types
+    assert (types.rcp, types.telemetry, types.video) == (0x01, 0x02, 0x03)
+    assert profile.link.port == 10000
+
+
+def test_drive_minimum_speed_from_the_paper(profile: RobotProfile) -> None:
+    assert profile.channels["drive_linear"].min_speed == 0.2
+    assert profile.channels["drive_turn"].min_speed == 0.2
+
+
+def test_every_channel_fits_the_int16_axis(profile: RobotProfile) -> None:
+    assert tuple(profile.channels) == CHANNEL_NAMES
+    for channel in profile.channels.values():
+        assert 0 <= channel.axis <= 15
+        assert 0.0 <= channel.min_speed <= channel.default_max <= channel.hard_max
+        assert channel.hard_max * channel.axis_per_unit <= AXIS_MAX
+        assert round(channel.hard_max * channel.axis_per_unit) <= 32767
+
+
+def test_axes_and_device_ids_are_distinct(profile: RobotProfile) -> None:
+    axes = [c.axis for c in profile.channels.values()]
+    assert len(set(axes)) == len(axes)
+    ids = [m.device_id for m in profile.motors.values()]
+    assert len(set(ids)) == len(ids)
+    assert len(profile.motors) <= 10
+    assert profile.torch_button != profile.camera_button
+
+
+def test_motors(profile: RobotProfile) -> None:
+    for name in ("left_track", "right_track"):
+        track = profile.motors[name]
+        assert not track.has_position
+        assert track.limits_rad is None
+    assert {m.track for m in profile.motors.values()} == {"left", "right", None}
+    waist = profile.motors["waist"]
+    assert waist.has_position
+    assert waist.limits_rad == (math.radians(-170.0), math.radians(170.0))
+    assert profile.motor_by_device(waist.device_id) is waist
+    assert profile.motor_by_device(255) is None
+    assert profile.motor_for_channel("waist") is waist
+    assert profile.motor_for_channel("drive_linear") is None
+    for motor in profile.positioned_motors:
+        assert motor.channel in profile.channels
+        assert motor.limits_rad is not None
+
+
+def test_parse_matches_load(profile: RobotProfile) -> None:
+    parsed = parse_profile(copy.deepcopy(SHIPPED_DATA))
+    assert parsed.source == "<profile>"
+    assert dataclasses.replace(parsed, source=profile.source) == profile
+
+
+def test_load_from_a_path(tmp_path: Path, profile: RobotProfile) -> None:
+    path = _write(tmp_path, SHIPPED_TEXT)
+    loaded = load_profile(path)
+    assert loaded.source == str(path)
+    assert dataclasses.replace(loaded, source=profile.source) == profile
+    assert load_profile(str(path)) == loaded
+
+
+def _matches(data: Any, parts: list[str]) -> int:
+    """How many keys a dotted pattern names; `*` stands for every table at its level."""
+    if not parts:
+        return 1
+    if not isinstance(data, dict):
+        return 0
+    head, rest = parts[0], parts[1:]
+    if head == "*":
+        return sum(_matches(value, rest) for value in data.values() if isinstance(value, dict))
+    return _matches(data[head], rest) if head in data else 0
+
+
+def test_assumptions_name_existing_keys(profile: RobotProfile) -> None:
+    assert profile.assumptions == tuple(SHIPPED_DATA["assumptions"])
+    assert profile.assumptions
+    for key in profile.assumptions:
+        assert _matches(SHIPPED_DATA, key.split(".")) > 0, key
+
+
+def test_assumption_patterns_are_checked() -> None:
+    assert _matches(SHIPPED_DATA, ["channels", "*", "axis"]) == len(CHANNEL_NAMES)
+    assert _matches(SHIPPED_DATA, ["motors", "*", "ticks_per_rad"]) == 8
+    assert _matches(SHIPPED_DATA, ["link", "no_such_key"]) == 0
+    assert _matches(SHIPPED_DATA, ["channels", "*", "no_such_key"]) == 0
+
+
+# --- validation errors, one per key -------------------------------------------------------
+
+_LIMITS = r"must be \[low, high\] with low < high$"
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "message"),
+    [
+        # missing keys
+        (("name",), DELETE, r"^profile\.name: missing$"),
+        (("link",), DELETE, r"^profile\.link: missing$"),
+        (("link", "port"), DELETE, r"^profile\.link\.port: missing$"),
+        (("link", "frame_types", "video"), DELETE, r"^profile\.link\.frame_types\.video: missing$"),
+        (("si", "linear_axis_per_m_s"), DELETE, r"^profile\.si\.linear_axis_per_m_s: missing$"),
+        (("chassis",), DELETE, r"^profile\.chassis: missing$"),
+        (("channels", "neck"), DELETE, r"^profile\.channels\.neck: missing$"),
+        (("channels", "waist", "axis"), DELETE, r"^profile\.channels\.waist\.axis: missing$"),
+        (
+            ("motors", "waist", "zero_offset_ticks"),
+            DELETE,
+            r"^profile\.motors\.waist\.zero_offset_ticks: missing$",
+        ),
+        (("buttons", "torch"), DELETE, r"^profile\.buttons\.torch: missing$"),
+        (("motors",), DELETE, r"^profile\.motors: missing$"),
+        # wrong types
+        (("link",), 5, r"^profile\.link: must be a table$"),
+        (("link", "port"), "10000", r"^profile\.link\.port: must be an integer, got '10000'$"),
+        (("link", "port"), 10000.0, r"^profile\.link\.port: must be an integer, got 10000\.0$"),
+        (
+            ("link", "send_rate_hz"),
+            "fast",
+            r"^profile\.link\.send_rate_hz: must be a number, got 'fast'$",
+        ),
+        (
+            ("link", "send_rate_hz"),
+            True,
+            r"^profile\.link\.send_rate_hz: must be a number, got True$",
+        ),
+        (
+            ("channels", "drive_linear", "axis"),
+            True,
+            r"^profile\.channels\.drive_linear\.axis: must be an integer, got True$",
+        ),
+        (("link", "address"), 192, r"^profile\.link\.address: must be a non-empty string$"),
+        (
+            ("channels", "waist", "unit"),
+            "",
+            r"^profile\.channels\.waist\.unit: must be a non-empty",
+        ),
+        (("link", "camera_names"), [], r"^profile\.link\.camera_names: must be a non-empty list"),
+        (("link", "camera_names"), ["a", 2], r"^profile\.link\.camera_names: must be a non-empty"),
+        (("assumptions",), "link.port", r"^profile\.assumptions: must be a list of key names$"),
+        # non-finite numbers
+        (
+            ("channels", "drive_linear", "hard_max"),
+            math.inf,
+            r"^profile\.channels\.drive_linear\.hard_max: must be finite, got inf$",
+        ),
+        (
+            ("si", "joint_axis_per_rad_s"),
+            math.nan,
+            r"^profile\.si\.joint_axis_per_rad_s: must be finite, got nan$",
+        ),
+        (
+            ("motors", "waist", "ticks_per_rad"),
+            math.inf,
+            r"^profile\.motors\.waist\.ticks_per_rad: must be finite, got inf$",
+        ),
+        (
+            ("link", "robot_watchdog_s"),
+            -math.inf,
+            r"^profile\.link\.robot_watchdog_s: must be finite, got -inf$",
+        ),
+        # values out of range
+        (
+            ("channels", "drive_linear", "default_max"),
+            0.5,
+            r"^profile\.channels\.drive_linear\.default_max: must be <= 0\.45, got 0\.5$",
+        ),
+        (
+            ("channels", "drive_linear", "hard_max"),
+            0.5,
+            r"^profile\.channels\.drive_linear\.hard_max: 0\.5 needs axis value 35777, "
+            r"over the int16 range; at most 0\.4579$",
+        ),
+        (
+            ("channels", "drive_turn", "hard_max"),
+            1.31,
+            r"^profile\.channels\.drive_turn\.hard_max: 1\.31 needs axis value 32974, "
+            r"over the int16 range; at most 1\.3018$",
+        ),
+        (
+            ("si", "joint_axis_per_rad_s"),
+            40000.0,
+            r"^profile\.channels\.flippers\.hard_max: 1\.0 needs axis value 40000, over the int16",
+        ),
+        (
+            ("channels", "flippers", "min_speed"),
+            0.6,
+            r"^profile\.channels\.flippers\.min_speed: above default_max \(0\.5\)$",
+        ),
+        (
+            ("channels", "flippers", "min_speed"),
+            -0.1,
+            r"^profile\.channels\.flippers\.min_speed: must be >= 0\.0, got -0\.1$",
+        ),
+        (
+            ("channels", "waist", "axis"),
+            16,
+            r"^profile\.channels\.waist\.axis: must be in \[0, 15\], got 16$",
+        ),
+        (
+            ("channels", "waist", "scale"),
+            "angular",
+            r"^profile\.channels\.waist\.scale: must be one of "
+            r"\('linear', 'rotation', 'joint'\), got 'angular'$",
+        ),
+        (("link", "port"), 0, r"^profile\.link\.port: must be in \[1, 65535\], got 0$"),
+        (("link", "port"), 65536, r"^profile\.link\.port: must be in \[1, 65535\], got 65536$"),
+        (
+            ("link", "send_rate_hz"),
+            100.0,
+            r"^profile\.link\.send_rate_hz: must be <= 50\.0, got 100\.0$",
+        ),
+        (
+            ("motors", "waist", "device_id"),
+            256,
+            r"^profile\.motors\.waist\.device_id: must be in \[0, 255\], got 256$",
+        ),
+        (
+            ("motors", "waist", "zero_offset_ticks"),
+            2**32,
+            r"^profile\.motors\.waist\.zero_offset_ticks: must be in \[0, 4294967295\]",
+        ),
+        (
+            ("motors", "left_track", "track"),
+            "middle",
+            r"^profile\.motors\.left_track\.track: must be 'left' or 'right'$",
+        ),
+        # duplicates and references
+        (("channels", "waist", "axis"), 3, r"^profile\.channels: two channels share one axis$"),
+        (
+            ("motors", "waist", "device_id"),
+            5,
+            r"^profile\.motors: two motors share one device_id$",
+        ),
+        (
+            ("motors", "waist", "channel"),
+            "tail",
+            r"^profile\.motors\.waist\.channel: unknown channel 'tail'$",
+        ),
+        (
+            ("channels", "tail"),
+            {"axis": 9, "scale": "joint", "unit": "rad/s", "min_speed": 0.0}
+            | {"default_max": 0.1, "hard_max": 0.2},
+            r"^profile\.channels: unknown channels \['tail'\]$",
+        ),
+        # motor limits
+        (
+            ("motors", "waist", "limits_deg"),
+            [10.0, -10.0],
+            r"^profile\.motors\.waist\.limits_deg: ",
+        ),
+        (("motors", "waist", "limits_deg"), [5.0, 5.0], _LIMITS),
+        (("motors", "waist", "limits_deg"), [-10.0], _LIMITS),
+        (("motors", "waist", "limits_deg"), [-10.0, 0.0, 10.0], _LIMITS),
+        (("motors", "waist", "limits_deg"), "wide", _LIMITS),
+        (("motors", "waist", "limits_deg"), [0.0, "90"], _LIMITS),
+        (("motors", "waist", "limits_deg"), [math.nan, 10.0], _LIMITS),
+        (("motors", "waist", "limits_deg"), DELETE, _LIMITS),
+        # buttons and frame types
+        (("buttons", "torch"), 1, r"^profile\.buttons: torch and camera_select must differ$"),
+        (
+            ("buttons", "camera_select"),
+            16,
+            r"^profile\.buttons\.camera_select: must be in \[0, 15\], got 16$",
+        ),
+        (
+            ("link", "frame_types", "video"),
+            0x01,
+            r"^profile\.link\.frame_types: the three IDs must differ$",
+        ),
+        (
+            ("link", "frame_types", "telemetry"),
+            0x03,
+            r"^profile\.link\.frame_types: the three IDs must differ$",
+        ),
+        (
+            ("link", "frame_types", "rcp"),
+            256,
+            r"^profile\.link\.frame_types\.rcp: must be in \[0, 255\], got 256$",
+        ),
+    ],
+)
+def test_validation_error_names_the_key(path: tuple[str, ...], value: object, message: str) -> None:
+    with pytest.raises(ProfileError, match=message):
+        parse_profile(_edited(path, value))
+
+
+def test_profile_error_is_a_value_error() -> None:
+    assert issubclass(ProfileError, ValueError)
+
+
+def test_more_than_ten_motors() -> None:
+    data = copy.deepcopy(SHIPPED_DATA)
+    data["motors"]["extra"] = {"device_id": 11}
+    with pytest.raises(ProfileError, match=r"^profile\.motors: .* at most 10 motors$"):
+        parse_profile(data)
+
+
+@pytest.mark.parametrize("limits", [[-math.inf, 180.0], [0.0, math.inf]])
+def test_infinite_limits_are_refused(limits: list[float]) -> None:
+    with pytest.raises(ProfileError, match=r"^profile\.motors\.waist\.limits_deg: "):
+        parse_profile(_edited(("motors", "waist", "limits_deg"), limits))
+
+
+# --- files --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            "hard_max = 0.45",
+            "hard_max = inf",
+            r"^profile\.channels\.drive_linear\.hard_max: must be finite, got inf$",
+        ),
+        (
+            "hard_max = 0.45",
+            "hard_max = nan",
+            r"^profile\.channels\.drive_linear\.hard_max: must be finite, got nan$",
+        ),
+        ("port = 10000", 'port = "10000"', r"^profile\.link\.port: must be an integer"),
+        ("torch = 0 ", "torch = 1 ", r"^profile\.buttons: torch and camera_select must differ$"),
+        ("video = 0x03", "video = 0x02", r"^profile\.link\.frame_types: the three IDs must differ"),
+        ("device_id = 8\n", "device_id = 7\n", r"^profile\.motors: two motors share one device_id"),
+    ],
+    ids=["inf", "nan", "port-string", "torch-camera", "frame-types", "device-id"],
+)
+def test_edited_file(tmp_path: Path, old: str, new: str, message: str) -> None:
+    path = _write(tmp_path, _replace_once(SHIPPED_TEXT, old, new))
+    with pytest.raises(ProfileError, match=message):
+        load_profile(path)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        SHIPPED_TEXT + "\n[link\n",
+        SHIPPED_TEXT.replace("port = 10000", "port = = 10000"),
+        "name = 'twice'\n" + SHIPPED_TEXT,
+        "\x00",
+    ],
+    ids=["open-table", "double-equals", "duplicate-key", "nul"],
+)
+def test_invalid_toml(tmp_path: Path, text: str) -> None:
+    path = _write(tmp_path, text)
+    with pytest.raises(
+        ProfileError, match=rf"^{re.escape(str(tmp_path))}/robot\.toml: not valid TOML: "
+    ):
+        load_profile(path)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(ProfileError, match=r"^cannot read profile .*absent\.toml: No such file"):
+        load_profile(tmp_path / "absent.toml")
+
+
+def test_directory_instead_of_file(tmp_path: Path) -> None:
+    with pytest.raises(ProfileError, match=rf"^cannot read profile {re.escape(str(tmp_path))}: "):
+        load_profile(tmp_path)
+
+
+def test_not_utf8(tmp_path: Path) -> None:
+    path = tmp_path / "robot.toml"
+    path.write_bytes(b"name = '\xff'\n")
+    with pytest.raises(ProfileError, match=r"robot\.toml: "):
+        load_profile(path)
