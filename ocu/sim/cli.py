@@ -1,0 +1,170 @@
+"""Command line of the simulator: `ocu-sim` and `python -m ocu.sim`.
+
+Signals: SIGUSR1 cuts the link, SIGUSR2 restores it, SIGINT and SIGTERM stop cleanly (exit 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import signal
+import sys
+from collections.abc import Sequence
+
+from ocu.profile import ProfileError, load_profile
+from ocu.sim.faults import FaultConfig
+from ocu.sim.simulator import RobotSimulator
+from ocu.sim.video import MAX_FRAME_SIDE_PX, MIN_FRAME_SIDE_PX
+
+log = logging.getLogger("ocu.sim")
+
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_HANDLED_SIGNALS = (*_STOP_SIGNALS, signal.SIGUSR1, signal.SIGUSR2)
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+    return value
+
+
+def _probability(text: str) -> float:
+    value = _number(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a probability in [0, 1], got {text}")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    value = _number(text)
+    if value < 0.0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def _positive(text: str) -> float:
+    value = _number(text)
+    if value <= 0.0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be in [0, 65535], got {value}")
+    return value
+
+
+def _frame_size(text: str) -> tuple[int, int]:
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(part.strip().isdigit() for part in parts):
+        raise argparse.ArgumentTypeError(f"size must look like 320x240, got {text!r}")
+    width_px, height_px = (int(part) for part in parts)
+    for side in (width_px, height_px):
+        if not MIN_FRAME_SIDE_PX <= side <= MAX_FRAME_SIDE_PX:
+            raise argparse.ArgumentTypeError(
+                f"each side must be in [{MIN_FRAME_SIDE_PX}, {MAX_FRAME_SIDE_PX}], got {text}"
+            )
+    return width_px, height_px
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ocu-sim."""
+    parser = argparse.ArgumentParser(
+        prog="ocu-sim",
+        description="Simulated Servosila Engineer robot server (UDP). "
+        "SIGUSR1 cuts the link, SIGUSR2 restores it.",
+    )
+    parser.add_argument("--host", default="127.0.0.1", help="address to bind (default %(default)s)")
+    parser.add_argument(
+        "--port", type=_port, default=None, help="UDP port (default: the profile's; 0 = any free)"
+    )
+    parser.add_argument("--profile", metavar="FILE", default=None, help="robot profile TOML")
+    parser.add_argument(
+        "--telemetry-hz",
+        type=_positive,
+        default=None,
+        help="telemetry packets per second (default: the profile's)",
+    )
+    parser.add_argument(
+        "--video-fps", type=_non_negative, default=10.0, help="video frames per second, 0 = off"
+    )
+    parser.add_argument(
+        "--video-size", type=_frame_size, default=(320, 240), metavar="WxH", help="frame size"
+    )
+    parser.add_argument("--loss", type=_probability, default=0.0, help="drop probability")
+    parser.add_argument("--latency-ms", type=_non_negative, default=0.0, help="fixed delay")
+    parser.add_argument(
+        "--jitter-ms", type=_non_negative, default=0.0, help="extra uniform delay 0..jitter"
+    )
+    parser.add_argument(
+        "--duplicate", type=_probability, default=0.0, help="probability to send a datagram twice"
+    )
+    parser.add_argument("--seed", type=int, default=None, help="seed of the fault decisions")
+    parser.add_argument(
+        "--log-level", type=str.upper, choices=LOG_LEVELS, default="INFO", help="logging level"
+    )
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the simulator until SIGINT or SIGTERM; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        profile = load_profile(args.profile)
+    except ProfileError as err:
+        parser.error(str(err))
+    logging.basicConfig(
+        level=args.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
+    faults = FaultConfig(
+        loss=args.loss,
+        latency_ms=args.latency_ms,
+        jitter_ms=args.jitter_ms,
+        duplicate=args.duplicate,
+    )
+    port = profile.link.port if args.port is None else args.port
+    # Block the handled signals before the loop thread exists so it inherits the mask and the
+    # main thread alone takes them, synchronously, with sigwait.
+    previous_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _HANDLED_SIGNALS)
+    try:
+        try:
+            simulator = RobotSimulator(
+                profile,
+                args.host,
+                port,
+                telemetry_hz=args.telemetry_hz,
+                video_fps=args.video_fps,
+                video_size=args.video_size,
+                faults=faults,
+                seed=args.seed,
+            )
+        except OSError as err:
+            print(f"ocu-sim: cannot listen on {args.host}:{port}: {err}", file=sys.stderr)
+            return 1
+        with simulator:
+            host, bound_port = simulator.address
+            print(f"ocu-sim listening on {host}:{bound_port}", flush=True)
+            while True:
+                signum = signal.sigwait(_HANDLED_SIGNALS)
+                if signum == signal.SIGUSR1:
+                    simulator.cut_link()
+                elif signum == signal.SIGUSR2:
+                    simulator.restore_link()
+                else:
+                    log.info("%s received, stopping", signal.Signals(signum).name)
+                    break
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
+    return 0
