@@ -1,0 +1,90 @@
+"""Run a position controller against a link without Qt (tests, benchmarks, the ROS node)."""
+
+from __future__ import annotations
+
+import queue
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from ocu.control.commands import JointReading
+from ocu.control.position import PositionController
+
+CONTROL_PERIOD_S = 0.02
+
+
+class CommandSink(Protocol):
+    """What the runner needs of a link (LinkCore satisfies it)."""
+
+    def set_velocities(self, **velocities: float) -> None: ...
+
+    def heartbeat(self) -> None: ...
+
+
+@dataclass
+class RunResult:
+    """What happened during one run: messages and the measured angle trace."""
+
+    messages: list[str] = field(default_factory=list)
+    trace: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
+    finished: bool = False
+    elapsed_s: float = 0.0
+
+
+class PositionRunner:
+    """Feeds telemetry to a controller and its outputs to a link at a fixed control period.
+
+    Telemetry arrives on the link's thread; it is queued and consumed on the runner's
+    thread, so the controller itself needs no locking.
+    """
+
+    def __init__(self, controller: PositionController, sink: CommandSink) -> None:
+        self.controller = controller
+        self.sink = sink
+        self._telemetry: queue.Queue[tuple[Mapping[str, JointReading], float]] = queue.Queue()
+
+    def on_readings(self, readings: Mapping[str, JointReading], received_at: float) -> None:
+        """Thread-safe entry for telemetry (call from the link's listener)."""
+        self._telemetry.put((readings, received_at))
+
+    def run(
+        self,
+        timeout_s: float,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        settle_s: float = 0.0,
+    ) -> RunResult:
+        """Control until no target is left (plus settle_s of watching) or the timeout."""
+        result = RunResult()
+        start = clock()
+        deadline = start + timeout_s
+        idle_since: float | None = None
+        channels = {self.controller.channel_of(j) for j in self.controller.targets}
+        while clock() < deadline:
+            next_step = clock() + CONTROL_PERIOD_S
+            # Waiting on the queue both paces the loop and reacts to telemetry at once.
+            while (remaining := next_step - clock()) > 0:
+                try:
+                    readings, received_at = self._telemetry.get(timeout=remaining)
+                except queue.Empty:
+                    break
+                self.controller.on_telemetry(readings, received_at)
+                for name, reading in readings.items():
+                    if reading.angle_rad is not None:
+                        result.trace.setdefault(name, []).append((received_at, reading.angle_rad))
+            now = clock()
+            velocities = self.controller.update(now)
+            for channel in channels:
+                velocities.setdefault(channel, 0.0)
+            self.sink.heartbeat()
+            self.sink.set_velocities(**velocities)
+            result.messages.extend(self.controller.pop_messages())
+            if not self.controller.targets:
+                idle_since = now if idle_since is None else idle_since
+                if now - idle_since >= settle_s:
+                    result.finished = True
+                    break
+        result.elapsed_s = clock() - start
+        self.sink.set_velocities(**dict.fromkeys(channels, 0.0))
+        return result
