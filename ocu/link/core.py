@@ -122,12 +122,15 @@ class LinkCore:
         link_lost_after_s: float | None = None,
         gui_alive_timeout_s: float | None = -1.0,
         send_rate_hz: float | None = None,
+        send_on_change: bool = True,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.profile = profile
         self.listener = listener or LinkListener()
         self.clock = clock
         self.limits = VelocityLimits(profile)
+        # False leaves changes to the periodic tick, as the vendor client does (benchmarks).
+        self.send_on_change = send_on_change
         self._mapper = CommandMapper(profile)
         self._codec = make_codec(profile)
         settings = profile.link
@@ -216,7 +219,8 @@ class LinkCore:
             if command == self._command:
                 return
             self._command = command
-        self._send_current()
+        if self.send_on_change:
+            self._send_current()
 
     def set_velocities(self, **velocities: float) -> None:
         """Change some channels of the current command (SI units)."""
