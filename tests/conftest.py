@@ -50,7 +50,7 @@ def _track_qthreads() -> None:
         _started_qthreads.append(self)
         original(self, *args)  # type: ignore[arg-type]
 
-    QThread.start = start  # type: ignore[method-assign]
+    QThread.start = start  # type: ignore[method-assign, assignment]
 
 
 _track_qthreads()
