@@ -7,6 +7,8 @@ import threading
 from collections.abc import Iterator
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+# PyOpenGL picks its platform at first import; offscreen Qt has no GL, so render via OSMesa.
+os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
 import pytest
 

@@ -1,0 +1,502 @@
+"""3D model of the robot: live pose from telemetry, a ghost of the targets, stale joints amber.
+
+The widget draws with OpenGL in a QOpenGLWidget when the display has GL, and otherwise with
+the same renderer in an OSMesa context, showing the image in a plain QWidget. The mouse
+works the same in both: left drag orbits, middle drag or Shift+left drag pans, the wheel
+zooms, a double click resets the view; F/S/T/I (or the context menu) pick preset views.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from functools import partial
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from PySide6.QtCore import QElapsedTimer, QPointF, Qt, QTimer, Signal, Slot
+from PySide6.QtGui import (
+    QContextMenuEvent,
+    QGuiApplication,
+    QImage,
+    QKeyEvent,
+    QMouseEvent,
+    QPainter,
+    QPaintEvent,
+    QResizeEvent,
+    QSurfaceFormat,
+    QWheelEvent,
+)
+from PySide6.QtOpenGLWidgets import QOpenGLWidget
+from PySide6.QtWidgets import QMenu, QVBoxLayout, QWidget
+
+from ocu.control.commands import JointReading
+from ocu.model.tree import KinematicTree
+from ocu.model.urdf import RobotModel, load_urdf
+from ocu.profile import RobotProfile
+from ocu.render.camera import VIEW_KEYS, VIEWS, OrbitCamera
+from ocu.render.platform import GlMode, choose_gl_platform, configure_gl_platform
+from ocu.render.scene import RenderFrame, build_frame, model_bounds
+
+FRESHNESS_CHECK_MS = 250
+SOFTWARE_FRAME_INTERVAL_MS = 33  # at most ~30 OSMesa frames per second
+
+
+class TelemetryFrameLike(Protocol):
+    """What on_telemetry reads from a telemetry frame (ocu.link.core.TelemetryFrame)."""
+
+    @property
+    def readings(self) -> Mapping[str, JointReading]: ...
+
+    @property
+    def received_at(self) -> float: ...
+
+
+class _Surface(Protocol):
+    """The child that shows the picture: GL widget or OSMesa image."""
+
+    frames_rendered: int
+    error: str | None
+
+    def request_render(self) -> None: ...
+
+    def render_now(self) -> None: ...
+
+    def release(self) -> None: ...
+
+
+class Model3DWidget(QWidget):
+    """The robot in 3D, following telemetry; see the module docstring for the controls."""
+
+    frame_rendered = Signal()
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        urdf_path: str | Path | None = None,
+        parent: QWidget | None = None,
+        *,
+        stale_after_s: float | None = None,
+        gl_mode: GlMode | None = None,
+    ) -> None:
+        super().__init__(parent)
+        self.profile = profile
+        self.model: RobotModel = load_urdf(urdf_path)
+        self.live: KinematicTree = self.model.tree.copy()
+        self.ghost: KinematicTree | None = None
+        self._ghost_targets: dict[str, float] = {}
+        self.stale_after_s = (
+            profile.link.link_lost_after_s if stale_after_s is None else stale_after_s
+        )
+        # Joints that telemetry can refresh: in both the profile and the model.
+        self.tracked_joints = frozenset(
+            name
+            for name, motor in profile.motors.items()
+            if motor.has_position and name in self.live.actuated_joints
+        )
+        self._fresh_at: dict[str, float] = {}
+        self._marked_stale: set[str] = set()
+        self._drawn_stale: frozenset[str] = self.stale_joints()  # nothing heard yet
+        low, high = model_bounds(self.model, self.live)
+        self.camera = OrbitCamera.framing(low, high, "iso")
+        self._drag_button: Qt.MouseButton | None = None
+        self._drag_pan = False
+        self._last_pos = QPointF()
+
+        wanted = gl_mode or choose_gl_platform(qt_platform=QGuiApplication.platformName())
+        self.gl_mode: GlMode = configure_gl_platform(wanted)
+        surface: _Surface = _GlSurface(self) if self.gl_mode == "native" else _SoftwareSurface(self)
+        self._surface = surface
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        assert isinstance(surface, QWidget)
+        surface.setAttribute(Qt.WidgetAttribute.WA_TransparentForMouseEvents)
+        layout.addWidget(surface)
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        self.setMinimumSize(160, 120)
+
+        self._freshness_timer = QTimer(self)
+        self._freshness_timer.setInterval(FRESHNESS_CHECK_MS)
+        self._freshness_timer.timeout.connect(self._check_freshness)
+        self._freshness_timer.start()
+
+    # State in.
+
+    def set_joint_angles(
+        self, angles_rad: Mapping[str, float], fresh_at: float | None = None
+    ) -> None:
+        """Show these joint angles; `fresh_at` (monotonic, default now) marks them fresh.
+
+        Names the model does not have (the tracks, another robot's joints) and non-finite
+        values are ignored.
+        """
+        stamp = time.monotonic() if fresh_at is None else fresh_at
+        changed = False
+        for name, value in angles_rad.items():
+            if name not in self.live.actuated_joints or not math.isfinite(value):
+                continue
+            if self.live.position(name) != value:
+                self.live.set_position(name, value)
+                changed = True
+            if name in self.tracked_joints:
+                self._fresh_at[name] = max(stamp, self._fresh_at.get(name, -math.inf))
+                self._marked_stale.discard(name)
+        if changed:
+            self._update_ghost()
+        self._check_freshness(force=changed)
+
+    @Slot(object)
+    def on_telemetry(self, frame: TelemetryFrameLike) -> None:
+        """Follow a telemetry frame: every motor with a position sets its joint."""
+        angles = {
+            name: reading.angle_rad
+            for name, reading in frame.readings.items()
+            if reading.angle_rad is not None
+        }
+        self.set_joint_angles(angles, fresh_at=frame.received_at)
+
+    def set_ghost(self, targets_rad: Mapping[str, float] | None) -> None:
+        """Show a translucent robot at these targets (None or empty: no ghost)."""
+        self._ghost_targets = {
+            name: value
+            for name, value in (targets_rad or {}).items()
+            if name in self.live.actuated_joints and math.isfinite(value)
+        }
+        self._update_ghost()
+        self.request_render()
+
+    def mark_stale(self, names: set[str]) -> None:
+        """Draw these joints in the warning colour until fresh telemetry arrives for them."""
+        self._marked_stale.update(name for name in names if name in self.live.joints)
+        self._check_freshness(force=True)
+
+    def stale_joints(self, now: float | None = None) -> frozenset[str]:
+        """Joints without telemetry newer than stale_after_s, plus those marked stale."""
+        moment = time.monotonic() if now is None else now
+        old = {
+            name
+            for name in self.tracked_joints
+            if moment - self._fresh_at.get(name, -math.inf) > self.stale_after_s
+        }
+        return frozenset(old | self._marked_stale)
+
+    @property
+    def drawn_stale_joints(self) -> frozenset[str]:
+        """The stale set the picture was last asked to show."""
+        return self._drawn_stale
+
+    @property
+    def ghost_targets(self) -> dict[str, float]:
+        """The targets the ghost shows (empty: none)."""
+        return dict(self._ghost_targets)
+
+    def _update_ghost(self) -> None:
+        if not self._ghost_targets:
+            self.ghost = None
+            return
+        ghost = self.live.copy()
+        ghost.set_positions(self._ghost_targets)
+        self.ghost = ghost
+
+    def _check_freshness(self, force: bool = False) -> None:
+        stale = self.stale_joints()
+        if force or stale != self._drawn_stale:
+            self._drawn_stale = stale
+            self.request_render()
+
+    # View.
+
+    def set_view(self, name: str) -> None:
+        """Preset direction: front, side, top or iso."""
+        self.camera.set_view(name)
+        self.request_render()
+
+    def reset_view(self) -> None:
+        """Frame the robot as it stands now (and its ghost), from the iso direction."""
+        low, high = model_bounds(self.model, self.live)
+        if self.ghost is not None:
+            ghost_low, ghost_high = model_bounds(self.model, self.ghost)
+            low, high = np.minimum(low, ghost_low), np.maximum(high, ghost_high)
+        self.camera.reframe(low, high, "iso")
+        self.request_render()
+
+    # Drawing.
+
+    @property
+    def frames_rendered(self) -> int:
+        """Frames drawn so far (either path)."""
+        return self._surface.frames_rendered
+
+    @property
+    def render_error(self) -> str | None:
+        """Why nothing can be drawn, or None."""
+        return self._surface.error
+
+    @property
+    def buffer_uploads(self) -> int:
+        """Vertex buffer uploads so far: one per mesh, at the first frame, never again."""
+        renderer = getattr(self._surface, "renderer", None)
+        return int(getattr(renderer, "buffer_uploads", 0))
+
+    def request_render(self) -> None:
+        """Schedule a redraw (rate-limited on the OSMesa path)."""
+        self._surface.request_render()
+
+    def render_now(self) -> None:
+        """Draw at once (before grab() of the OSMesa path, for screenshots)."""
+        self._surface.render_now()
+
+    def build_frame(self, width_px: int, height_px: int) -> RenderFrame:
+        """The frame for the current state at a given size."""
+        return build_frame(
+            self.model,
+            self.camera,
+            width_px / max(height_px, 1),
+            live=self.live,
+            ghost=self.ghost,
+            stale_joints=self._drawn_stale,
+        )
+
+    def _surface_rendered(self) -> None:
+        self.frame_rendered.emit()
+
+    def release(self) -> None:
+        """Free the GL resources now (also done when the widget is destroyed)."""
+        self._freshness_timer.stop()
+        self._surface.release()
+
+    # Mouse and keys.
+
+    def mousePressEvent(self, event: QMouseEvent) -> None:
+        """Start an orbit (left) or pan (middle, Shift+left) drag."""
+        button = event.button()
+        shift = bool(event.modifiers() & Qt.KeyboardModifier.ShiftModifier)
+        if button in (Qt.MouseButton.LeftButton, Qt.MouseButton.MiddleButton):
+            self._drag_button = button
+            self._drag_pan = button == Qt.MouseButton.MiddleButton or shift
+            self._last_pos = event.position()
+            event.accept()
+            return
+        super().mousePressEvent(event)
+
+    def mouseMoveEvent(self, event: QMouseEvent) -> None:
+        """Orbit or pan by the distance moved since the last event."""
+        if self._drag_button is None:
+            super().mouseMoveEvent(event)
+            return
+        position = event.position()
+        dx = position.x() - self._last_pos.x()
+        dy = position.y() - self._last_pos.y()
+        self._last_pos = position
+        if self._drag_pan:
+            self.camera.pan(dx, dy, max(self.height(), 1))
+        else:
+            self.camera.orbit(dx, dy)
+        self.request_render()
+        event.accept()
+
+    def mouseReleaseEvent(self, event: QMouseEvent) -> None:
+        """End the drag."""
+        if event.button() == self._drag_button:
+            self._drag_button = None
+            event.accept()
+            return
+        super().mouseReleaseEvent(event)
+
+    def mouseDoubleClickEvent(self, event: QMouseEvent) -> None:
+        """Reset the view."""
+        if event.button() == Qt.MouseButton.LeftButton:
+            self.reset_view()
+            event.accept()
+            return
+        super().mouseDoubleClickEvent(event)
+
+    def wheelEvent(self, event: QWheelEvent) -> None:
+        """Zoom: one notch (120 units) is one step."""
+        steps = event.angleDelta().y() / 120.0
+        if steps:
+            self.camera.zoom(steps)
+            self.request_render()
+        event.accept()
+
+    def keyPressEvent(self, event: QKeyEvent) -> None:
+        """F, S, T, I: preset views; Home or R: reset."""
+        text = event.text().lower()
+        if text in VIEW_KEYS:
+            self.set_view(VIEW_KEYS[text])
+        elif event.key() in (Qt.Key.Key_Home, Qt.Key.Key_R):
+            self.reset_view()
+        else:
+            super().keyPressEvent(event)
+
+    def contextMenuEvent(self, event: QContextMenuEvent) -> None:
+        """Preset views and reset."""
+        menu = QMenu(self)
+        for name in VIEWS:
+            menu.addAction(name.capitalize(), partial(self.set_view, name))
+        menu.addSeparator()
+        menu.addAction("Reset view", self.reset_view)
+        menu.exec(event.globalPos())
+
+
+def _gl_surface_format() -> QSurfaceFormat:
+    fmt = QSurfaceFormat()
+    fmt.setRenderableType(QSurfaceFormat.RenderableType.OpenGL)
+    fmt.setVersion(3, 3)
+    fmt.setProfile(QSurfaceFormat.OpenGLContextProfile.CoreProfile)
+    fmt.setDepthBufferSize(24)
+    fmt.setSamples(4)
+    return fmt
+
+
+class _GlSurface(QOpenGLWidget):
+    """Native path: the renderer draws into Qt's framebuffer in paintGL."""
+
+    def __init__(self, owner: Model3DWidget) -> None:
+        super().__init__(owner)
+        from ocu.render.renderer import ModelRenderer  # after the platform choice
+
+        self._owner = owner
+        self.setFormat(_gl_surface_format())
+        self.renderer = ModelRenderer(owner.model)
+        self.frames_rendered = 0
+        self.error: str | None = None
+
+    def initializeGL(self) -> None:
+        from ocu.render.renderer import RenderError
+
+        context = self.context()
+        if context is None or not context.isValid():
+            self.error = "3D view unavailable: no OpenGL context"
+            return
+        fmt = context.format()
+        if (fmt.majorVersion(), fmt.minorVersion()) < (3, 3):
+            self.error = (
+                f"3D view unavailable: OpenGL 3.3 needed, got "
+                f"{fmt.majorVersion()}.{fmt.minorVersion()}"
+            )
+            return
+        try:
+            self.renderer.initialize()
+        except RenderError as err:
+            self.error = f"3D view unavailable: {err}"
+            return
+        context.aboutToBeDestroyed.connect(self.release)
+
+    def paintGL(self) -> None:
+        if self.error is not None or not self.renderer.initialized:
+            return
+        ratio = self.devicePixelRatioF()
+        width = round(self.width() * ratio)
+        height = round(self.height() * ratio)
+        self.renderer.render(self._owner.build_frame(width, height), width, height)
+        self.frames_rendered += 1
+        self._owner._surface_rendered()
+
+    def request_render(self) -> None:
+        self.update()
+
+    def render_now(self) -> None:
+        self.repaint()
+
+    def release(self) -> None:
+        if self.renderer.initialized and self.context() is not None:
+            self.makeCurrent()
+            self.renderer.release()
+            self.doneCurrent()
+
+
+class _SoftwareSurface(QWidget):
+    """OSMesa path: render offscreen on a rate-limited timer, paint the image."""
+
+    def __init__(self, owner: Model3DWidget) -> None:
+        super().__init__(owner)
+        self._owner = owner
+        self._image = QImage()
+        self._offscreen: Any = None
+        self.renderer: Any = None
+        self.frames_rendered = 0
+        self.error: str | None = None
+        self._since_last = QElapsedTimer()
+        self._timer = QTimer(self)
+        self._timer.setSingleShot(True)
+        self._timer.timeout.connect(self.render_now)
+        self.setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent)
+
+    def _ensure_context(self) -> bool:
+        if self._offscreen is not None:
+            return True
+        if self.error is not None:
+            return False
+        try:
+            from ocu.render.osmesa import OffscreenRenderer
+            from ocu.render.renderer import ModelRenderer
+
+            self.renderer = ModelRenderer(self._owner.model)
+            width, height = self._pixel_size()
+            self._offscreen = OffscreenRenderer(self.renderer, width, height)
+        except Exception as err:  # no OSMesa, or a GL failure: show why instead of crashing
+            self.error = f"3D view unavailable: {err}"
+            self.update()
+            return False
+        return True
+
+    def _pixel_size(self) -> tuple[int, int]:
+        ratio = self.devicePixelRatioF()
+        return max(round(self.width() * ratio), 1), max(round(self.height() * ratio), 1)
+
+    def request_render(self) -> None:
+        if self._timer.isActive():
+            return
+        elapsed = self._since_last.elapsed() if self._since_last.isValid() else 1 << 30
+        self._timer.start(max(0, SOFTWARE_FRAME_INTERVAL_MS - int(elapsed)))
+
+    def render_now(self) -> None:
+        self._timer.stop()
+        if not self._ensure_context():
+            return
+        width, height = self._pixel_size()
+        rgba = self._offscreen.render(self._owner.build_frame(width, height), width, height)
+        image = QImage(rgba.data, width, height, width * 4, QImage.Format.Format_RGBA8888)
+        self._image = image.copy()  # own the pixels: rgba is reused by the next render
+        self._image.setDevicePixelRatio(self.devicePixelRatioF())
+        self._since_last.start()
+        self.frames_rendered += 1
+        self.update()
+        self._owner._surface_rendered()
+
+    def paintEvent(self, event: QPaintEvent) -> None:
+        painter = QPainter(self)
+        if self._image.isNull() or self.error is not None:
+            painter.fillRect(self.rect(), Qt.GlobalColor.darkGray)
+            if self.error is not None:
+                painter.setPen(Qt.GlobalColor.white)
+                painter.drawText(
+                    self.rect(),
+                    Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap,
+                    self.error,
+                )
+        else:
+            painter.drawImage(0, 0, self._image)
+        painter.end()
+
+    def resizeEvent(self, event: QResizeEvent) -> None:
+        super().resizeEvent(event)
+        self.request_render()
+
+    def release(self) -> None:
+        self._timer.stop()
+        if self._offscreen is not None:
+            self._offscreen.close()
+            self._offscreen = None
+
+
+def image_array(image: QImage) -> np.ndarray[Any, np.dtype[np.uint8]]:
+    """A QImage as an (h, w, 4) RGBA array (for tests and screenshots)."""
+    converted = image.convertToFormat(QImage.Format.Format_RGBA8888)
+    width, height = converted.width(), converted.height()
+    buffer = np.frombuffer(converted.constBits(), dtype=np.uint8)
+    rows = buffer[: converted.bytesPerLine() * height].reshape(height, converted.bytesPerLine())
+    return rows[:, : width * 4].reshape(height, width, 4).copy()
