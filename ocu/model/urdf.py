@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -48,8 +49,11 @@ class RobotModel:
 
 
 def default_urdf_path() -> Path:
-    """The low-poly Engineer model shipped in the repository's assets folder."""
-    return Path(__file__).resolve().parents[2] / "assets" / "engineer.urdf"
+    """The low-poly Engineer model: the checkout's assets folder, else the installed copy."""
+    in_checkout = Path(__file__).resolve().parents[2] / "assets" / "engineer.urdf"
+    if in_checkout.exists():
+        return in_checkout
+    return Path(sys.prefix) / "share" / "ocu" / "assets" / "engineer.urdf"
 
 
 def load_urdf(path: str | Path | None = None) -> RobotModel:
