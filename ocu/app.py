@@ -4,13 +4,31 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ocu.profile import ProfileError, RobotProfile, load_profile
 
+if TYPE_CHECKING:
+    from ocu.hotkeys import KeyMap
+
 log = logging.getLogger("ocu")
+
+CONFIG_DIR_ENV = "OCU_CONFIG_DIR"
+SETTINGS_FILE = "ocu.ini"
+SIGNAL_POLL_MS = 100
+
+
+def default_config_dir() -> Path:
+    """$OCU_CONFIG_DIR, else $XDG_CONFIG_HOME/ocu, else ~/.config/ocu."""
+    if os.environ.get(CONFIG_DIR_ENV):
+        return Path(os.environ[CONFIG_DIR_ENV])
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    return Path(base) / "ocu"
 
 
 def parse_robot(text: str, default_port: int) -> tuple[str, int]:
@@ -48,6 +66,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--quit-after", type=float, metavar="S", help="quit by itself after S seconds"
     )
+    parser.add_argument(
+        "--config-dir",
+        metavar="DIR",
+        type=Path,
+        help=f"where the window layout ({SETTINGS_FILE}) and the hotkey override "
+        f"(hotkeys.toml) live; default ${CONFIG_DIR_ENV} or ~/.config/ocu",
+    )
+    parser.add_argument(
+        "--keys", metavar="FILE", type=Path, help="hotkey map merged over the default one"
+    )
     parser.add_argument("--log-level", default="INFO")
     return parser
 
@@ -72,7 +100,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             robot = parse_robot(args.robot, profile.link.port)
         except argparse.ArgumentTypeError as err:
             parser.error(str(err))
-    return run_console(profile, robot, args.profile, args.sim_arg, args.quit_after)
+    from ocu.hotkeys import USER_KEY_MAP_NAME, KeyMapError, load_key_map
+
+    config_dir = args.config_dir if args.config_dir is not None else default_config_dir()
+    override = args.keys if args.keys is not None else config_dir / USER_KEY_MAP_NAME
+    if args.keys is not None and not args.keys.exists():
+        parser.error(f"--keys: {args.keys} does not exist")
+    try:
+        key_map = load_key_map(profile, override)
+    except KeyMapError as err:
+        parser.error(str(err))
+    return run_console(
+        profile,
+        robot,
+        args.profile,
+        args.sim_arg,
+        args.quit_after,
+        config_dir=config_dir,
+        key_map=key_map,
+    )
 
 
 def run_console(
@@ -81,9 +127,12 @@ def run_console(
     profile_path: str | None,
     sim_args: list[str],
     quit_after_s: float | None,
+    *,
+    config_dir: Path,
+    key_map: KeyMap,
 ) -> int:
     """Start simulator (if no robot), link and window; run the Qt event loop."""
-    from PySide6.QtCore import QTimer
+    from PySide6.QtCore import QSettings, QTimer
     from PySide6.QtWidgets import QApplication
 
     from ocu.link.core import LinkCore, LinkError
@@ -103,28 +152,52 @@ def run_console(
         address_text = f"simulator {robot[0]}:{robot[1]}"
     else:
         address_text = f"robot {robot[0]}:{robot[1]}"
+    robot_address = robot
     try:
         try:
-            core = LinkCore(profile, robot)
+            # The first link is made here so a bad address fails before any window opens.
+            first_link: list[LinkThread] = [LinkThread(LinkCore(profile, robot_address))]
         except LinkError as err:
             log.error("%s", err)
             return 1
-        link = LinkThread(core)
-        window = MainWindow(profile, link, address_text)
-        app.aboutToQuit.connect(link.shutdown)
-        # Python handles SIGINT/SIGTERM only when the interpreter runs: a short timer lets it,
-        # and the handler quits Qt so shutdown sends zeros before the process ends.
+
+        def make_link() -> LinkThread:
+            if first_link:
+                return first_link.pop()
+            return LinkThread(LinkCore(profile, robot_address))
+
+        config_dir.mkdir(parents=True, exist_ok=True)
+        settings = QSettings(str(config_dir / SETTINGS_FILE), QSettings.Format.IniFormat)
+        window = MainWindow(profile, make_link, address_text, settings, key_map)
+        app.aboutToQuit.connect(window.shutdown)
+        # Python runs a signal handler between any two bytecodes of the main thread, e.g. in
+        # the middle of a send that holds the link's lock: the handler only raises a flag, and
+        # a short timer (which also lets Python see the signal at all) quits Qt from the
+        # event loop, so shutdown sends zeros before the process ends.
+        stop_signals: list[int] = []
         for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: app.quit())
+            signal.signal(sig, lambda signum, _frame: stop_signals.append(signum))
+
+        def quit_on_signal() -> None:
+            if stop_signals:
+                log.info("%s received, quitting", signal.Signals(stop_signals[0]).name)
+                app.quit()
+
         pulse = QTimer()
-        pulse.start(200)
-        pulse.timeout.connect(lambda: None)
+        pulse.start(SIGNAL_POLL_MS)
+        pulse.timeout.connect(quit_on_signal)
         if quit_after_s is not None:
             QTimer.singleShot(int(quit_after_s * 1000), app.quit)
-        window.show()
-        link.start_link()
+        if window.layout_restored:
+            window.show()
+        else:
+            # First run: the whole screen for the cockpit (also without a window manager).
+            screen = window.screen()
+            if screen is not None:
+                window.resize(screen.availableGeometry().size())
+            window.showMaximized()
         code = app.exec()
-        link.shutdown()
+        window.shutdown()
         return code
     finally:
         if simulator is not None:

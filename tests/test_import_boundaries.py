@@ -8,7 +8,17 @@ from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
-PURE_MODULES = ("ocu.protocol", "ocu.profile", "ocu.control.commands")
+PURE_MODULES = (
+    "ocu.protocol",
+    "ocu.profile",
+    "ocu.control.commands",
+    "ocu.control.position",
+    "ocu.control.teleop",
+    "ocu.hotkeys",
+    "ocu.link.core",
+    "ocu.sim.simulator",
+    "ocu.model.tree",
+)
 
 _CHECK = f"""
 import importlib

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
+import statistics
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 
@@ -29,58 +32,80 @@ class RateMeter:
             self._times.popleft()
 
 
-class LossEstimator:
-    """Estimates downlink loss from gaps in the telemetry tick counter.
+# Tick steps within this factor of the shortest quarter's top form the one-period cluster.
+PERIOD_CLUSTER = (0.5, 1.5)
 
-    The robot sends telemetry at a fixed period, so consecutive ticks differ by one period;
-    the smallest positive difference seen estimates it, and a gap of n periods means n - 1
-    packets were lost. Repeated ticks are duplicates, falling ticks are reordered packets.
-    Counts are kept over a sliding window so the figure follows the current link quality.
+
+@dataclass(frozen=True)
+class TickLoss:
+    """Telemetry loss from the tick counter of the packets received, in arrival order."""
+
+    received: int
+    lost: int
+    duplicates: int
+    reordered: int
+    period_ticks: float | None
+
+    @property
+    def fraction(self) -> float | None:
+        """Lost share of the packets sent, or None before the period is known."""
+        total = self.received + self.lost
+        return None if self.period_ticks is None or not total else self.lost / total
+
+
+def tick_loss(ticks: Sequence[int]) -> TickLoss:
+    """Packets that never arrived: the span of ticks in periods, less the distinct ticks seen.
+
+    The robot sends telemetry at a fixed period. The period is the median of the tick steps
+    near the shortest quarter of them, so one late packet followed by an on-time one (a short
+    step) does not shrink it; counting over the whole span, not step by step, keeps such a
+    pair from counting as a loss. Repeated ticks are duplicates, falling ones reordered.
     """
+    distinct = sorted(set(ticks))
+    duplicates = len(ticks) - len(distinct)
+    reordered = 0
+    newest: int | None = None
+    for tick in ticks:
+        if newest is not None and tick < newest:
+            reordered += 1
+        newest = tick if newest is None else max(newest, tick)
+    steps = sorted(b - a for a, b in itertools.pairwise(distinct))
+    if not steps:
+        return TickLoss(len(distinct), 0, duplicates, reordered, None)
+    quarter = steps[(len(steps) - 1) // 4]
+    low, high = PERIOD_CLUSTER
+    period = float(statistics.median(s for s in steps if low * quarter <= s <= high * quarter))
+    expected = round((distinct[-1] - distinct[0]) / period) + 1
+    return TickLoss(len(distinct), max(expected - len(distinct), 0), duplicates, reordered, period)
+
+
+class LossEstimator:
+    """Live downlink loss from the telemetry ticks of a sliding time window (see tick_loss)."""
 
     def __init__(self, window_s: float = 30.0) -> None:
         self.window_s = window_s
-        self.period: int | None = None
-        self.last_tick: int | None = None
         self.duplicates = 0
         self.reordered = 0
-        self.lost_total = 0
-        self._events: deque[tuple[float, int, int]] = deque()
+        self._events: deque[tuple[float, int]] = deque()
 
     def add(self, tick: int, now: float) -> None:
         """Account for one telemetry packet with this tick."""
-        last = self.last_tick
-        if last is None:
-            self.last_tick = tick
-            self._push(now, received=1, lost=0)
-            return
-        delta = tick - last
-        if delta == 0:
+        self._trim(now)
+        if any(t == tick for _, t in self._events):
             self.duplicates += 1
             return
-        if delta < 0:
+        if self._events and tick < max(t for _, t in self._events):
             self.reordered += 1
-            return
-        if self.period is None or delta < self.period:
-            self.period = delta
-        lost = max(round(delta / self.period) - 1, 0)
-        self.lost_total += lost
-        self.last_tick = tick
-        self._push(now, received=1, lost=lost)
+        self._events.append((now, tick))
+
+    def window(self, now: float) -> TickLoss:
+        """Loss figures over the window ending now."""
+        self._trim(now)
+        return tick_loss([t for _, t in self._events])
 
     def loss(self, now: float) -> float | None:
         """Fraction of telemetry lost in the window, or None before the period is known."""
-        self._trim(now)
-        if self.period is None:
-            return None
-        received = sum(e[1] for e in self._events)
-        lost = sum(e[2] for e in self._events)
-        total = received + lost
-        return lost / total if total else None
-
-    def _push(self, now: float, received: int, lost: int) -> None:
-        self._events.append((now, received, lost))
-        self._trim(now)
+        return self.window(now).fraction
 
     def _trim(self, now: float) -> None:
         limit = now - self.window_s

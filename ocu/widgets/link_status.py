@@ -10,57 +10,78 @@ from PySide6.QtWidgets import QHBoxLayout, QLabel, QWidget
 from ocu.link.core import LinkState, TelemetryFrame
 from ocu.link.stats import LinkStats
 
+BLOCK = "font-weight:bold;font-size:15pt;padding:3px 12px;border-radius:4px;"
 STATE_STYLES = {
     LinkState.CONNECTING: "background:#b8860b;color:white;",
     LinkState.CONNECTED: "background:#2e7d32;color:white;",
     LinkState.LOST: "background:#c62828;color:white;",
     LinkState.CLOSED: "background:#555;color:white;",
 }
+STATE_TEXT = {
+    LinkState.CONNECTING: "CONNECTING",
+    LinkState.CONNECTED: "CONNECTED",
+    LinkState.LOST: "LINK LOST",
+    LinkState.CLOSED: "DISCONNECTED",
+}
+ESTOP_STYLE = "background:#c62828;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
+MOVING_STYLE = "background:#ef6c00;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
+READY_STYLE = "background:#37474f;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
+INFO_STYLE = "font-size:12pt;padding:0 8px;"
+AGE_REFRESH_MS = 250
 
 
-def _label(name: str, text: str = "") -> QLabel:
-    label = QLabel(text)
+def _label(name: str, style: str = INFO_STYLE) -> QLabel:
+    label = QLabel()
     label.setObjectName(name)
+    label.setStyleSheet(style)
     return label
 
 
 class LinkStatus(QWidget):
-    """Always-visible link facts for the status bar."""
+    """Always-visible link facts and the e-stop state, for the status bar."""
 
     def __init__(self, address_text: str, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.state = LinkState.CONNECTING
         self.last_telemetry_at: float | None = None
+        self.estop_active = False
+        self.moving = False
         layout = QHBoxLayout(self)
-        layout.setContentsMargins(0, 0, 0, 0)
+        layout.setContentsMargins(2, 2, 2, 2)
+        layout.setSpacing(6)
         self.state_label = _label("link_state")
+        self.age_label = _label("telemetry_age")
         self.rates_label = _label("link_rates")
         self.loss_label = _label("link_loss")
-        self.address_label = _label("link_address", address_text)
+        self.address_label = _label("link_address")
+        self.address_label.setText(address_text)
         self.estop_label = _label("estop_state")
-        for label in (
-            self.state_label,
-            self.rates_label,
-            self.loss_label,
-            self.address_label,
-            self.estop_label,
-        ):
-            label.setContentsMargins(6, 0, 6, 0)
+        self.estop_label.setMinimumWidth(220)
+        for label in (self.state_label, self.age_label, self.rates_label, self.loss_label):
             layout.addWidget(label)
-        self.set_estop(False)
+        layout.addStretch(1)
+        layout.addWidget(self.address_label)
+        layout.addWidget(self.estop_label)
         self.rates_label.setText("RCP — Hz · telemetry — Hz")
         self.loss_label.setText("loss —")
+        self._show_estop()
         # The age of the last telemetry must tick even when nothing arrives.
         self._age_timer = QTimer(self)
-        self._age_timer.setInterval(250)
+        self._age_timer.setInterval(AGE_REFRESH_MS)
         self._age_timer.timeout.connect(self._refresh_state)
         self._age_timer.start()
         self._refresh_state()
+
+    def set_address(self, address_text: str) -> None:
+        """The simulator or robot address shown."""
+        self.address_label.setText(address_text)
 
     def on_state(self, state: LinkState, reason: str) -> None:
         """Link state changed."""
         self.state = state
         self.state_label.setToolTip(reason)
+        if state == LinkState.CONNECTING:
+            self.last_telemetry_at = None
         self._refresh_state()
 
     def on_telemetry(self, frame: TelemetryFrame) -> None:
@@ -72,27 +93,44 @@ class LinkStatus(QWidget):
         """New counters and rates."""
         self.rates_label.setText(
             f"RCP {stats.rcp_rate_hz:.1f} Hz · telemetry {stats.telemetry_rate_hz:.1f} Hz"
-            f" · video {stats.video_rate_hz:.1f} fps"
+            f" · video {stats.video_rate_hz:.0f} fps"
         )
-        loss = "—" if stats.loss_estimate is None else f"{100 * stats.loss_estimate:.0f}%"
-        self.loss_label.setText(f"loss {loss} · bad {stats.malformed} · foreign {stats.foreign}")
+        loss = "—" if stats.loss_estimate is None else f"{100 * stats.loss_estimate:.0f} %"
+        self.loss_label.setText(f"loss {loss}")
+        self.loss_label.setToolTip(
+            f"telemetry loss estimate; malformed {stats.malformed}, foreign {stats.foreign}, "
+            f"duplicates {stats.duplicates}, reordered {stats.reordered}"
+        )
 
-    def set_estop(self, active: bool) -> None:
-        """Show whether an emergency stop holds the robot."""
-        if active:
+    def set_estop(self, active: bool, reason: str = "") -> None:
+        """Whether an emergency stop holds the robot until the operator acts again."""
+        self.estop_active = active
+        self.estop_label.setToolTip(reason)
+        self._show_estop()
+
+    def set_moving(self, moving: bool) -> None:
+        """Whether any channel is commanded to move."""
+        self.moving = moving
+        self._show_estop()
+
+    def _show_estop(self) -> None:
+        if self.estop_active:
             self.estop_label.setText("E-STOP")
-            self.estop_label.setStyleSheet(
-                "background:#c62828;color:white;font-weight:bold;font-size:16pt;padding:2px 10px;"
-            )
+            self.estop_label.setStyleSheet(ESTOP_STYLE)
+        elif self.moving:
+            self.estop_label.setText("MOVING · Space = stop")
+            self.estop_label.setStyleSheet(MOVING_STYLE)
         else:
-            self.estop_label.setText("e-stop ready (Space)")
-            self.estop_label.setStyleSheet("font-size:12pt;padding:2px 10px;")
+            self.estop_label.setText("STOPPED · Space = stop")
+            self.estop_label.setStyleSheet(READY_STYLE)
 
     def _refresh_state(self) -> None:
-        text = "LINK LOST" if self.state == LinkState.LOST else self.state.value
-        if self.last_telemetry_at is not None:
-            text += f" · telemetry {time.monotonic() - self.last_telemetry_at:.1f} s ago"
-        self.state_label.setText(text)
-        self.state_label.setStyleSheet(
-            STATE_STYLES[self.state] + "font-weight:bold;padding:2px 8px;"
-        )
+        style = STATE_STYLES[self.state] + BLOCK
+        if self.state_label.styleSheet() != style:
+            self.state_label.setStyleSheet(style)
+        self.state_label.setText(STATE_TEXT[self.state])
+        if self.last_telemetry_at is None:
+            self.age_label.setText("no telemetry yet")
+        else:
+            age = time.monotonic() - self.last_telemetry_at
+            self.age_label.setText(f"telemetry {age:.1f} s ago")

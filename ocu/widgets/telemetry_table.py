@@ -11,7 +11,7 @@ from ocu.profile import RobotProfile
 from ocu.protocol import MOTOR_SLOTS
 
 COLUMNS = (
-    "device",
+    "id",
     "joint",
     "state",
     "mode",
@@ -21,7 +21,7 @@ COLUMNS = (
     "status",
     "target °",
     "speed cmd",
-    "current cmd A",
+    "cur cmd A",
 )
 
 
@@ -39,6 +39,7 @@ class TelemetryTable(QTableWidget):
         self.setHorizontalHeaderLabels(list(COLUMNS))
         self.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         self.verticalHeader().setVisible(False)
+        self.verticalHeader().setDefaultSectionSize(22)
         self.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
         for row in range(MOTOR_SLOTS):
             for column in range(len(COLUMNS)):

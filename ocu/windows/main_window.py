@@ -1,35 +1,356 @@
-"""The main window: link status bar and the live telemetry of all ten motors."""
+"""The cockpit: one window of dock widgets, a status bar that is always visible, hotkeys.
+
+The window owns the operator model, the link's lifetime (Connect/Disconnect) and the Qt side
+of the safety rules: focus loss, hiding, minimising, a lost link and closing all stop the
+robot through the model; a stalled GUI thread is caught by the link's own watchdog, and the
+model is halted when the thread comes back so nothing resumes by itself.
+"""
 
 from __future__ import annotations
 
-from PySide6.QtWidgets import QMainWindow, QWidget
+import logging
+import time
+from collections.abc import Callable
 
+from PySide6.QtCore import QByteArray, QEvent, QSettings, Qt, QTimer
+from PySide6.QtGui import QAction, QCloseEvent, QHideEvent
+from PySide6.QtWidgets import (
+    QApplication,
+    QDockWidget,
+    QListWidget,
+    QMainWindow,
+    QWidget,
+)
+
+from ocu import hotkeys
+from ocu.control.teleop import TeleopModel
+from ocu.hotkeys import KeyMap
+from ocu.link.core import LinkState, TelemetryFrame
 from ocu.link.qt import LinkThread
 from ocu.profile import RobotProfile
 from ocu.widgets.link_status import LinkStatus
-from ocu.widgets.telemetry_table import TelemetryTable
+from ocu.widgets.model3d import Model3DWidget
+from ocu.windows.help_overlay import HelpOverlay
+from ocu.windows.joint_position import JointPositionPanel
+from ocu.windows.key_filter import KeyFilter
+from ocu.windows.max_velocity import MaxVelocityPanel
+from ocu.windows.velocity import VelocityPanel
+
+log = logging.getLogger("ocu.console")
+
+CONTROL_PERIOD_MS = 50
+LAYOUT_VERSION = 1
+EVENT_LOG_LENGTH = 500
+DEFAULT_SIZE = (1560, 960)
+MINIMUM_SIZE = (800, 560)
+
+LinkFactory = Callable[[], LinkThread]
 
 
 class MainWindow(QMainWindow):
-    """Shows what the link sees; the link is owned by the caller."""
+    """The operator console; `link_factory` makes a fresh, not yet started link per Connect."""
 
     def __init__(
         self,
         profile: RobotProfile,
-        link: LinkThread,
+        link_factory: LinkFactory,
         address_text: str,
+        settings: QSettings,
+        key_map: KeyMap | None = None,
+        *,
+        connect: bool = True,
         parent: QWidget | None = None,
     ) -> None:
         super().__init__(parent)
+        self.setObjectName("ocu_main_window")
         self.profile = profile
-        self.link = link
+        self.link_factory = link_factory
+        self.settings = settings
+        self.key_map = key_map if key_map is not None else hotkeys.load_key_map(profile)
+        self.model = TeleopModel(profile, fine_factor=self.key_map.fine_factor)
+        self.link: LinkThread | None = None
+        self._shut = False
+        self._last_tick: float | None = None
         self.setWindowTitle(f"ocu — {profile.name} — {address_text}")
-        self.telemetry_table = TelemetryTable(profile)
-        self.setCentralWidget(self.telemetry_table)
+
+        self.velocity_panel = VelocityPanel(self.model)
+        self.max_panel = MaxVelocityPanel(self.model)
+        self.joint_panel = JointPositionPanel(self.model)
+        self.event_log = QListWidget()
+        self.event_log.setObjectName("event_log")
+        self.event_log.setFocusPolicy(Qt.FocusPolicy.NoFocus)
+        placeholder = QWidget()
+        placeholder.setMaximumSize(0, 0)
+        self.setCentralWidget(placeholder)
+        self.setDockNestingEnabled(True)
+        self.velocity_dock = self._dock("velocity_dock", "Velocity", self.velocity_panel)
+        self.max_dock = self._dock("max_velocity_dock", "Max velocity", self.max_panel)
+        self.joint_dock = self._dock("joint_position_dock", "Joint position", self.joint_panel)
+        self.log_dock = self._dock("event_log_dock", "Events", self.event_log)
+        self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
+        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.joint_dock)
+        self.splitDockWidget(self.velocity_dock, self.max_dock, Qt.Orientation.Vertical)
+        self.tabifyDockWidget(self.max_dock, self.log_dock)
+        self.max_dock.raise_()
+        self.model_dock = add_model_dock(self)
+        self.resizeDocks(
+            [self.velocity_dock, self.joint_dock], [520, 1040], Qt.Orientation.Horizontal
+        )
+        self.resizeDocks([self.velocity_dock, self.max_dock], [520, 380], Qt.Orientation.Vertical)
+        self.resizeDocks([self.joint_dock, self.model_dock], [560, 340], Qt.Orientation.Vertical)
+        model_view = self.model_dock.widget()
+        assert isinstance(model_view, Model3DWidget)
+        self.model_view = model_view
+
         self.link_status = LinkStatus(address_text)
         self.statusBar().addPermanentWidget(self.link_status, 1)
-        link.telemetry_received.connect(self.telemetry_table.show_frame)
-        link.telemetry_received.connect(self.link_status.on_telemetry)
-        link.link_state_changed.connect(self.link_status.on_state)
+        self.statusBar().setSizeGripEnabled(False)
+        self.help_overlay = HelpOverlay(self.model, self.key_map, self)
+        self._build_menu()
+
+        self.key_filter = KeyFilter(self.model, self.key_map, self.owns, parent=self)
+        app = QApplication.instance()
+        assert isinstance(app, QApplication)
+        app.installEventFilter(self.key_filter)
+        app.applicationStateChanged.connect(self._on_application_state)
+        app.focusWindowChanged.connect(self._on_focus_window)
+
+        events = self.model.events
+        events.command_changed.connect(self._push_command)
+        events.estop_requested.connect(self._link_estop)
+        events.estop_changed.connect(self.link_status.set_estop)
+        events.max_changed.connect(self._push_max)
+        events.connection_changed.connect(self._on_connection)
+        events.message.connect(self.log_event)
+        events.position_message.connect(self.log_event)
+
+        self._control_timer = QTimer(self)
+        self._control_timer.setInterval(CONTROL_PERIOD_MS)
+        self._control_timer.timeout.connect(self._control_tick)
+        self._control_timer.start()
+
+        # An explicit minimum keeps the layout from re-setting it whenever a label grows
+        # (Qt's offscreen platform warns on every such change of a visible window).
+        self.setMinimumSize(*MINIMUM_SIZE)
+        self.resize(*DEFAULT_SIZE)
+        self._default_state = self.saveState(LAYOUT_VERSION)
+        self.layout_restored = self.restore_layout()
+        if connect:
+            self._start_link()
+        else:
+            self.model.set_connected(False)
+
+    # ---- layout ----------------------------------------------------------------------------
+
+    def _dock(self, name: str, title: str, widget: QWidget) -> QDockWidget:
+        dock = QDockWidget(title, self)
+        dock.setObjectName(name)
+        dock.setWidget(widget)
+        dock.setFeatures(
+            QDockWidget.DockWidgetFeature.DockWidgetMovable
+            | QDockWidget.DockWidgetFeature.DockWidgetFloatable
+            | QDockWidget.DockWidgetFeature.DockWidgetClosable
+        )
+        dock.topLevelChanged.connect(lambda _floating: self._check_focus())
+        return dock
+
+    def docks(self) -> list[QDockWidget]:
+        """Every dock of the console."""
+        return self.findChildren(QDockWidget)
+
+    def _build_menu(self) -> None:
+        view = self.menuBar().addMenu("&View")
+        for dock in self.docks():
+            view.addAction(dock.toggleViewAction())
+        view.addSeparator()
+        reset = QAction("Reset layout", self)
+        reset.triggered.connect(self.reset_layout)
+        view.addAction(reset)
+        help_action = QAction("Hotkeys (F1 or ?)", self)
+        help_action.triggered.connect(lambda: hotkeys.toggle_help(self.model))
+        self.menuBar().addAction(help_action)
+
+    def restore_layout(self) -> bool:
+        """Window geometry and dock layout from the settings; False if none was saved."""
+        geometry = self.settings.value("main_window/geometry")
+        state = self.settings.value("main_window/state")
+        restored = False
+        if isinstance(geometry, QByteArray):
+            restored = self.restoreGeometry(geometry)
+        if isinstance(state, QByteArray):
+            restored = self.restoreState(state, LAYOUT_VERSION) and restored
+        return restored
+
+    def save_layout(self) -> None:
+        """Remember window geometry and dock layout."""
+        self.settings.setValue("main_window/geometry", self.saveGeometry())
+        self.settings.setValue("main_window/state", self.saveState(LAYOUT_VERSION))
+        self.settings.sync()
+
+    def reset_layout(self) -> None:
+        """Back to the default dock layout."""
+        for dock in self.docks():
+            dock.setFloating(False)
+            dock.show()
+        self.restoreState(self._default_state, LAYOUT_VERSION)
+
+    def owns(self, widget: QWidget) -> bool:
+        """Whether a widget belongs to this console (floating docks and dialogs included)."""
+        current: QWidget | None = widget
+        while current is not None:
+            if current is self:
+                return True
+            current = current.parentWidget()
+        return False
+
+    # ---- link ------------------------------------------------------------------------------
+
+    def _start_link(self) -> None:
+        if self.link is not None or self._shut:
+            return
+        link = self.link_factory()
+        # Not started yet: no other thread touches the limits.
+        for channel in self.profile.channels:
+            link.core.limits.set(channel, self.model.max_velocity(channel))
+        link.telemetry_received.connect(self._on_telemetry)
+        link.link_state_changed.connect(self._on_link_state)
         link.stats_updated.connect(self.link_status.on_stats)
-        self.resize(1100, 420)
+        link.safety_event.connect(self._on_safety_event)
+        self.link = link
+        self.link_status.on_state(LinkState.CONNECTING, "connecting")
+        link.set_command(self.model.command(link.core.command))
+        link.start_link()
+        self.log_event("link started")
+
+    def _stop_link(self) -> None:
+        link, self.link = self.link, None
+        if link is None:
+            return
+        link.shutdown()
+        self.link_status.on_state(LinkState.CLOSED, "disconnected by the operator")
+        self.log_event("link stopped (zeros sent last)")
+
+    def _on_connection(self, connected: bool) -> None:
+        if connected:
+            self._start_link()
+        else:
+            self._stop_link()
+
+    def _push_command(self) -> None:
+        self.link_status.set_moving(self.model.is_moving)
+        if self.link is not None:
+            self.link.set_command(self.model.command(self.link.core.command))
+
+    def _push_max(self, channel: str, value: float) -> None:
+        if self.link is not None:
+            self.link.core.set_max_velocity(channel, value)
+
+    def _link_estop(self, reason: str) -> None:
+        if self.link is not None:
+            self.link.emergency_stop(reason)
+
+    def _is_current_link(self) -> bool:
+        # Queued signals of a link stopped meanwhile may still arrive; they are stale.
+        return self.link is not None and self.sender() is self.link
+
+    def _on_telemetry(self, frame: TelemetryFrame) -> None:
+        if not self._is_current_link():
+            return
+        self.model.on_telemetry(frame.readings, frame.received_at)
+        self.joint_panel.on_telemetry(frame)
+        self.link_status.on_telemetry(frame)
+        self.model_view.on_telemetry(frame)
+
+    def _on_link_state(self, state: LinkState, reason: str) -> None:
+        if not self._is_current_link():
+            return
+        self.link_status.on_state(state, reason)
+        self.log_event(f"link {state.value}: {reason}")
+        if state == LinkState.LOST:
+            self.model.halt("link lost")
+
+    def _on_safety_event(self, message: str) -> None:
+        self.log_event(f"link: {message}")
+        # The link zeroed the command by itself (watchdog, link lost): make the model agree,
+        # so that nothing resumes when the GUI or the link comes back.
+        self.model.halt(message)
+
+    # ---- control loop ----------------------------------------------------------------------
+
+    def _control_tick(self) -> None:
+        now = time.monotonic()
+        last, self._last_tick = self._last_tick, now
+        if last is not None and now - last > self.profile.link.gui_alive_timeout_s:
+            # The GUI thread stalled long enough for the link to zero the command; this tick
+            # may run before the link's safety event arrives, so halt here too.
+            self.model.halt(f"GUI thread stalled for {now - last:.2f} s")
+        self.model.update(now)
+
+    # ---- focus, visibility, closing --------------------------------------------------------
+
+    def _check_focus(self) -> None:
+        active = QApplication.activeWindow()
+        if active is None or not self.owns(active):
+            self.model.halt("console lost focus")
+
+    def _on_focus_window(self, _window: object) -> None:
+        self._check_focus()
+
+    def _on_application_state(self, state: Qt.ApplicationState) -> None:
+        if state != Qt.ApplicationState.ApplicationActive:
+            self.model.halt("application inactive")
+
+    def changeEvent(self, event: QEvent) -> None:
+        """Minimising or losing activation stops the robot."""
+        if event.type() == QEvent.Type.WindowStateChange and self.isMinimized():
+            self.model.halt("window minimised")
+        elif event.type() == QEvent.Type.ActivationChange and not self.isActiveWindow():
+            self._check_focus()
+        super().changeEvent(event)
+
+    def hideEvent(self, event: QHideEvent) -> None:
+        """A hidden console commands nothing."""
+        self.model.halt("window hidden")
+        super().hideEvent(event)
+
+    def closeEvent(self, event: QCloseEvent) -> None:
+        """Stop, remember the layout, close the link (zeros last)."""
+        self.shutdown()
+        super().closeEvent(event)
+
+    def shutdown(self) -> None:
+        """Stop all motion and the link; idempotent (closeEvent and aboutToQuit both call it)."""
+        if self._shut:
+            return
+        self.model.halt("console closed")
+        self.save_layout()
+        self._control_timer.stop()
+        app = QApplication.instance()
+        if isinstance(app, QApplication):
+            app.removeEventFilter(self.key_filter)
+            app.applicationStateChanged.disconnect(self._on_application_state)
+            app.focusWindowChanged.disconnect(self._on_focus_window)
+        self._stop_link()
+        self._shut = True
+
+    # ---- messages --------------------------------------------------------------------------
+
+    def log_event(self, text: str) -> None:
+        """A line in the Events dock and the status bar."""
+        stamp = time.strftime("%H:%M:%S")
+        self.event_log.addItem(f"{stamp}  {text}")
+        while self.event_log.count() > EVENT_LOG_LENGTH:
+            self.event_log.takeItem(0)
+        self.event_log.scrollToBottom()
+        self.statusBar().showMessage(text, 8000)
+        log.info("%s", text)
+
+
+def add_model_dock(window: MainWindow) -> QDockWidget:
+    """The 3D model dock under the joint-position dock: live pose, a ghost at the targets."""
+    widget = Model3DWidget(window.profile)
+    dock = window._dock("model3d_dock", "3D model", widget)
+    window.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
+    window.splitDockWidget(window.joint_dock, dock, Qt.Orientation.Vertical)
+    window.model.events.targets_changed.connect(lambda targets: widget.set_ghost(targets or None))
+    return dock

@@ -11,7 +11,7 @@ import pytest
 
 from ocu.control.commands import Command, CommandMapper, make_codec
 from ocu.link.core import LinkCore, LinkError, LinkListener, LinkState, TelemetryFrame, VideoFrame
-from ocu.link.stats import LinkStats, LossEstimator, RateMeter
+from ocu.link.stats import LinkStats, LossEstimator, RateMeter, tick_loss
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket, VideoFramePacket
 from tests.link.peer import RobotPeer
@@ -419,13 +419,33 @@ def test_stats_report_loss_from_tick_gaps(profile: RobotProfile, peer: RobotPeer
 def test_loss_estimator_duplicates_and_reordering() -> None:
     estimator = LossEstimator(window_s=100.0)
     assert estimator.loss(0.0) is None
-    for t, tick in enumerate([100, 200, 200, 300, 250, 600]):
+    ticks = [100, 200, 200, 300, 500, 400, 700, 800, 900, 1000, 1300]
+    for t, tick in enumerate(ticks):
         estimator.add(tick, float(t))
+    window = estimator.window(11.0)
     assert estimator.duplicates == 1
-    assert estimator.reordered == 1
-    assert estimator.lost_total == 2
-    assert estimator.loss(6.0) == pytest.approx(2 / 6)
+    assert estimator.reordered == 1  # 400 after 500: late, but it did arrive
+    assert window.period_ticks == 100.0
+    assert window.lost == 3  # 600, 1100 and 1200
+    assert estimator.loss(11.0) == pytest.approx(3 / 13)
     assert estimator.loss(200.0) is None  # nothing left in the window
+
+
+def test_loss_estimator_ignores_jitter() -> None:
+    # Ticks 50 apart with one packet 34 ms late: a short step must not shrink the period.
+    estimator = LossEstimator(window_s=100.0)
+    for t, tick in enumerate([0, 51, 135, 153, 200, 250, 300, 350, 400]):
+        estimator.add(tick, float(t))
+    assert estimator.loss(9.0) == 0.0
+
+
+@pytest.mark.parametrize("loss", [0.1, 0.3, 0.6])
+def test_tick_loss_matches_dropped_share(loss: float) -> None:
+    rng = random.Random(3)
+    sent = [i * 1000 + rng.randint(-100, 100) for i in range(2000)]  # 10% send jitter
+    received = [t for t in sent if rng.random() >= loss]
+    result = tick_loss(received)
+    assert result.fraction == pytest.approx(loss, abs=0.03)
 
 
 def test_rate_meter_window() -> None:

@@ -1,0 +1,279 @@
+"""Hotkeys: the key map file and the key bindings, plain functions over a TeleopModel (no Qt).
+
+A key is named by its position on a US keyboard ("W"), whatever the layout prints on it; the
+Qt side turns a key event into that name (from the scan code when the platform gives one)
+and calls `press` / `release` here.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from ocu.control.teleop import DEFAULT_FINE_FACTOR, TeleopModel
+from ocu.profile import RobotProfile
+
+USER_KEY_MAP_NAME = "hotkeys.toml"
+ESTOP_KEY = "Space"
+CLOSE_HELP_KEY = "Escape"
+
+# Linux evdev key codes (the PC set-1 scan codes of the main block) of the US positions.
+# X11 and Wayland report evdev + 8 as the native scan code; Windows reports the set-1 code.
+KEY_POSITIONS: dict[str, int] = {
+    "Escape": 1,
+    **{str((n + 1) % 10): 2 + n for n in range(10)},
+    "Minus": 12,
+    "Equal": 13,
+    **{letter: 16 + n for n, letter in enumerate("QWERTYUIOP")},
+    "BracketLeft": 26,
+    "BracketRight": 27,
+    **{letter: 30 + n for n, letter in enumerate("ASDFGHJKL")},
+    "Semicolon": 39,
+    "Apostrophe": 40,
+    "Grave": 41,
+    "Backslash": 43,
+    **{letter: 44 + n for n, letter in enumerate("ZXCVBNM")},
+    "Comma": 51,
+    "Period": 52,
+    "Slash": 53,
+    "Space": 57,
+    **{f"F{n + 1}": 59 + n for n in range(10)},
+    "F11": 87,
+    "F12": 88,
+}
+_NAME_BY_POSITION = {code: name for name, code in KEY_POSITIONS.items()}
+# How the help names a key, where its name is not what is printed on it.
+KEY_LABELS = {"Slash": "?", "Minus": "-", "Equal": "=", "Comma": ",", "Period": "."}
+# Words for the + and - directions (the paper's table 4); "+"/"-" for other channels.
+DIRECTION_WORDS = {
+    "drive_linear": ("forward", "reverse"),
+    "drive_turn": ("rotate left", "rotate right"),
+    "waist": ("rotate left", "rotate right"),
+    "shoulder": ("up", "down"),
+    "elbow": ("up", "down"),
+    "neck": ("up", "down"),
+    "flippers": ("up", "down"),
+    "gripper": ("open", "close"),
+}
+
+
+class KeyMapError(ValueError):
+    """The key map file is missing, not TOML, or binds something unknown."""
+
+
+@dataclass(frozen=True)
+class HoldBinding:
+    """Hold a key to move one channel in one direction."""
+
+    channel: str
+    direction: int
+
+    def describe(self) -> str:
+        """'drive_linear +' as written in the key map file."""
+        return f"{self.channel} {'+' if self.direction > 0 else '-'}"
+
+
+@dataclass(frozen=True)
+class KeyMap:
+    """Key name to hold binding or command name, and the Shift fine factor."""
+
+    hold: Mapping[str, HoldBinding]
+    commands: Mapping[str, str]
+    fine_factor: float = DEFAULT_FINE_FACTOR
+    sources: tuple[str, ...] = ()
+
+    def is_bound(self, key: str) -> bool:
+        """Whether pressing this key does something."""
+        return key in self.hold or key in self.commands or key == ESTOP_KEY
+
+    def keys_for(self, command: str) -> list[str]:
+        """Keys bound to a command, Space first for the emergency stop."""
+        keys = [key for key, name in self.commands.items() if name == command]
+        if command == "emergency_stop" and ESTOP_KEY not in keys:
+            keys.insert(0, ESTOP_KEY)
+        return keys
+
+    def help_rows(self) -> list[tuple[str, str]]:
+        """(keys, what they do) for the help overlay, one row per channel."""
+        by_channel: dict[str, dict[int, list[str]]] = {}
+        for key, binding in self.hold.items():
+            directions = by_channel.setdefault(binding.channel, {1: [], -1: []})
+            directions[binding.direction].append(key_label(key))
+        lines = []
+        for channel, directions in by_channel.items():
+            words = DIRECTION_WORDS.get(channel, ("+", "-"))
+            keys = " / ".join(" ".join(directions[d]) for d in (1, -1) if directions[d])
+            what = " / ".join(words[i] for i, d in enumerate((1, -1)) if directions[d])
+            lines.append((keys, f"{channel.replace('_', ' ')}: {what}"))
+        lines.append(("Shift + key", f"fine: {self.fine_factor:g} of the hotkey speed"))
+        for command in dict.fromkeys(self.commands.values()):
+            keys = " or ".join(key_label(k) for k in self.keys_for(command))
+            lines.append((keys, COMMAND_TITLES[command]))
+        if "emergency_stop" not in self.commands.values():
+            lines.append((ESTOP_KEY, COMMAND_TITLES["emergency_stop"]))
+        return lines
+
+
+def key_label(key: str) -> str:
+    """What the help shows for a key name ('Slash' -> '?')."""
+    return KEY_LABELS.get(key, key)
+
+
+def key_for_position(code: int) -> str | None:
+    """The key name at an evdev position, or None."""
+    return _NAME_BY_POSITION.get(code)
+
+
+def default_key_map_path() -> Path:
+    """The key map shipped with the package (the paper's table 4)."""
+    return Path(str(resources.files("ocu") / "profiles" / "hotkeys.toml"))
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise KeyMapError(f"cannot read key map {path}: {err.strerror}") from err
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise KeyMapError(f"{path}: not valid TOML: {err}") from err
+
+
+def _check_key(key: str, where: str) -> None:
+    if key not in KEY_POSITIONS:
+        raise KeyMapError(f"{where}: unknown key {key!r}; use one of {', '.join(KEY_POSITIONS)}")
+
+
+def _table(data: dict[str, Any], name: str, source: str) -> dict[str, Any]:
+    table = data.get(name, {})
+    if not isinstance(table, dict):
+        raise KeyMapError(f"{source}: [{name}] must be a table")
+    return table
+
+
+def parse_key_map(
+    data: dict[str, Any], profile: RobotProfile, base: KeyMap | None = None, source: str = "?"
+) -> KeyMap:
+    """Validate a decoded key map and merge it over `base`."""
+    unknown = set(data) - {"options", "hold", "commands"}
+    if unknown:
+        raise KeyMapError(f"{source}: unknown tables {sorted(unknown)}")
+    hold = dict(base.hold) if base else {}
+    commands = dict(base.commands) if base else {}
+    fine_factor = base.fine_factor if base else DEFAULT_FINE_FACTOR
+
+    options = _table(data, "options", source)
+    if "fine_factor" in options:
+        value = options["fine_factor"]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise KeyMapError(f"{source}: options.fine_factor must be a number")
+        if not (math.isfinite(value) and 0.0 < value <= 1.0):
+            raise KeyMapError(f"{source}: options.fine_factor must be in (0, 1], got {value}")
+        fine_factor = float(value)
+
+    for key, text in _table(data, "hold", source).items():
+        where = f"{source}: hold.{key}"
+        _check_key(key, where)
+        if not isinstance(text, str):
+            raise KeyMapError(f'{where}: must be a string like "waist +"')
+        commands.pop(key, None)
+        if not text.strip():
+            hold.pop(key, None)
+            continue
+        parts = text.split()
+        if len(parts) != 2 or parts[1] not in ("+", "-"):
+            raise KeyMapError(f'{where}: {text!r} must be "CHANNEL +" or "CHANNEL -"')
+        if parts[0] not in profile.channels:
+            raise KeyMapError(
+                f"{where}: unknown channel {parts[0]!r}; channels: {', '.join(profile.channels)}"
+            )
+        hold[key] = HoldBinding(parts[0], 1 if parts[1] == "+" else -1)
+
+    for key, name in _table(data, "commands", source).items():
+        where = f"{source}: commands.{key}"
+        _check_key(key, where)
+        if not isinstance(name, str):
+            raise KeyMapError(f"{where}: must be a command name")
+        hold.pop(key, None)
+        if not name:
+            commands.pop(key, None)
+            continue
+        if name not in COMMANDS:
+            raise KeyMapError(f"{where}: unknown command {name!r}; use one of {sorted(COMMANDS)}")
+        commands[key] = name
+    if ESTOP_KEY in hold:
+        raise KeyMapError(f"{source}: {ESTOP_KEY} is the emergency stop and cannot move a joint")
+    sources = (*base.sources, source) if base else (source,)
+    return KeyMap(hold=hold, commands=commands, fine_factor=fine_factor, sources=sources)
+
+
+def load_key_map(profile: RobotProfile, override: Path | None = None) -> KeyMap:
+    """The shipped key map, with the user's override file merged over it when it exists."""
+    default = default_key_map_path()
+    key_map = parse_key_map(_read_toml(default), profile, source=str(default))
+    if override is not None and override.exists():
+        key_map = parse_key_map(_read_toml(override), profile, key_map, source=str(override))
+    return key_map
+
+
+# ---- key bindings: plain functions over the model ------------------------------------------
+
+
+def emergency_stop(model: TeleopModel, reason: str = "Space") -> None:
+    """Stop everything now and latch until the operator acts again."""
+    model.emergency_stop(reason)
+
+
+def toggle_help(model: TeleopModel) -> None:
+    """Show or hide the hotkey help overlay."""
+    model.set_help_visible(not model.help_visible)
+
+
+COMMANDS: dict[str, Callable[[TeleopModel], None]] = {
+    "emergency_stop": emergency_stop,
+    "help": toggle_help,
+}
+COMMAND_TITLES = {
+    "emergency_stop": "EMERGENCY STOP (also the StopAll button)",
+    "help": "show / hide this help",
+}
+
+
+def press(model: TeleopModel, key_map: KeyMap, key: str) -> bool:
+    """A key went down (auto-repeat already filtered out); True if it is bound."""
+    if key == ESTOP_KEY:
+        emergency_stop(model, ESTOP_KEY)
+        return True
+    binding = key_map.hold.get(key)
+    if binding is not None:
+        model.hotkey_down(key, binding.channel, binding.direction)
+        return True
+    command = key_map.commands.get(key)
+    if command is not None:
+        COMMANDS[command](model)
+        return True
+    if key == CLOSE_HELP_KEY and model.help_visible:
+        model.set_help_visible(False)
+        return True
+    return False
+
+
+def release(model: TeleopModel, key_map: KeyMap, key: str) -> bool:
+    """A key went up; True if it was a held motion key."""
+    return model.hotkey_up(key)
+
+
+def release_all(model: TeleopModel, reason: str) -> bool:
+    """Release every held key (focus lost, window hidden); True if any was held."""
+    return model.release_hotkeys(reason)
+
+
+def set_fine(model: TeleopModel, fine: bool) -> None:
+    """Shift went down or up."""
+    model.set_fine(fine)

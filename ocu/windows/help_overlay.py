@@ -1,0 +1,66 @@
+"""The hotkey help overlay (F1 or ?): the key map over the whole window, mouse-transparent."""
+
+from __future__ import annotations
+
+from html import escape
+
+from PySide6.QtCore import QEvent, QObject, Qt
+from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+from ocu.control.teleop import TeleopModel
+from ocu.hotkeys import KeyMap
+
+OVERLAY_STYLE = "background: rgba(20, 24, 28, 215); color: white;"
+
+
+def help_html(key_map: KeyMap) -> str:
+    """The key map as an HTML table (keys by US position)."""
+    rows = "".join(
+        f"<tr><td align='right' style='padding:3px 18px;font-weight:bold;font-size:17pt;"
+        f"color:#ffd54f'>{escape(keys)}</td>"
+        f"<td style='padding:3px 6px;font-size:15pt'>{escape(what)}</td></tr>"
+        for keys, what in key_map.help_rows()
+    )
+    sources = "<br>".join(escape(s) for s in key_map.sources)
+    return (
+        "<div style='font-size:20pt;font-weight:bold'>Hotkeys — hold to move, release to stop"
+        "</div><table align='center'>" + rows + "</table>"
+        "<p style='font-size:11pt'>Keys work by position (a Russian layout drives the same). "
+        "Letters go to a text box that has focus; Space stops from anywhere. "
+        "F1, ? or Esc closes this help.<br>Key map: " + sources + "</p>"
+    )
+
+
+class HelpOverlay(QWidget):
+    """Covers its parent while the model says help is visible."""
+
+    def __init__(self, model: TeleopModel, key_map: KeyMap, parent: QWidget) -> None:
+        super().__init__(parent)
+        self.host = parent
+        self.setObjectName("help_overlay")
+        self.setAttribute(Qt.WidgetAttribute.WA_TransparentForMouseEvents)
+        self.setAttribute(Qt.WidgetAttribute.WA_StyledBackground)
+        self.setStyleSheet(OVERLAY_STYLE)
+        self.label = QLabel(help_html(key_map))
+        self.label.setObjectName("help_text")
+        self.label.setTextFormat(Qt.TextFormat.RichText)
+        self.label.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.label.setStyleSheet("background: transparent; color: white;")
+        layout = QVBoxLayout(self)
+        layout.addWidget(self.label)
+        parent.installEventFilter(self)
+        model.events.help_changed.connect(self._on_help)
+        self.setVisible(model.help_visible)
+        self.setGeometry(parent.rect())
+
+    def eventFilter(self, watched: QObject, event: QEvent) -> bool:
+        """Follow the parent's size."""
+        if watched is self.host and event.type() == QEvent.Type.Resize:
+            self.setGeometry(self.host.rect())
+        return False
+
+    def _on_help(self, visible: bool) -> None:
+        self.setGeometry(self.host.rect())
+        self.setVisible(visible)
+        if visible:
+            self.raise_()

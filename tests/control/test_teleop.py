@@ -1,0 +1,353 @@
+"""The operator model without Qt: sources, hotkeys, Shift, e-stop latch, position merging."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from ocu.control.commands import Command, CommandError, JointReading
+from ocu.control.position import PositionError
+from ocu.control.teleop import ChannelCommand, Event, Source, TeleopModel
+from ocu.profile import RobotProfile, load_profile
+
+
+class Recorder:
+    """Collects every event of a model."""
+
+    def __init__(self, model: TeleopModel) -> None:
+        self.commands: list[dict[str, float]] = []
+        self.estops: list[str] = []
+        self.estop_states: list[bool] = []
+        self.messages: list[str] = []
+        self.position_messages: list[str] = []
+        self.channels: list[tuple[str, ChannelCommand]] = []
+        events = model.events
+        events.command_changed.connect(lambda: self.commands.append(model.velocities()))
+        events.estop_requested.connect(self.estops.append)
+        events.estop_changed.connect(lambda active, _reason: self.estop_states.append(active))
+        events.message.connect(self.messages.append)
+        events.position_message.connect(self.position_messages.append)
+        events.channel_changed.connect(lambda name, cmd: self.channels.append((name, cmd)))
+
+
+@pytest.fixture
+def model(profile: RobotProfile) -> TeleopModel:
+    return TeleopModel(profile)
+
+
+def reading(profile: RobotProfile, name: str, angle_rad: float) -> JointReading:
+    motor = profile.motors[name]
+    return JointReading(name, motor.device_id, 1, 2, angle_rad, 0.0, 0.3, 0, angle_rad, 0.0, 0.3)
+
+
+def test_slider_sets_one_channel_bounded_by_its_maximum(model: TeleopModel) -> None:
+    log = Recorder(model)
+    limit = model.max_velocity("waist")
+    assert model.set_velocity("waist", 10.0) == limit
+    assert model.channel("waist") == ChannelCommand(limit, Source.SLIDER)
+    assert log.commands == [{"waist": limit}]
+    assert model.set_velocity("waist", -10.0) == -limit
+
+
+def test_typed_values_apply_together_and_all_or_nothing(model: TeleopModel) -> None:
+    log = Recorder(model)
+    model.set_velocities({"waist": 0.1, "elbow": -0.2}, Source.TEXT)
+    assert model.velocities() == {"waist": 0.1, "elbow": -0.2}
+    assert len(log.commands) == 1  # one command for both: they move together
+    with pytest.raises(CommandError, match="finite"):
+        model.set_velocities({"waist": 0.3, "neck": math.nan})
+    with pytest.raises(CommandError, match="unknown"):
+        model.set_velocities({"waist": 0.3, "tail": 1.0})
+    assert model.velocities() == {"waist": 0.1, "elbow": -0.2}
+
+
+def test_hold_to_move_release_to_stop_and_two_keys_at_once(model: TeleopModel) -> None:
+    speed_linear = model.hotkey_speed("drive_linear")
+    speed_waist = model.hotkey_speed("waist")
+    assert model.hotkey_down("W", "drive_linear", 1)
+    assert model.hotkey_down("Q", "waist", 1)
+    assert model.velocities() == {"drive_linear": speed_linear, "waist": speed_waist}
+    assert not model.hotkey_down("W", "drive_linear", 1)  # already held
+    assert model.hotkey_up("W")
+    assert model.velocities() == {"waist": speed_waist}
+    assert model.channel("drive_linear") == ChannelCommand(0.0, Source.NONE)
+    assert model.hotkey_up("Q")
+    assert model.velocities() == {}
+    assert not model.hotkey_up("Q")
+
+
+def test_opposite_keys_cancel_and_the_last_release_stops(model: TeleopModel) -> None:
+    model.hotkey_down("W", "drive_linear", 1)
+    model.hotkey_down("S", "drive_linear", -1)
+    assert model.channel("drive_linear").velocity == 0.0
+    model.hotkey_up("W")
+    assert model.channel("drive_linear").velocity == -model.hotkey_speed("drive_linear")
+
+
+def test_hotkey_speed_defaults_to_the_maximum_and_is_bounded_by_it(model: TeleopModel) -> None:
+    assert model.hotkey_speed("waist") == model.max_velocity("waist")
+    assert model.set_hotkey_speed("waist", 0.1) == 0.1
+    model.hotkey_down("Q", "waist", 1)
+    assert model.channel("waist").velocity == 0.1
+    model.set_max_velocity("waist", 0.05)  # a lower maximum cuts the held key's speed
+    assert model.channel("waist").velocity == 0.05
+    model.set_max_velocity("waist", 0.8)
+    assert model.channel("waist").velocity == 0.1
+    model.set_hotkey_speed("waist", None)
+    assert model.channel("waist").velocity == 0.8
+
+
+def test_max_velocity_never_exceeds_the_hard_maximum(
+    model: TeleopModel, profile: RobotProfile
+) -> None:
+    hard = profile.channels["drive_linear"].hard_max
+    assert model.set_max_velocity("drive_linear", 10.0) == hard
+    model.set_velocity("drive_linear", 10.0)
+    assert model.channel("drive_linear").velocity == hard
+    model.set_max_velocity("drive_linear", 0.1)
+    assert model.channel("drive_linear").velocity == 0.1  # the standing command is cut
+
+
+def test_shift_moves_at_a_fraction_but_not_below_the_servo_deadband(
+    model: TeleopModel, profile: RobotProfile
+) -> None:
+    model.hotkey_down("Q", "waist", 1)
+    model.set_fine(True)
+    assert model.channel("waist").velocity == pytest.approx(
+        model.hotkey_speed("waist") * model.fine_factor
+    )
+    model.set_fine(False)
+    assert model.channel("waist").velocity == model.hotkey_speed("waist")
+    # Drive: a quarter of 0.3 m/s is below the 0.2 m/s at which the servos start moving.
+    model.set_fine(True)
+    model.hotkey_down("W", "drive_linear", 1)
+    assert model.channel("drive_linear").velocity == profile.channels["drive_linear"].min_speed
+
+
+def test_emergency_stop_zeroes_everything_and_latches(model: TeleopModel) -> None:
+    log = Recorder(model)
+    model.set_velocity("waist", 0.3)
+    model.hotkey_down("W", "drive_linear", 1)
+    model.set_switch("gripper", 1)
+    model.set_target("shoulder", 0.5)
+    model.emergency_stop("test")
+    assert log.estops == ["test"]
+    assert model.estopped
+    assert model.velocities() == {}
+    assert model.held_keys == frozenset()
+    assert model.targets == {}
+    assert all(c == ChannelCommand() for c in model.channels.values())
+    # Nothing resumes by itself: a release, Shift, a control step.
+    model.hotkey_up("W")
+    model.set_fine(True)
+    model.update(1.0)
+    assert model.velocities() == {}
+    assert model.estopped
+    # The operator acts again: a new key press.
+    model.hotkey_down("A", "drive_turn", 1)
+    assert not model.estopped
+    assert model.velocities() == {"drive_turn": model.fine_speed("drive_turn")}
+    assert log.estop_states == [True, False]
+
+
+@pytest.mark.parametrize(
+    "act",
+    [
+        lambda m: m.set_velocity("waist", 0.1),
+        lambda m: m.set_velocities({"waist": 0.1}),
+        lambda m: m.set_switch("flippers", -1),
+        lambda m: m.set_target("waist", 0.2),
+    ],
+    ids=["slider", "accept", "switch", "target"],
+)
+def test_every_operator_act_releases_the_latch(
+    model: TeleopModel, act: Callable[[TeleopModel], None]
+) -> None:
+    model.emergency_stop()
+    act(model)
+    assert not model.estopped
+
+
+def test_halt_stops_without_latching_or_estop(model: TeleopModel) -> None:
+    log = Recorder(model)
+    model.hotkey_down("W", "drive_linear", 1)
+    model.set_velocity("neck", 0.2)
+    assert model.halt("window hidden")
+    assert model.velocities() == {}
+    assert not model.estopped
+    assert log.estops == []
+    assert log.messages[-1] == "motion stopped: window hidden"
+    assert not model.halt("again")  # nothing to stop: no message
+    assert log.messages[-1] == "motion stopped: window hidden"
+
+
+def test_switch_moves_at_the_hotkey_speed(model: TeleopModel) -> None:
+    model.set_hotkey_speed("flippers", 0.2)
+    model.set_switch("flippers", -1)
+    assert model.channel("flippers") == ChannelCommand(-0.2, Source.SWITCH)
+    model.set_switch("flippers", 0)
+    assert model.channel("flippers") == ChannelCommand()
+    with pytest.raises(ValueError, match="direction"):
+        model.set_switch("flippers", 2)
+
+
+def test_manual_command_drops_held_keys_of_that_channel(model: TeleopModel) -> None:
+    model.hotkey_down("Q", "waist", 1)
+    model.set_velocity("waist", -0.1)
+    assert model.held_keys == frozenset()
+    assert not model.hotkey_up("Q")  # its release no longer stops the slider's command
+    assert model.channel("waist") == ChannelCommand(-0.1, Source.SLIDER)
+
+
+def test_torch_is_part_of_the_command_and_survives_an_estop(model: TeleopModel) -> None:
+    model.set_torch(True)
+    model.set_velocity("waist", 0.2)
+    base = Command(camera=2, video_bitrate=5.0)
+    command = model.command(base)
+    assert command == Command({"waist": 0.2}, torch=True, camera=2, video_bitrate=5.0)
+    model.emergency_stop()
+    assert model.command(base) == Command({}, torch=True, camera=2, video_bitrate=5.0)
+
+
+def test_connection_request_halts_before_disconnecting(model: TeleopModel) -> None:
+    seen: list[tuple[bool, dict[str, float]]] = []
+    model.events.connection_changed.connect(lambda c: seen.append((c, model.velocities())))
+    model.set_velocity("waist", 0.2)
+    model.set_connected(False)
+    assert seen == [(False, {})]
+    model.set_connected(True)
+    assert seen[-1] == (True, {})
+
+
+# ---- position control merged into the channels --------------------------------------------
+
+
+def test_position_targets_drive_their_channels_and_several_move_at_once(
+    model: TeleopModel, profile: RobotProfile
+) -> None:
+    log = Recorder(model)
+    model.on_telemetry(
+        {name: reading(profile, name, 0.0) for name in ("waist", "shoulder")}, received_at=0.0
+    )
+    model.set_targets({"waist": 0.5, "shoulder": -0.1})
+    model.update(0.01)
+    assert model.channel("waist").source is Source.POSITION
+    assert model.channel("waist").velocity > 0.0
+    assert model.channel("shoulder").velocity < 0.0
+    assert set(model.targets) == {"waist", "shoulder"}
+    # A manual command on a joint takes it back from the controller; the other goes on.
+    model.hotkey_down("Q", "waist", -1)
+    assert set(model.targets) == {"shoulder"}
+    assert model.channel("waist").source is Source.HOTKEY
+    model.update(0.02)
+    assert model.channel("waist").source is Source.HOTKEY
+    assert model.channel("shoulder").source is Source.POSITION
+    assert any("cancelled by manual command" in m for m in log.messages)
+
+
+def test_reached_target_stops_its_channel_with_a_message(
+    model: TeleopModel, profile: RobotProfile
+) -> None:
+    log = Recorder(model)
+    model.on_telemetry({"neck": reading(profile, "neck", 0.0)}, received_at=0.0)
+    model.set_target("neck", 0.0005)
+    model.update(0.01)
+    model.on_telemetry({"neck": reading(profile, "neck", 0.0005)}, received_at=0.05)
+    model.update(0.06)
+    assert model.targets == {}
+    assert model.channel("neck") == ChannelCommand()
+    assert any("reached" in m for m in log.position_messages)
+
+
+def test_bad_target_applies_nothing(model: TeleopModel) -> None:
+    with pytest.raises(PositionError, match="outside the limits"):
+        model.set_targets({"waist": 0.1, "shoulder": math.radians(170.0)})
+    with pytest.raises(PositionError, match="not a joint driven"):
+        model.set_targets({"left_track": 0.1})
+    assert model.targets == {}
+
+
+def test_cancel_targets_stops_the_channels(model: TeleopModel, profile: RobotProfile) -> None:
+    model.on_telemetry({"elbow": reading(profile, "elbow", 0.0)}, received_at=0.0)
+    model.set_target("elbow", 1.0)
+    model.update(0.01)
+    assert model.is_moving
+    model.cancel_targets()
+    assert not model.is_moving
+    assert model.channel("elbow") == ChannelCommand()
+
+
+# ---- invariants ----------------------------------------------------------------------------
+
+_CHANNELS = ("drive_linear", "drive_turn", "waist", "gripper")
+Op = Callable[[TeleopModel], object]
+
+
+def _down(key: str, channel: str, direction: int) -> Op:
+    return lambda m: m.hotkey_down(key, channel, direction)
+
+
+def _up(key: str) -> Op:
+    return lambda m: m.hotkey_up(key)
+
+
+def _slider(channel: str, value: float) -> Op:
+    return lambda m: m.set_velocity(channel, value)
+
+
+def _max(channel: str, value: float) -> Op:
+    return lambda m: m.set_max_velocity(channel, value)
+
+
+def _fine(on: bool) -> Op:
+    return lambda m: m.set_fine(on)
+
+
+def _estop() -> Op:
+    return lambda m: m.emergency_stop()
+
+
+_keys = st.sampled_from("WSAQEG")
+_channels = st.sampled_from(_CHANNELS)
+_ops = st.one_of(
+    st.builds(_down, _keys, _channels, st.sampled_from([-1, 1])),
+    st.builds(_up, _keys),
+    st.builds(_slider, _channels, st.floats(-5, 5)),
+    st.builds(_max, _channels, st.floats(0, 5)),
+    st.builds(_fine, st.booleans()),
+    st.builds(_estop),
+)
+
+
+@given(st.lists(_ops, max_size=30))
+def test_velocities_stay_within_the_maxima_and_stop_when_keys_are_up(ops: list[Op]) -> None:
+    model = TeleopModel(load_profile())
+    for op in ops:
+        op(model)
+        for name, value in model.velocities().items():
+            assert abs(value) <= model.max_velocity(name) + 1e-12
+        if model.estopped:
+            assert model.velocities() == {}
+    model.release_hotkeys()
+    assert all(c.source is not Source.HOTKEY for c in model.channels.values())
+
+
+def test_event_runs_every_callback_before_raising() -> None:
+    event: Event[[int]] = Event()
+    seen: list[int] = []
+
+    def broken(_value: int) -> None:
+        raise RuntimeError("view failed")
+
+    event.connect(broken)
+    event.connect(seen.append)
+    with pytest.raises(RuntimeError, match="view failed"):
+        event.emit(3)
+    assert seen == [3]
+    event.disconnect(broken)
+    event.emit(4)
+    assert seen == [3, 4]

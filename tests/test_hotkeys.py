@@ -1,0 +1,166 @@
+"""The key map file and the key bindings as plain functions over the model (no Qt)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ocu import hotkeys
+from ocu.control.teleop import TeleopModel
+from ocu.hotkeys import HoldBinding, KeyMap, KeyMapError, load_key_map
+from ocu.profile import RobotProfile
+
+# Table 4 of the paper: key, channel, direction (+ forward / left / up / open).
+TABLE_4 = {
+    "W": ("drive_linear", 1),
+    "S": ("drive_linear", -1),
+    "A": ("drive_turn", 1),
+    "D": ("drive_turn", -1),
+    "Q": ("waist", 1),
+    "E": ("waist", -1),
+    "Y": ("shoulder", 1),
+    "H": ("shoulder", -1),
+    "U": ("elbow", 1),
+    "J": ("elbow", -1),
+    "F": ("flippers", 1),
+    "R": ("flippers", -1),
+    "T": ("gripper", 1),
+    "G": ("gripper", -1),
+}
+
+
+@pytest.fixture
+def key_map(profile: RobotProfile) -> KeyMap:
+    return load_key_map(profile)
+
+
+@pytest.fixture
+def model(profile: RobotProfile) -> TeleopModel:
+    return TeleopModel(profile)
+
+
+def test_default_map_is_table_4(key_map: KeyMap) -> None:
+    assert {k: (b.channel, b.direction) for k, b in key_map.hold.items()} == TABLE_4
+    assert key_map.commands == {"Space": "emergency_stop", "F1": "help", "Slash": "help"}
+    assert key_map.fine_factor == 0.25
+
+
+def test_key_positions_are_the_us_scan_codes() -> None:
+    # evdev codes (= PC set-1 scan codes) of a few keys, from linux/input-event-codes.h.
+    assert hotkeys.KEY_POSITIONS["Q"] == 16
+    assert hotkeys.KEY_POSITIONS["W"] == 17
+    assert hotkeys.KEY_POSITIONS["A"] == 30
+    assert hotkeys.KEY_POSITIONS["Z"] == 44
+    assert hotkeys.KEY_POSITIONS["Space"] == 57
+    assert hotkeys.KEY_POSITIONS["Slash"] == 53
+    assert hotkeys.KEY_POSITIONS["1"] == 2
+    assert hotkeys.KEY_POSITIONS["0"] == 11
+    assert hotkeys.KEY_POSITIONS["F12"] == 88
+    assert hotkeys.key_for_position(17) == "W"
+    assert hotkeys.key_for_position(250) is None
+    assert len(set(hotkeys.KEY_POSITIONS.values())) == len(hotkeys.KEY_POSITIONS)
+
+
+def test_user_file_changes_the_map_without_code(profile: RobotProfile, tmp_path: Path) -> None:
+    override = tmp_path / "hotkeys.toml"
+    override.write_text(
+        '[options]\nfine_factor = 0.5\n[hold]\nI = "drive_linear +"\nW = ""\nF1 = "neck +"\n'
+        '[commands]\nP = "emergency_stop"\n',
+        encoding="utf-8",
+    )
+    key_map = load_key_map(profile, override)
+    assert key_map.hold["I"] == HoldBinding("drive_linear", 1)
+    assert "W" not in key_map.hold
+    assert key_map.hold["F1"] == HoldBinding("neck", 1)
+    assert "F1" not in key_map.commands
+    assert key_map.commands["P"] == "emergency_stop"
+    assert key_map.fine_factor == 0.5
+    assert key_map.sources[-1] == str(override)
+    assert key_map.hold["S"] == HoldBinding("drive_linear", -1)  # the rest is kept
+
+
+def test_missing_user_file_means_the_default(profile: RobotProfile, tmp_path: Path) -> None:
+    assert load_key_map(profile, tmp_path / "none.toml") == load_key_map(profile)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('[hold]\n"Ä" = "waist +"\n', "unknown key"),
+        ('[hold]\nK = "tail +"\n', "unknown channel 'tail'"),
+        ('[hold]\nK = "waist up"\n', "must be"),
+        ("[hold]\nK = 3\n", "must be a string"),
+        ('[hold]\nSpace = "waist +"\n', "emergency stop"),
+        ('[commands]\nK = "dance"\n', "unknown command"),
+        ("[options]\nfine_factor = 0\n", r"\(0, 1\]"),
+        ('[options]\nfine_factor = "x"\n', "must be a number"),
+        ("[keys]\n", "unknown tables"),
+        ("hold = 3\n", "must be a table"),
+        ("[hold\n", "not valid TOML"),
+    ],
+)
+def test_bad_user_files_are_refused_with_the_reason(
+    profile: RobotProfile, tmp_path: Path, text: str, message: str
+) -> None:
+    override = tmp_path / "hotkeys.toml"
+    override.write_text(text, encoding="utf-8")
+    with pytest.raises(KeyMapError, match=message):
+        load_key_map(profile, override)
+
+
+def test_every_table_4_key_moves_its_channel_while_held(
+    model: TeleopModel, key_map: KeyMap
+) -> None:
+    for key, (channel, direction) in TABLE_4.items():
+        assert hotkeys.press(model, key_map, key)
+        assert model.velocities() == {channel: direction * model.hotkey_speed(channel)}
+        assert hotkeys.release(model, key_map, key)
+        assert model.velocities() == {}
+
+
+def test_space_stops_everything(model: TeleopModel, key_map: KeyMap) -> None:
+    stops: list[str] = []
+    model.events.estop_requested.connect(stops.append)
+    hotkeys.press(model, key_map, "W")
+    hotkeys.press(model, key_map, "Q")
+    assert hotkeys.press(model, key_map, "Space")
+    assert stops == ["Space"]
+    assert model.velocities() == {}
+    assert model.estopped
+    assert not hotkeys.release(model, key_map, "W")  # nothing held any more
+
+
+def test_help_keys_toggle_and_escape_closes(model: TeleopModel, key_map: KeyMap) -> None:
+    assert hotkeys.press(model, key_map, "F1")
+    assert model.help_visible
+    assert hotkeys.press(model, key_map, "Slash")
+    assert not model.help_visible
+    assert not hotkeys.press(model, key_map, "Escape")  # nothing to close: not consumed
+    hotkeys.toggle_help(model)
+    assert hotkeys.press(model, key_map, "Escape")
+    assert not model.help_visible
+
+
+def test_unbound_keys_are_not_consumed(model: TeleopModel, key_map: KeyMap) -> None:
+    assert not hotkeys.press(model, key_map, "K")
+    assert not hotkeys.release(model, key_map, "K")
+
+
+def test_release_all_and_shift(model: TeleopModel, key_map: KeyMap) -> None:
+    hotkeys.press(model, key_map, "Q")
+    hotkeys.set_fine(model, True)
+    assert model.velocities() == {"waist": model.fine_speed("waist")}
+    assert hotkeys.release_all(model, "focus lost")
+    assert model.velocities() == {}
+    assert not hotkeys.release_all(model, "focus lost")
+
+
+def test_help_rows_list_every_binding(key_map: KeyMap) -> None:
+    rows = dict(key_map.help_rows())
+    assert rows["W / S"] == "drive linear: forward / reverse"
+    assert rows["T / G"] == "gripper: open / close"
+    assert rows["Space"].startswith("EMERGENCY STOP")
+    assert rows["F1 or ?"] == "show / hide this help"
+    assert "Shift + key" in rows
+    assert len(rows) == 10

@@ -1,0 +1,107 @@
+"""Console fixtures (the real simulator, the real link, settings in tmp_path) and helpers."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from PySide6.QtCore import QSettings
+from PySide6.QtWidgets import QApplication
+from pytestqt.qtbot import QtBot
+
+from ocu.link.core import LinkCore, LinkState
+from ocu.link.qt import LinkThread
+from ocu.profile import RobotProfile
+from ocu.sim.simulator import ReceivedRcp, RobotSimulator, SimState
+from ocu.windows.main_window import MainWindow
+
+DEADLINE_MS = 5000
+DEADLINE_S = DEADLINE_MS / 1000
+
+
+@pytest.fixture
+def sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
+    """The simulator at 10 Hz telemetry, no video (keeps the two cores free)."""
+    simulator = RobotSimulator(profile, telemetry_hz=10.0, video_fps=0.0)
+    simulator.start()
+    yield simulator
+    simulator.stop()
+
+
+@pytest.fixture
+def settings(tmp_path: Path) -> QSettings:
+    """Console settings in a temporary file, never the user's."""
+    return QSettings(str(tmp_path / "ocu.ini"), QSettings.Format.IniFormat)
+
+
+ConsoleFactory = Callable[..., MainWindow]
+
+
+@pytest.fixture
+def make_console(
+    qtbot: QtBot, profile: RobotProfile, settings: QSettings
+) -> Iterator[ConsoleFactory]:
+    """Build, show and activate consoles; each is shut down after the test."""
+    windows: list[MainWindow] = []
+
+    def make(sim: RobotSimulator, *, connected: bool = True, **link_kwargs: object) -> MainWindow:
+        def link_factory() -> LinkThread:
+            return LinkThread(LinkCore(profile, sim.address, **link_kwargs))  # type: ignore[arg-type]
+
+        window = MainWindow(profile, link_factory, "simulator", settings, connect=connected)
+        qtbot.addWidget(window)
+        windows.append(window)
+        window.show()
+        window.activateWindow()
+        qtbot.waitUntil(window.isActiveWindow, timeout=DEADLINE_MS)
+        if connected:
+            qtbot.waitUntil(
+                lambda: window.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS
+            )
+        return window
+
+    yield make
+    for window in windows:
+        window.shutdown()
+    QApplication.processEvents()
+
+
+@pytest.fixture
+def console(make_console: ConsoleFactory, sim: RobotSimulator) -> MainWindow:
+    """One console connected to the simulator, active, with telemetry flowing."""
+    return make_console(sim)
+
+
+def wait_sim(
+    qtbot: QtBot,
+    sim: RobotSimulator,
+    predicate: Callable[[SimState], bool],
+    what: str,
+    timeout_ms: int = DEADLINE_MS,
+) -> SimState:
+    """Wait, with Qt's event loop running, until the simulator's state satisfies predicate."""
+    seen: list[SimState] = []
+
+    def check() -> bool:
+        state = sim.state()
+        if predicate(state):
+            seen.append(state)
+            return True
+        return False
+
+    try:
+        qtbot.waitUntil(check, timeout=timeout_ms)
+    except qtbot.TimeoutError:
+        raise AssertionError(f"simulator never showed: {what}") from None
+    return seen[-1]
+
+
+def drive_axis(profile: RobotProfile, rcp: ReceivedRcp, channel: str) -> int:
+    """The raw axis value of one channel in a received RCP."""
+    return rcp.packet.axes[profile.channels[channel].axis]
+
+
+def is_zero(rcp: ReceivedRcp) -> bool:
+    """Whether an RCP commands no motion at all."""
+    return not any(rcp.packet.axes)

@@ -1,0 +1,191 @@
+"""Velocity and max-velocity windows over the real link to the real simulator."""
+
+from __future__ import annotations
+
+import pytest
+from PySide6.QtCore import Qt
+from PySide6.QtTest import QTest
+from pytestqt.qtbot import QtBot
+
+from ocu.control.teleop import Source
+from ocu.link.core import LinkState
+from ocu.profile import RobotProfile
+from ocu.sim.simulator import RobotSimulator
+from ocu.widgets.number_box import NumberError, parse_number
+from ocu.widgets.value_slider import STEPS
+from ocu.windows.main_window import MainWindow
+from tests.windows.console_fixtures import DEADLINE_MS, drive_axis, is_zero, wait_sim
+
+
+def type_into(qtbot: QtBot, box: object, text: str) -> None:
+    from ocu.widgets.number_box import NumberBox
+
+    assert isinstance(box, NumberBox)
+    box.setFocus()
+    box.selectAll()
+    QTest.keyClick(box, Qt.Key.Key_Backspace)
+    QTest.keyClicks(box, text)
+
+
+def test_moving_a_slider_moves_the_joint_at_once(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    slider = console.velocity_panel.sliders["shoulder"]
+    slider.setValue(STEPS // 2)
+    half = console.model.max_velocity("shoulder") / 2
+    state = wait_sim(qtbot, sim, lambda s: s.velocities["shoulder"] > 0, "shoulder moving")
+    assert state.commanded_velocities["shoulder"] == pytest.approx(half, abs=1e-4)
+    assert console.velocity_panel.boxes["shoulder"].text() == f"{half:.3f}"
+    assert console.velocity_panel.source_labels["shoulder"].text() == "slider"
+    slider.setValue(0)
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped with the slider at zero")
+
+
+def test_accept_applies_typed_values_together(
+    console: MainWindow, sim: RobotSimulator, profile: RobotProfile, qtbot: QtBot
+) -> None:
+    panel = console.velocity_panel
+    type_into(qtbot, panel.boxes["waist"], "0,25")  # a comma decimal mark
+    type_into(qtbot, panel.boxes["neck"], "-0.1")
+    assert console.model.velocities() == {}  # typing alone sends nothing
+    assert all(is_zero(r) for r in sim.received_commands())
+    QTest.mouseClick(panel.accept_button, Qt.MouseButton.LeftButton)
+    state = wait_sim(
+        qtbot, sim, lambda s: s.velocities["waist"] > 0 and s.velocities["neck"] < 0, "both moving"
+    )
+    assert state.commanded_velocities["waist"] == pytest.approx(0.25, abs=1e-4)
+    assert state.commanded_velocities["neck"] == pytest.approx(-0.1, abs=1e-4)
+    # Together: no RCP carried one of them without the other.
+    moving = [r for r in sim.received_commands() if not is_zero(r)]
+    assert all(
+        drive_axis(profile, r, "waist") != 0 and drive_axis(profile, r, "neck") != 0 for r in moving
+    )
+    assert console.velocity_panel.sliders["waist"].value() == round(
+        0.25 / console.model.max_velocity("waist") * STEPS
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("abc", "not a number"),
+        ("nan", "not a number"),
+        ("inf", "not a number"),
+        ("1e999", "too large"),
+        ("0.9", "outside"),
+        ("0,1,2", "not a number"),
+        ("", "empty"),
+        ("-", "not a number"),
+    ],
+)
+def test_bad_input_is_refused_with_the_reason_and_nothing_is_sent(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot, text: str, reason: str
+) -> None:
+    panel = console.velocity_panel
+    type_into(qtbot, panel.boxes["elbow"], "0.1")  # a good value next to the bad one
+    box = panel.boxes["waist"]
+    type_into(qtbot, box, text)
+    QTest.keyClick(box, Qt.Key.Key_Return)
+    assert reason in panel.message_label.text()
+    assert reason in box.error
+    assert "Not applied" in panel.message_label.text()
+    assert console.model.velocities() == {}
+    assert all(is_zero(r) for r in sim.received_commands())
+
+
+def test_number_parsing_is_locale_proof() -> None:
+    assert parse_number("0,5", -1, 1) == 0.5
+    assert parse_number(" 0.5 ", -1, 1) == 0.5
+    assert parse_number("−0,25", -1, 1) == -0.25  # a typographic minus
+    assert parse_number(".5", -1, 1) == 0.5
+    assert parse_number("5e-1", -1, 1) == 0.5
+    with pytest.raises(NumberError, match=r"outside \[-1, 1\] m/s"):
+        parse_number("2", -1, 1, "m/s")
+    with pytest.raises(NumberError, match="not a number"):
+        parse_number("1 000", -1000, 1000)
+
+
+def test_max_velocity_bounds_sliders_and_hotkeys(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    max_panel = console.max_panel
+    type_into(qtbot, max_panel.boxes["waist"], "0,2")
+    QTest.mouseClick(max_panel.accept_button, Qt.MouseButton.LeftButton)
+    assert console.model.max_velocity("waist") == 0.2
+    assert console.model.hotkey_speed("waist") == 0.2
+    slider = console.velocity_panel.sliders["waist"]
+    slider.setValue(slider.maximum())
+    state = wait_sim(qtbot, sim, lambda s: s.velocities["waist"] > 0, "waist moving")
+    assert state.commanded_velocities["waist"] == pytest.approx(0.2, abs=1e-4)
+    slider.setValue(0)
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped")
+    QTest.keyPress(console, Qt.Key.Key_E)
+    state = wait_sim(qtbot, sim, lambda s: s.velocities["waist"] < 0, "waist moving on E")
+    assert state.commanded_velocities["waist"] == pytest.approx(-0.2, abs=1e-4)
+    QTest.keyRelease(console, Qt.Key.Key_E)
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped")
+    # The max slider: never above the profile's hard maximum.
+    max_slider = max_panel.sliders["waist"]
+    max_slider.setValue(max_slider.maximum())
+    hard_max = console.profile.channels["waist"].hard_max
+    assert console.model.max_velocity("waist") == hard_max
+    assert console.velocity_panel.boxes["waist"].high == hard_max
+
+
+def test_hotkey_speed_is_settable_below_the_maximum(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    box = console.max_panel.hotkey_boxes["neck"]
+    type_into(qtbot, box, "0.1")
+    QTest.keyClick(box, Qt.Key.Key_Return)
+    assert console.model.hotkey_speed("neck") == 0.1
+    console.model.set_max_velocity("neck", 0.05)
+    assert box.text() == "0.050"
+    type_into(qtbot, box, "0.3")
+    QTest.keyClick(box, Qt.Key.Key_Return)
+    assert "outside [0, 0.05]" in console.max_panel.message_label.text()
+    # A new maximum and a hotkey speed above it, typed together: refused, nothing applied.
+    type_into(qtbot, console.max_panel.hotkey_boxes["waist"], "0.4")
+    type_into(qtbot, console.max_panel.boxes["waist"], "0.2")
+    QTest.keyClick(console.max_panel.boxes["waist"], Qt.Key.Key_Return)
+    assert "above the maximum 0.2" in console.max_panel.message_label.text()
+    assert console.model.max_velocity("waist") == console.profile.channels["waist"].default_max
+
+
+def test_switches_torch_and_stop_all(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    panel = console.velocity_panel
+    QTest.mouseClick(panel.switch_buttons["flippers"][1], Qt.MouseButton.LeftButton)
+    QTest.mouseClick(panel.switch_buttons["gripper"][1], Qt.MouseButton.LeftButton)
+    panel.torch_box.setChecked(True)
+    state = wait_sim(
+        qtbot,
+        sim,
+        lambda s: s.velocities["flippers"] > 0 and s.velocities["gripper"] > 0 and s.torch,
+        "flippers up, gripper opening, torch on",
+    )
+    assert console.model.channel("flippers").source is Source.SWITCH
+    QTest.mouseClick(panel.stop_button, Qt.MouseButton.LeftButton)
+    state = wait_sim(qtbot, sim, lambda s: s.all_stopped, "StopAll")
+    assert state.torch  # the headlight is not motion
+    assert panel.switch_buttons["flippers"][0].isChecked()
+    assert console.model.estopped
+
+
+def test_disconnect_sends_zeros_last_and_connect_comes_back(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    panel = console.velocity_panel
+    panel.sliders["elbow"].setValue(STEPS // 2)
+    wait_sim(qtbot, sim, lambda s: s.velocities["elbow"] > 0, "elbow moving")
+    QTest.mouseClick(panel.connect_button, Qt.MouseButton.LeftButton)
+    assert console.link is None
+    assert panel.connect_button.text() == "Connect"
+    assert console.link_status.state_label.text() == "DISCONNECTED"
+    state = wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped on disconnect")
+    assert is_zero(sim.received_commands()[-1])
+    assert state.rcp_count == len(sim.received_commands())
+    QTest.mouseClick(panel.connect_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: console.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS)
+    assert console.model.velocities() == {}
