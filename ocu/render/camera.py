@@ -27,7 +27,8 @@ VIEWS: dict[str, tuple[float, float]] = {
     "top": (180.0, 90.0),  # from above: forward points up on screen
     "iso": (-50.0, 24.0),
 }
-VIEW_KEYS = {"f": "front", "s": "side", "t": "top", "i": "iso"}
+# Digits, because letters are the console's hotkeys.
+VIEW_KEYS = {"1": "front", "2": "side", "3": "top", "4": "iso"}
 
 
 def _rotation_x(angle: float) -> Matrix:

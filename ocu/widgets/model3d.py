@@ -3,7 +3,7 @@
 The widget draws with OpenGL in a QOpenGLWidget when the display has GL, and otherwise with
 the same renderer in an OSMesa context, showing the image in a plain QWidget. The mouse
 works the same in both: left drag orbits, middle drag or Shift+left drag pans, the wheel
-zooms, a double click resets the view; F/S/T/I (or the context menu) pick preset views.
+zooms, a double click resets the view; 1/2/3/4 (or the context menu) pick preset views.
 """
 
 from __future__ import annotations
@@ -322,11 +322,11 @@ class Model3DWidget(QWidget):
         event.accept()
 
     def keyPressEvent(self, event: QKeyEvent) -> None:
-        """F, S, T, I: preset views; Home or R: reset."""
+        """1-4: front, side, top, iso views; Home: reset."""
         text = event.text().lower()
         if text in VIEW_KEYS:
             self.set_view(VIEW_KEYS[text])
-        elif event.key() in (Qt.Key.Key_Home, Qt.Key.Key_R):
+        elif event.key() == Qt.Key.Key_Home:
             self.reset_view()
         else:
             super().keyPressEvent(event)
