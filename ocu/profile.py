@@ -25,6 +25,13 @@ CHANNEL_NAMES = (
 )
 
 
+CAMERA_MODELS = ("fisheye", "standard")
+COLOUR_MODES = ("off", "gray_world", "fixed")
+# Distortion coefficients per model: cv2.fisheye takes k1..k4; the standard (Brown-Conrady)
+# model k1, k2, p1, p2 and optionally k3.
+DISTORTION_LENGTHS = {"fisheye": (4,), "standard": (4, 5)}
+
+
 class ProfileError(ValueError):
     """The robot profile is missing a value or holds a bad one."""
 
@@ -57,6 +64,62 @@ class LinkSettings:
     default_video_bitrate: float
     camera_names: tuple[str, ...]
     frame_types: FrameTypes
+
+
+@dataclass(frozen=True)
+class ExtensionFrameTypes:
+    """Wire IDs of our protocol extension's packet types (not vendor facts)."""
+
+    hello: int
+    video_fragment: int
+    status: int
+
+
+@dataclass(frozen=True)
+class ExtensionSettings:
+    """The open protocol extension: its IDs and what the OCU asks of an extended robot."""
+
+    probe: bool
+    frame_types: ExtensionFrameTypes
+    max_datagram_bytes: int
+    stream_width_px: int
+    stream_height_px: int
+    stream_fps: int
+
+
+@dataclass(frozen=True)
+class VideoSettings:
+    """OCU-side video settings: no-signal time, battery warning, reassembly bounds."""
+
+    no_signal_after_s: float = 1.0
+    battery_warning_percent: float = 20.0
+    reassembly_max_frames: int = 16
+    reassembly_max_bytes: int = 8 * 1024 * 1024
+    reassembly_timeout_s: float = 0.5
+
+
+@dataclass(frozen=True)
+class CameraCalibration:
+    """Intrinsics of one camera at the resolution it was calibrated at."""
+
+    model: str
+    size_px: tuple[int, int]
+    focal_px: tuple[float, float]
+    centre_px: tuple[float, float]
+    distortion: tuple[float, ...]
+    balance: float
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """One camera: its name, calibration (None = not calibrated) and correction defaults."""
+
+    name: str
+    index: int
+    calibration: CameraCalibration | None = None
+    undistort: bool = False
+    colour: str = "off"
+    fixed_gains_rgb: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -107,6 +170,9 @@ class RobotProfile:
     linear_axis_per_m_s: float
     rotation_axis_per_rad_s: float
     assumptions: tuple[str, ...]
+    extension: ExtensionSettings | None = None
+    video: VideoSettings = VideoSettings()
+    cameras: tuple[CameraSettings, ...] = ()
 
     def motor_by_device(self, device_id: int) -> Motor | None:
         """The motor with this telemetry device ID, or None."""
@@ -197,6 +263,36 @@ class _Reader:
     def optional(self, key: str) -> bool:
         return key in self.table
 
+    def boolean(self, key: str) -> bool:
+        value = self._get(key)
+        if not isinstance(value, bool):
+            raise ProfileError(f"{self.where}.{key}: must be true or false, got {value!r}")
+        return value
+
+    def choice(self, key: str, choices: tuple[str, ...]) -> str:
+        value = self.string(key)
+        if value not in choices:
+            raise ProfileError(f"{self.where}.{key}: must be one of {choices}, got {value!r}")
+        return value
+
+    def numbers(
+        self, key: str, lengths: tuple[int, ...], *, low: float | None = None
+    ) -> tuple[float, ...]:
+        value = self._get(key)
+        if (
+            not isinstance(value, list)
+            or len(value) not in lengths
+            or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value
+            )
+        ):
+            sizes = " or ".join(str(n) for n in lengths)
+            raise ProfileError(f"{self.where}.{key}: must be a list of {sizes} finite numbers")
+        if low is not None and any(v < low for v in value):
+            raise ProfileError(f"{self.where}.{key}: every value must be >= {low}")
+        return tuple(float(v) for v in value)
+
 
 def _parse_channel(name: str, reader: _Reader, scales: dict[str, float]) -> Channel:
     axis = reader.integer("axis", low=0, high=AXIS_COUNT - 1)
@@ -266,6 +362,86 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
     )
 
 
+def _parse_extension(reader: _Reader, vendor: FrameTypes) -> ExtensionSettings:
+    types_reader = reader.sub("frame_types")
+    types = ExtensionFrameTypes(
+        hello=types_reader.integer("hello", low=0, high=255),
+        video_fragment=types_reader.integer("video_fragment", low=0, high=255),
+        status=types_reader.integer("status", low=0, high=255),
+    )
+    ids = [types.hello, types.video_fragment, types.status, vendor.rcp, vendor.telemetry]
+    ids.append(vendor.video)
+    if len(set(ids)) != len(ids):
+        raise ProfileError(
+            f"{types_reader.where}: the three IDs must differ from each other "
+            "and from link.frame_types"
+        )
+    return ExtensionSettings(
+        probe=reader.boolean("probe"),
+        frame_types=types,
+        # 64 bytes leave room for the fragment header; 65507 is the UDP/IPv4 payload limit.
+        max_datagram_bytes=reader.integer("max_datagram_bytes", low=64, high=65507),
+        stream_width_px=reader.integer("stream_width_px", low=16, high=4096),
+        stream_height_px=reader.integer("stream_height_px", low=16, high=4096),
+        stream_fps=reader.integer("stream_fps", low=0, high=255),
+    )
+
+
+def _parse_video(reader: _Reader) -> VideoSettings:
+    return VideoSettings(
+        no_signal_after_s=reader.number("no_signal_after_s", low=0.01),
+        battery_warning_percent=reader.number("battery_warning_percent", low=0.0, high=100.0),
+        reassembly_max_frames=reader.integer("reassembly_max_frames", low=1, high=1024),
+        reassembly_max_bytes=reader.integer("reassembly_max_bytes", low=65536, high=2**30),
+        reassembly_timeout_s=reader.number("reassembly_timeout_s", low=0.001),
+    )
+
+
+def _parse_camera(name: str, index: int, reader: _Reader) -> CameraSettings:
+    model = reader.choice("model", CAMERA_MODELS)
+    size = reader.numbers("calibration_size_px", (2,), low=1.0)
+    if not all(v.is_integer() for v in size):
+        raise ProfileError(f"{reader.where}.calibration_size_px: must be whole pixels")
+    focal = reader.numbers("focal_px", (2,), low=1e-6)
+    centre = reader.numbers("centre_px", (2,))
+    if not (0.0 <= centre[0] <= size[0] and 0.0 <= centre[1] <= size[1]):
+        raise ProfileError(f"{reader.where}.centre_px: must lie inside calibration_size_px")
+    distortion = reader.numbers("distortion", DISTORTION_LENGTHS[model])
+    gains = reader.numbers("fixed_gains_rgb", (3,), low=0.0)
+    calibration = CameraCalibration(
+        model=model,
+        size_px=(int(size[0]), int(size[1])),
+        focal_px=(focal[0], focal[1]),
+        centre_px=(centre[0], centre[1]),
+        distortion=distortion,
+        balance=reader.number("balance", low=0.0, high=1.0),
+    )
+    return CameraSettings(
+        name=name,
+        index=index,
+        calibration=calibration,
+        undistort=reader.boolean("undistort"),
+        colour=reader.choice("colour", COLOUR_MODES),
+        fixed_gains_rgb=(gains[0], gains[1], gains[2]),
+    )
+
+
+def _parse_cameras(root: _Reader, names: tuple[str, ...]) -> tuple[CameraSettings, ...]:
+    # A camera without a table has no calibration and no correction by default.
+    tables = root.sub("cameras") if root.optional("cameras") else _Reader({}, "profile.cameras")
+    unknown = set(tables.table) - set(names)
+    if unknown:
+        raise ProfileError(
+            f"profile.cameras: {sorted(unknown)} not in link.camera_names {list(names)}"
+        )
+    return tuple(
+        _parse_camera(name, index, tables.sub(name))
+        if tables.optional(name)
+        else CameraSettings(name=name, index=index)
+        for index, name in enumerate(names)
+    )
+
+
 def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfile:
     """Validate a decoded TOML document and build the profile."""
     root = _Reader(data, "profile")
@@ -283,6 +459,8 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
     cameras = link.table.get("camera_names")
     if not isinstance(cameras, list) or not cameras or not all(isinstance(c, str) for c in cameras):
         raise ProfileError("profile.link.camera_names: must be a non-empty list of names")
+    if len(set(cameras)) != len(cameras) or len(cameras) > 255:
+        raise ProfileError("profile.link.camera_names: names must be distinct, at most 255")
     link_settings = LinkSettings(
         address=link.string("address"),
         port=link.integer("port", low=1, high=65535),
@@ -351,4 +529,11 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
         linear_axis_per_m_s=scales["linear"],
         rotation_axis_per_rad_s=scales["rotation"],
         assumptions=tuple(assumptions),
+        extension=(
+            _parse_extension(root.sub("extension"), frame_types)
+            if root.optional("extension")
+            else None
+        ),
+        video=_parse_video(root.sub("video")) if root.optional("video") else VideoSettings(),
+        cameras=_parse_cameras(root, tuple(cameras)),
     )

@@ -14,7 +14,7 @@ import selectors
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import Enum
 
@@ -26,6 +26,7 @@ from ocu.control.commands import (
     make_codec,
     read_telemetry,
 )
+from ocu.link.reassembly import Reassembler, ReassemblyStats
 from ocu.link.stats import LinkStats, LossEstimator, RateMeter
 from ocu.profile import RobotProfile
 from ocu.protocol import (
@@ -33,6 +34,13 @@ from ocu.protocol import (
     RemoteControlPacket,
     TelemetryPacket,
     VideoFramePacket,
+)
+from ocu.protocol.extended import (
+    CameraRequest,
+    ExtendedCodec,
+    HelloPacket,
+    StatusPacket,
+    VideoFragment,
 )
 
 log = logging.getLogger("ocu.link")
@@ -68,12 +76,57 @@ class TelemetryFrame:
 
 @dataclass(frozen=True)
 class VideoFrame:
-    """One JPEG frame from the robot and when it arrived."""
+    """One JPEG frame from the robot and when it arrived.
+
+    A vendor frame carries no camera id: `camera` is the camera the OCU last selected (None
+    before any selection). An extension frame carries its camera, sequence number and the
+    robot's capture time (microseconds of the robot's monotonic clock).
+    """
 
     jpeg: bytes
     camera: int | None
     received_at: float
     wall_time: float
+    sequence: int | None = None
+    capture_time_us: int | None = None
+
+
+@dataclass(frozen=True)
+class StatusFrame:
+    """One extension status packet in SI units (None = the robot did not measure it)."""
+
+    packet: StatusPacket
+    received_at: float
+    wall_time: float
+
+    @property
+    def voltage_v(self) -> float | None:
+        """Battery voltage in volts."""
+        mv = self.packet.voltage_mv
+        return None if mv is None else mv / 1000.0
+
+    @property
+    def charge_percent(self) -> float | None:
+        """Battery charge in percent."""
+        permille = self.packet.charge_permille
+        return None if permille is None else permille / 10.0
+
+    @property
+    def headlight_on(self) -> bool | None:
+        """Headlight state as the robot reports it."""
+        return self.packet.headlight_on
+
+    @property
+    def roll_rad(self) -> float | None:
+        """Roll angle in radians."""
+        mrad = self.packet.roll_mrad
+        return None if mrad is None else mrad / 1000.0
+
+    @property
+    def pitch_rad(self) -> float | None:
+        """Pitch angle in radians."""
+        mrad = self.packet.pitch_mrad
+        return None if mrad is None else mrad / 1000.0
 
 
 class LinkListener:
@@ -83,7 +136,13 @@ class LinkListener:
         """A valid telemetry packet arrived."""
 
     def video_frame_received(self, frame: VideoFrame) -> None:
-        """A valid video frame arrived."""
+        """A valid video frame arrived (vendor packet, or extension frame reassembled)."""
+
+    def status_received(self, frame: StatusFrame) -> None:
+        """An extension status packet arrived."""
+
+    def extension_changed(self, active: bool, reason: str) -> None:
+        """The robot started or stopped speaking the protocol extension."""
 
     def link_state_changed(self, state: LinkState, reason: str) -> None:
         """The link changed state."""
@@ -123,6 +182,7 @@ class LinkCore:
         gui_alive_timeout_s: float | None = -1.0,
         send_rate_hz: float | None = None,
         send_on_change: bool = True,
+        extension: bool = False,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.profile = profile
@@ -166,7 +226,9 @@ class LinkCore:
         self._wake_w.setblocking(False)
 
         self._lock = threading.RLock()
-        self._send_lock = threading.Lock()
+        # Re-entrant: a signal handler or listener that sends while this thread is already
+        # inside a send must not deadlock the link.
+        self._send_lock = threading.RLock()
         self._command = Command(video_bitrate=settings.default_video_bitrate)
         self._rate_hz = settings.send_rate_hz if send_rate_hz is None else send_rate_hz
         self._check_rate(self._rate_hz)
@@ -174,6 +236,9 @@ class LinkCore:
         self._estop_latched = False
         self._gui_alive_at = clock()
         self._gui_tripped = False
+        # The thread that calls heartbeat() owns the commands; until one does, whoever sets
+        # commands counts as alive by doing so.
+        self._owner_thread: int | None = None
         self._stop_requested = threading.Event()
         self._loop_exited = threading.Event()
         self._loop_exited.set()
@@ -195,6 +260,37 @@ class LinkCore:
         self._video_rate = RateMeter(window_s=1.0)
         self._loss = LossEstimator()
 
+        # The protocol extension: probe with a hello on every tick when asked to and the
+        # profile defines it (and does not switch probing off).
+        ext = profile.extension
+        self.extension_enabled = extension and ext is not None and ext.probe
+        self._ext_codec: ExtendedCodec | None = None
+        self._hello = HelloPacket()
+        if ext is not None:
+            types = ext.frame_types
+            self._ext_codec = ExtendedCodec(types.hello, types.video_fragment, types.status)
+            self._hello = HelloPacket(
+                cameras=tuple(
+                    CameraRequest(
+                        camera=index,
+                        width_px=ext.stream_width_px,
+                        height_px=ext.stream_height_px,
+                        fps=ext.stream_fps,
+                    )
+                    for index in range(len(settings.camera_names))
+                ),
+                max_datagram_bytes=ext.max_datagram_bytes,
+            )
+        video = profile.video
+        self._reassembler = Reassembler(
+            video.reassembly_max_frames, video.reassembly_max_bytes, video.reassembly_timeout_s
+        )
+        self._ext_active = False
+        self._ext_last_at: float | None = None
+        self._ext_received = 0
+        self._ext_malformed = 0
+        self._hellos_sent = 0
+
     # ---- commands (any thread) -------------------------------------------------------------
 
     @property
@@ -212,8 +308,13 @@ class LinkCore:
     def set_command(self, command: Command) -> None:
         """Replace the command; sends it at once when it differs from the current one."""
         with self._lock:
-            self._gui_alive_at = self.clock()
-            self._gui_tripped = False
+            if self._owner_thread in (None, threading.get_ident()):
+                self._gui_alive_at = self.clock()
+                self._gui_tripped = False
+            elif self._owner_silent():
+                # Commands from another thread (a ROS bridge hosted by the GUI) must neither
+                # hide a stalled owner nor move the robot while it is stalled.
+                command = command.stopped()
             if command.is_motion:
                 self._estop_latched = False
             if command == self._command:
@@ -249,10 +350,16 @@ class LinkCore:
         self._wake()
         self._notify_safety(f"EMERGENCY STOP ({reason})")
 
+    def _owner_silent(self) -> bool:
+        timeout = self.gui_alive_timeout_s
+        return timeout is not None and self.clock() - self._gui_alive_at > timeout
+
     def heartbeat(self) -> None:
-        """Confirm that the thread owning the commands is alive."""
+        """Confirm that the thread owning the commands is alive (it becomes the owner)."""
         with self._lock:
+            self._owner_thread = threading.get_ident()
             self._gui_alive_at = self.clock()
+            self._gui_tripped = False
 
     def set_rate_hz(self, rate_hz: float) -> None:
         """Change the periodic send rate (bounded by the profile, 1-50 Hz for the Engineer)."""
@@ -266,6 +373,35 @@ class LinkCore:
         """The periodic send rate."""
         with self._lock:
             return self._rate_hz
+
+    @property
+    def extension_active(self) -> bool:
+        """Whether the robot speaks the protocol extension (valid packets lately)."""
+        with self._lock:
+            return self._ext_active
+
+    @property
+    def stream_request(self) -> HelloPacket:
+        """The hello sent to probe for the extension, with the per-camera stream request."""
+        with self._lock:
+            return self._hello
+
+    def set_stream_request(self, cameras: Sequence[CameraRequest]) -> None:
+        """Ask an extended robot for these per-camera streams; sent at once if it changed."""
+        hello = HelloPacket(
+            cameras=tuple(cameras), max_datagram_bytes=self._hello.max_datagram_bytes
+        )
+        hello.check()
+        with self._lock:
+            if hello == self._hello:
+                return
+            self._hello = hello
+        self._send_hello()
+
+    def video_stats(self) -> ReassemblyStats:
+        """Counters of the extension's fragment reassembly."""
+        with self._lock:
+            return self._reassembler.stats()
 
     def _check_rate(self, rate_hz: float) -> None:
         low, high = self.profile.link.send_rate_min_hz, self.profile.link.send_rate_max_hz
@@ -300,6 +436,7 @@ class LinkCore:
                 now = self.clock()
                 if now >= next_tick:
                     self._send_current()
+                    self._send_hello()
                     next_tick = max(next_tick + 1.0 / self.rate_hz, now)
                 if now >= next_stats:
                     self._emit_stats(now)
@@ -351,6 +488,21 @@ class LinkCore:
             lost = self._state in (LinkState.CONNECTED, LinkState.CONNECTING) and (
                 now - last > self.link_lost_after_s
             )
+        ext_lost_reason = None
+        with self._lock:
+            self._reassembler.expire(now)
+            if (
+                self._ext_active
+                and self._ext_last_at is not None
+                and now - self._ext_last_at > self.link_lost_after_s
+            ):
+                self._ext_active = False
+                ext_lost_reason = (
+                    f"no extension packet for {now - self._ext_last_at:.1f} s: vendor protocol"
+                )
+        if ext_lost_reason is not None:
+            log.info("extension lost: %s", ext_lost_reason)
+            self._call(self.listener.extension_changed, False, ext_lost_reason)
         if message:
             self._send_current()
             self._notify_safety(message)
@@ -400,6 +552,14 @@ class LinkCore:
                 self._foreign += 1
             return
         self._call(self.listener.datagram_received, data, now)
+        # Without probing, extension types stay unknown: malformed, exactly as before.
+        if (
+            self.extension_enabled
+            and self._ext_codec is not None
+            and self._ext_codec.handles(data[0] if data else -1)
+        ):
+            self._handle_extended(data, source, now)
+            return
         try:
             packet = self._codec.decode(data)
         except ProtocolError as err:
@@ -434,6 +594,53 @@ class LinkCore:
                 self.listener.video_frame_received, VideoFrame(packet.jpeg, camera, now, wall)
             )
 
+    def _handle_extended(self, data: bytes, source: tuple[str, int], now: float) -> None:
+        assert self._ext_codec is not None
+        try:
+            packet = self._ext_codec.decode(data)
+        except ProtocolError as err:
+            with self._lock:
+                self._malformed += 1
+                self._ext_malformed += 1
+            log.debug("malformed extension datagram (%d bytes): %s", len(data), err)
+            return
+        if isinstance(packet, HelloPacket):
+            with self._lock:
+                self._foreign += 1  # a hello never comes from the robot
+            return
+        complete = None
+        with self._lock:
+            self._received += 1
+            self._ext_received += 1
+            self._last_valid_at = now
+            self._ext_last_at = now
+            became_active = not self._ext_active
+            self._ext_active = True
+            became_connected = self._state != LinkState.CONNECTED
+            if isinstance(packet, VideoFragment):
+                complete = self._reassembler.add(packet, now)
+                if complete is not None:
+                    self._video += 1
+                    self._video_rate.add(now)
+        if became_connected:
+            self._set_state(LinkState.CONNECTED, f"packets from {source[0]}:{source[1]}")
+        if became_active:
+            log.info("robot speaks the protocol extension")
+            self._call(self.listener.extension_changed, True, "extension packets from the robot")
+        wall = time.time()
+        if isinstance(packet, StatusPacket):
+            self._call(self.listener.status_received, StatusFrame(packet, now, wall))
+        elif complete is not None:
+            frame = VideoFrame(
+                complete.jpeg,
+                complete.camera,
+                now,
+                wall,
+                sequence=complete.sequence,
+                capture_time_us=complete.capture_time_us,
+            )
+            self._call(self.listener.video_frame_received, frame)
+
     # ---- send ------------------------------------------------------------------------------
 
     def current_packet(self) -> RemoteControlPacket:
@@ -443,6 +650,27 @@ class LinkCore:
 
     def _send_current(self) -> None:
         self._send_packet(self.current_packet())
+
+    def _send_hello(self) -> None:
+        if not self.extension_enabled or self._ext_codec is None:
+            return
+        with self._lock:
+            hello = self._hello
+        data = self._ext_codec.encode(hello)
+        with self._send_lock:
+            if self._closed:
+                return
+            try:
+                self._sock.sendto(data, self.robot_address)
+            except OSError as err:
+                with self._lock:
+                    self._send_errors += 1
+                log.debug("hello send failed: %s", err)
+                return
+            now = self.clock()
+        with self._lock:
+            self._hellos_sent += 1
+        self._call(self.listener.datagram_sent, data, now)
 
     def _send_zeros(self) -> None:
         with self._lock:

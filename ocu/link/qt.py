@@ -1,25 +1,55 @@
-"""The link core in a QThread: events become Qt signals; JPEGs decode off the GUI thread."""
+"""The link core in a QThread: events become Qt signals; JPEGs decode off the GUI thread.
+
+Video takes its own path so that a slow GUI drops stale frames instead of queueing them: the
+loop hands each JPEG to the "ocu-video" decoder thread (newest per camera wins), which puts
+the decoded QImage into a one-slot mailbox per camera and emits `video_frame_ready(camera)`
+only when that mailbox was empty. At most one such signal per camera is ever queued; the
+GUI takes the newest image with `take_video_frame(camera)`.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from PySide6.QtCore import QObject, QThread, QTimer, Signal
+from PySide6.QtCore import QMetaMethod, QObject, QThread, QTimer, Signal
 from PySide6.QtGui import QImage
 
 from ocu.control.commands import Command
-from ocu.link.core import LinkCore, LinkListener, LinkState, TelemetryFrame, VideoFrame
+from ocu.link.core import (
+    LinkCore,
+    LinkListener,
+    LinkState,
+    StatusFrame,
+    TelemetryFrame,
+    VideoFrame,
+)
 from ocu.link.stats import LinkStats
+from ocu.video.correction import Corrector
+from ocu.video.decoder import DecodedFrame, VideoDecoder
+from ocu.video.slot import LatestFrames
 
 HEARTBEAT_PERIOD_MS = 100
 
 
 @dataclass(frozen=True)
 class DecodedVideoFrame:
-    """A video frame with its image decoded in the link thread (null image if corrupt)."""
+    """A video frame with its image decoded off the GUI thread (null image if corrupt).
+
+    `image` wraps `decoded.pixels` without a copy; keep this object (not only the QImage)
+    alive while the image is in use.
+    """
 
     frame: VideoFrame
     image: QImage
+    decoded: DecodedFrame | None = None
+
+
+def wrap_pixels(decoded: DecodedFrame) -> QImage:
+    """A QImage over the decoder's BGRA pixels, no copy (Format_RGB32 on little-endian)."""
+    pixels = decoded.pixels
+    return QImage(
+        pixels.data, decoded.width, decoded.height, pixels.strides[0], QImage.Format.Format_RGB32
+    )
 
 
 class _SignalListener(LinkListener):
@@ -32,8 +62,13 @@ class _SignalListener(LinkListener):
         self.owner.telemetry_received.emit(frame)
 
     def video_frame_received(self, frame: VideoFrame) -> None:
-        image = QImage.fromData(frame.jpeg)
-        self.owner.video_frame_received.emit(DecodedVideoFrame(frame, image))
+        self.owner.decoder.submit(frame)
+
+    def status_received(self, frame: StatusFrame) -> None:
+        self.owner.status_received.emit(frame)
+
+    def extension_changed(self, active: bool, reason: str) -> None:
+        self.owner.extension_changed.emit(active, reason)
 
     def link_state_changed(self, state: LinkState, reason: str) -> None:
         self.owner.link_state_changed.emit(state, reason)
@@ -49,7 +84,13 @@ class LinkThread(QThread):
     """Runs a LinkCore's loop; the GUI thread proves it is alive with a heartbeat timer."""
 
     telemetry_received = Signal(object)
+    # One signal per decoded frame with its image: it queues when the GUI is slow, so it is
+    # emitted only while something is connected (recording, tests). Viewers use
+    # video_frame_ready and take_video_frame instead.
     video_frame_received = Signal(object)
+    video_frame_ready = Signal(int)
+    status_received = Signal(object)
+    extension_changed = Signal(bool, str)
     link_state_changed = Signal(object, str)
     stats_updated = Signal(object)
     safety_event = Signal(str)
@@ -58,6 +99,11 @@ class LinkThread(QThread):
         super().__init__(parent)
         self.setObjectName("ocu-link")
         self.core = core
+        cameras = len(core.profile.link.camera_names)
+        self.corrector = Corrector(core.profile.cameras)
+        self.frames: LatestFrames[DecodedVideoFrame] = LatestFrames(cameras)
+        self.decoder = VideoDecoder(cameras, self.corrector, self._on_decoded, self._on_corrupt)
+        self._legacy_signal = QMetaMethod.fromSignal(self.video_frame_received)
         core.listener = _SignalListener(self)
         # The timer lives in the GUI thread: if that thread stalls, heartbeats stop and the
         # core zeroes any motion after gui_alive_timeout_s.
@@ -67,9 +113,27 @@ class LinkThread(QThread):
         self._shut = False
 
     def start_link(self) -> None:
-        """Start the loop thread and the heartbeat."""
+        """Start the loop thread, the video decoder and the heartbeat."""
         self._heartbeat.start()
+        self.decoder.start()
         self.start()
+
+    def take_video_frame(self, camera: int) -> DecodedVideoFrame | None:
+        """The newest decoded frame of a camera not yet taken, or None (any thread)."""
+        return self.frames.take(camera)
+
+    def _on_decoded(self, decoded: DecodedFrame) -> None:
+        # Decoder thread: QImage (unlike QPixmap) may be built outside the GUI thread.
+        frame = DecodedVideoFrame(decoded.source, wrap_pixels(decoded), decoded)
+        if self.frames.put(decoded.slot, frame):
+            self.video_frame_ready.emit(decoded.slot)
+        if self.isSignalConnected(self._legacy_signal):
+            self.video_frame_received.emit(frame)
+
+    def _on_corrupt(self, frame: VideoFrame, slot: int) -> None:
+        # Counted by the decoder (decoder.stats); the viewer keeps showing the last good frame.
+        if self.isSignalConnected(self._legacy_signal):
+            self.video_frame_received.emit(DecodedVideoFrame(frame, QImage()))
 
     def run(self) -> None:
         """QThread body: the core's loop."""
@@ -90,4 +154,5 @@ class LinkThread(QThread):
         self._shut = True
         self._heartbeat.stop()
         self.core.shutdown(timeout_s)
+        self.decoder.stop(timeout_s)
         self.wait(int(timeout_s * 1000))

@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from ocu.profile import ProfileError, load_profile
+from ocu.sim.extended import DEFAULT_DRAIN_PERCENT_PER_S, DEFAULT_STATUS_HZ
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator
 from ocu.sim.video import MAX_FRAME_SIDE_PX, MIN_FRAME_SIDE_PX
@@ -52,6 +53,13 @@ def _positive(text: str) -> float:
     value = _number(text)
     if value <= 0.0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def _percent(text: str) -> float:
+    value = _number(text)
+    if not 0.0 <= value <= 100.0:
+        raise argparse.ArgumentTypeError(f"must be a percentage in [0, 100], got {text}")
     return value
 
 
@@ -112,6 +120,28 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--seed", type=int, default=None, help="seed of the fault decisions")
     parser.add_argument(
+        "--extended",
+        action="store_true",
+        help="also speak ocu's protocol extension: four cameras, status, battery "
+        "(docs/protocol.md)",
+    )
+    parser.add_argument(
+        "--status-hz",
+        type=_positive,
+        default=DEFAULT_STATUS_HZ,
+        help="extension status packets per second (default %(default)s)",
+    )
+    parser.add_argument(
+        "--battery-percent", type=_percent, default=100.0, help="starting charge (extension)"
+    )
+    parser.add_argument(
+        "--battery-drain",
+        type=_non_negative,
+        default=DEFAULT_DRAIN_PERCENT_PER_S,
+        metavar="PERCENT_PER_S",
+        help="battery drain at rest, in percent per second (default %(default)s)",
+    )
+    parser.add_argument(
         "--log-level", type=str.upper, choices=LOG_LEVELS, default="INFO", help="logging level"
     )
     return parser
@@ -149,6 +179,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                 video_size=args.video_size,
                 faults=faults,
                 seed=args.seed,
+                extended=args.extended,
+                status_hz=args.status_hz,
+                battery_percent=args.battery_percent,
+                battery_drain_percent_per_s=args.battery_drain,
             )
         except OSError as err:
             print(f"ocu-sim: cannot listen on {args.host}:{port}: {err}", file=sys.stderr)

@@ -46,6 +46,13 @@ from ocu.protocol import (
     TelemetryPacket,
     VideoFramePacket,
 )
+from ocu.protocol.extended import ExtendedCodec, HelloPacket
+from ocu.sim.extended import (
+    DEFAULT_DRAIN_PERCENT_PER_S,
+    DEFAULT_STATUS_HZ,
+    ExtendedCounters,
+    ExtendedServer,
+)
 from ocu.sim.faults import DelayLine, Direction, FaultConfig, make_injectors
 from ocu.sim.video import DEFAULT_QUALITY, FrameRenderer, quality_for_bitrate
 
@@ -124,6 +131,7 @@ class SimState:
     duplicated: int
     send_errors: int
     internal_errors: int
+    extended: ExtendedCounters | None = None
 
 
 @dataclass
@@ -172,6 +180,10 @@ class RobotSimulator:
         seed: int | None = None,
         physics_hz: float = 200.0,
         initial_joints: Mapping[str, float] | None = None,
+        extended: bool = False,
+        status_hz: float = DEFAULT_STATUS_HZ,
+        battery_percent: float = 100.0,
+        battery_drain_percent_per_s: float = DEFAULT_DRAIN_PERCENT_PER_S,
     ) -> None:
         self.profile = profile
         rate_hz = profile.link.telemetry_rate_hz if telemetry_hz is None else telemetry_hz
@@ -191,6 +203,25 @@ class RobotSimulator:
         self._codec = make_codec(profile)
         self._mapper = CommandMapper(profile)
         self._renderer = FrameRenderer(profile.link.camera_names, video_size)
+        # The protocol extension (ocu.sim.extended): a vendor-mode simulator still knows its
+        # frame types, to count such packets as foreign rather than as malformed.
+        self._ext_codec: ExtendedCodec | None = None
+        self._ext: ExtendedServer | None = None
+        ext_settings = profile.extension
+        if ext_settings is not None:
+            types = ext_settings.frame_types
+            self._ext_codec = ExtendedCodec(types.hello, types.video_fragment, types.status)
+        if extended:
+            if self._ext_codec is None:
+                raise ValueError("extended mode needs the profile's [extension] table")
+            self._ext = ExtendedServer(
+                profile,
+                self._ext_codec,
+                status_hz=status_hz,
+                battery_percent=battery_percent,
+                drain_percent_per_s=battery_drain_percent_per_s,
+                seed=seed,
+            )
 
         self._fault_lock = threading.Lock()
         self._faults = faults if faults is not None else FaultConfig()
@@ -371,6 +402,11 @@ class RobotSimulator:
             self._link_cut = False
         log.info("link restored")
 
+    @property
+    def extension(self) -> ExtendedServer | None:
+        """The extension side (stop_camera, set_battery, set_corrupt), None in vendor mode."""
+        return self._ext
+
     def state(self) -> SimState:
         """The latest snapshot."""
         with self._condition:
@@ -420,6 +456,8 @@ class RobotSimulator:
 
     def _next_deadline_s(self) -> float:
         deadline_s = min(self._next_physics_s, self._next_telemetry_s, self._next_video_s)
+        if self._ext is not None:
+            deadline_s = min(deadline_s, self._ext.next_due_s())
         delayed_s = self._delay_line.next_due_s()
         return deadline_s if delayed_s is None else min(deadline_s, delayed_s)
 
@@ -445,6 +483,15 @@ class RobotSimulator:
         if self._video_period_s is not None and now_s >= self._next_video_s:
             self._next_video_s = _next_due(self._next_video_s, self._video_period_s, now_s)
             self._send_video(now_s)
+        if self._ext is not None:
+            self._ext.poll(
+                now_s,
+                lambda data, address: self._route(Direction.TO_OCU, data, address, now_s),
+                torch=self._torch,
+                pose=self._pose,
+                moving=not all(speed == 0.0 for speed in self._velocities.values()),
+                rcp_quality=self._quality,
+            )
 
     def _read_datagrams(self) -> None:
         for _ in range(MAX_DATAGRAMS_PER_WAKE):
@@ -505,6 +552,9 @@ class RobotSimulator:
             self._counters.datagrams_sent += 1
 
     def _handle_datagram(self, data: bytes, address: tuple[str, int], now_s: float) -> None:
+        if data and self._ext_codec is not None and self._ext_codec.handles(data[0]):
+            self._handle_extended(data, address, now_s)
+            return
         try:
             packet = self._codec.decode(data)
         except ProtocolError as err:
@@ -516,6 +566,24 @@ class RobotSimulator:
             log.debug("dropped %s from %s:%d", type(packet).__name__, address[0], address[1])
             return
         self._apply_rcp(packet, address, now_s)
+
+    def _handle_extended(self, data: bytes, address: tuple[str, int], now_s: float) -> None:
+        if self._ext is None:
+            # A vendor robot does not speak the extension: dropped like any foreign packet.
+            self._counters.foreign += 1
+            return
+        try:
+            packet = self._ext_codec.decode(data) if self._ext_codec is not None else None
+        except ProtocolError as err:
+            self._counters.malformed += 1
+            log.debug("dropped malformed extension datagram: %s", err)
+            return
+        if not isinstance(packet, HelloPacket):
+            self._counters.foreign += 1
+            return
+        if not self._ext.active(now_s):
+            log.info("extension hello from %s:%d", *address)
+        self._ext.on_hello(packet, address, now_s)
 
     def _apply_rcp(
         self, packet: RemoteControlPacket, address: tuple[str, int], now_s: float
@@ -685,6 +753,8 @@ class RobotSimulator:
     def _send_video(self, now_s: float) -> None:
         if self._client is None:
             return
+        if self._ext is not None and self._ext.active(now_s):
+            return  # the client gets every camera through the extension instead
         jpeg = self._renderer.render(
             self._camera, self._frame_number, self._quality, torch=self._torch, time_s=now_s
         )
@@ -726,6 +796,7 @@ class RobotSimulator:
             duplicated=counters.duplicated,
             send_errors=counters.send_errors,
             internal_errors=counters.internal_errors,
+            extended=None if self._ext is None else self._ext.counters(self._time_s),
         )
 
     def _publish(self) -> None:

@@ -473,3 +473,33 @@ def test_rcp_encoding_matches_mapper(profile: RobotProfile, peer: RobotPeer) -> 
 def test_unresolvable_robot_host_gives_clear_error(profile: RobotProfile) -> None:
     with pytest.raises(LinkError, match=r"cannot resolve robot host 'no-such-host\.invalid'"):
         LinkCore(profile, ("no-such-host.invalid", 10000))
+
+
+def test_commands_from_another_thread_do_not_hide_a_silent_owner(
+    profile: RobotProfile, peer: RobotPeer
+) -> None:
+    link, recorder = make_link(profile, peer, link_lost_after_s=60.0, send_rate_hz=20.0)
+    link.start()
+    axis = profile.channels["drive_linear"].axis
+    stop = threading.Event()
+
+    def bridge() -> None:
+        # Like a ROS bridge hosted by the GUI: a steady stream of commands from its thread.
+        while not stop.wait(0.05):
+            link.set_velocities(drive_linear=0.3)
+
+    try:
+        link.heartbeat()  # this thread owns the commands ... and then falls silent
+        streamer = threading.Thread(target=bridge, name="test-bridge")
+        streamer.start()
+        peer.recv_until(lambda p: p.axes[axis] != 0)
+        assert recorder.wait(lambda: any("control thread silent" in m for m in recorder.safety))
+        peer.drain()
+        for _ in range(10):  # half a second of 20 Hz ticks and bridge commands: all still
+            assert peer.recv_rcp()[0].axes[axis] == 0
+        link.heartbeat()  # the owner is back: the bridge may drive again
+        peer.recv_until(lambda p: p.axes[axis] != 0)
+    finally:
+        stop.set()
+        streamer.join()
+        link.shutdown()

@@ -1,0 +1,330 @@
+"""`ocu inspect FILE.mcap`: what a recording holds and how the link did, by hand-checkable rules.
+
+The figures are those seed 002 section 7 computes by hand from its logs: per channel counts
+and rates, and packet loss per direction as the share of packets sent that never arrived.
+Robot -> OCU loss comes from gaps in the telemetry tick counter and from gaps in the
+extension's per-camera video sequence numbers; OCU -> robot loss cannot be seen from the
+OCU's side (the robot acknowledges nothing) and is reported as such. A file cut short is read
+up to its last complete chunk and said to be truncated.
+
+The telemetry period is estimated from the whole recording with the same rule as the live
+link (ocu.link.stats.tick_loss): the median of the tick steps near the shortest quarter.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+from ocu.control.commands import make_codec
+from ocu.link.reassembly import Reassembler
+from ocu.link.stats import tick_loss
+from ocu.profile import ProfileError, RobotProfile, load_profile
+from ocu.protocol import ProtocolError, TelemetryPacket
+from ocu.protocol.extended import ExtendedCodec, VideoFragment
+from ocu.record import schemas as s
+from ocu.record.errors import RecordingError
+from ocu.record.reader import Recording
+
+SEQUENCE_MODULO = 2**32
+
+
+@dataclass
+class ChannelSummary:
+    """Messages on one topic."""
+
+    topic: str
+    messages: int = 0
+    bytes: int = 0
+    first_ns: int = 0
+    last_ns: int = 0
+    longest_gap_s: float = 0.0
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean rate between the first and the last message."""
+        span_s = (self.last_ns - self.first_ns) / 1e9
+        return (self.messages - 1) / span_s if self.messages > 1 and span_s > 0 else 0.0
+
+    def add(self, log_time_ns: int, size: int) -> None:
+        """Count one message."""
+        if self.messages:
+            self.longest_gap_s = max(self.longest_gap_s, (log_time_ns - self.last_ns) / 1e9)
+        else:
+            self.first_ns = log_time_ns
+        self.messages += 1
+        self.bytes += size
+        self.last_ns = log_time_ns
+
+
+@dataclass
+class CameraSummary:
+    """Frames of one camera: delivered, rate, and lost (extension video only)."""
+
+    name: str
+    frames: int = 0
+    fps: float = 0.0
+    lost: int | None = None
+
+    @property
+    def loss(self) -> float | None:
+        """Share of the frames sent that never completed."""
+        if self.lost is None or self.frames + self.lost == 0:
+            return None
+        return self.lost / (self.frames + self.lost)
+
+
+@dataclass
+class Summary:
+    """Everything `ocu inspect` prints."""
+
+    path: str
+    size_bytes: int
+    truncated: bool
+    corrupt_chunks: int
+    profile_name: str
+    start_wall_s: float
+    duration_s: float
+    channels: list[ChannelSummary] = field(default_factory=list)
+    rcp_sent: int = 0
+    rcp_rate_hz: float = 0.0
+    rcp_longest_gap_s: float = 0.0
+    robot_watchdog_s: float = 0.0
+    telemetry_received: int = 0
+    telemetry_lost: int = 0
+    telemetry_duplicates: int = 0
+    telemetry_reordered: int = 0
+    telemetry_rate_hz: float = 0.0
+    telemetry_longest_gap_s: float = 0.0
+    cameras: list[CameraSummary] = field(default_factory=list)
+    events: list[tuple[float, str, str, str]] = field(default_factory=list)
+    estops: int = 0
+    malformed: int | None = None
+    recorder_dropped: int | None = None
+
+    @property
+    def telemetry_loss(self) -> float | None:
+        """Share of telemetry packets sent by the robot that never arrived."""
+        total = self.telemetry_received + self.telemetry_lost
+        return self.telemetry_lost / total if total else None
+
+
+def summarize(recording: Recording, profile: RobotProfile) -> Summary:
+    """Read the whole recording once and compute the summary."""
+    summary = Summary(
+        path=str(recording.path),
+        size_bytes=recording.size_bytes,
+        truncated=recording.truncated,
+        corrupt_chunks=0,
+        profile_name=recording.metadata.get("profile_name", profile.name),
+        start_wall_s=recording.start_ns / 1e9,
+        duration_s=recording.duration_s,
+        robot_watchdog_s=profile.link.robot_watchdog_s,
+    )
+    channels: dict[str, ChannelSummary] = {}
+    codec = make_codec(profile)
+    ext = profile.extension
+    ext_codec = (
+        ExtendedCodec(ext.frame_types.hello, ext.frame_types.video_fragment, ext.frame_types.status)
+        if ext is not None
+        else None
+    )
+    ticks: list[int] = []
+    video = profile.video
+    reassembler = Reassembler(
+        video.reassembly_max_frames, video.reassembly_max_bytes, video.reassembly_timeout_s
+    )
+    completed: dict[int, int] = defaultdict(int)
+    sequences: dict[int, tuple[int, int]] = {}
+    last_stats = None
+    start_ns = recording.start_ns
+    for message in recording.messages():
+        topic = message.topic
+        channel = channels.get(topic)
+        if channel is None:
+            channel = channels[topic] = ChannelSummary(topic)
+        channel.add(message.log_time_ns, len(message.data))
+        if topic == s.RAW_TELEMETRY:
+            data = bytes(recording.decode(message).data)
+            try:
+                tick = TelemetryPacket.decode(data, codec.telemetry_type).tick
+            except ProtocolError:
+                continue
+            ticks.append(tick)
+        elif topic == s.RAW_VIDEO_FRAGMENT and ext_codec is not None:
+            data = bytes(recording.decode(message).data)
+            try:
+                fragment = ext_codec.decode(data)
+            except ProtocolError:
+                continue
+            if not isinstance(fragment, VideoFragment):
+                continue
+            first, last = sequences.get(fragment.camera, (fragment.sequence, fragment.sequence))
+            if (fragment.sequence - last) % SEQUENCE_MODULO < SEQUENCE_MODULO // 2:
+                last = fragment.sequence
+            sequences[fragment.camera] = (first, last)
+            if reassembler.add(fragment, message.log_time_ns / 1e9) is not None:
+                completed[fragment.camera] += 1
+        elif topic == s.LINK_STATS:
+            last_stats = recording.decode(message)
+        elif topic == s.EVENTS:
+            event = recording.decode(message)
+            offset_s = (message.log_time_ns - start_ns) / 1e9
+            summary.events.append((offset_s, event.kind, event.state, event.message))
+            if event.kind == s.EVENT_SAFETY and event.message.startswith("EMERGENCY STOP"):
+                summary.estops += 1
+    summary.corrupt_chunks = recording.corrupt_chunks
+    summary.channels = sorted(channels.values(), key=lambda c: c.topic)
+
+    rcp = channels.get(s.RAW_RCP)
+    if rcp is not None:
+        summary.rcp_sent = rcp.messages
+        summary.rcp_rate_hz = rcp.rate_hz
+        summary.rcp_longest_gap_s = rcp.longest_gap_s
+    raw_telemetry = channels.get(s.RAW_TELEMETRY)
+    if raw_telemetry is not None:
+        summary.telemetry_rate_hz = raw_telemetry.rate_hz
+        summary.telemetry_longest_gap_s = raw_telemetry.longest_gap_s
+    loss = tick_loss(ticks)
+    summary.telemetry_duplicates = loss.duplicates
+    summary.telemetry_reordered = loss.reordered
+    summary.telemetry_received = loss.received
+    summary.telemetry_lost = loss.lost
+
+    names = profile.link.camera_names
+    for index, name in enumerate(names):
+        images = channels.get(s.camera_topic(name))
+        camera = CameraSummary(name)
+        if index in sequences:
+            first, last = sequences[index]
+            sent = (last - first) % SEQUENCE_MODULO + 1
+            camera.frames = completed[index]
+            camera.lost = max(sent - camera.frames, 0)
+        elif images is not None:
+            camera.frames = images.messages
+        if images is not None:
+            camera.fps = images.rate_hz
+        if camera.frames or camera.lost:
+            summary.cameras.append(camera)
+    if last_stats is not None:
+        summary.malformed = int(last_stats.malformed)
+        summary.recorder_dropped = int(last_stats.recorder_dropped)
+    return summary
+
+
+def _size(count: int) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if count >= scale:
+            return f"{count / scale:.1f} {unit}"
+    return f"{count} B"
+
+
+def _percent(value: float | None) -> str:
+    return "n/a" if value is None else f"{value * 100:.2f} %"
+
+
+def render(summary: Summary) -> str:
+    """The summary as text."""
+    state = (
+        "TRUNCATED: no summary or footer (recorder killed?); read up to the last complete chunk"
+        if summary.truncated
+        else "complete"
+    )
+    started = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(summary.start_wall_s))
+    lines = [
+        f"{summary.path}  ({_size(summary.size_bytes)}, {state})",
+        f"recorded {started} (local), duration {summary.duration_s:.1f} s, "
+        f"profile {summary.profile_name}",
+    ]
+    if summary.corrupt_chunks:
+        lines.append(f"WARNING: {summary.corrupt_chunks} damaged chunk(s) skipped")
+    lines += ["", f"{'channel':<34} {'messages':>9} {'rate':>10} {'bytes':>10}"]
+    for channel in summary.channels:
+        lines.append(
+            f"{channel.topic:<34} {channel.messages:>9} {channel.rate_hz:>8.1f}/s "
+            f"{_size(channel.bytes):>10}"
+        )
+    lines += [
+        "",
+        "link (packet drop = packets sent that never arrived, as in seed 002 section 7)",
+        f"  OCU -> robot  {summary.rcp_sent} RCPs sent, {summary.rcp_rate_hz:.1f}/s, "
+        f"longest gap {summary.rcp_longest_gap_s:.2f} s "
+        f"(robot watchdog {summary.robot_watchdog_s:.1f} s); "
+        "drop: not observable from the OCU (the robot acknowledges nothing)",
+        f"  robot -> OCU  telemetry {summary.telemetry_received} received, "
+        f"{summary.telemetry_lost} lost: drop {_percent(summary.telemetry_loss)}; "
+        f"{summary.telemetry_rate_hz:.1f}/s, longest gap {summary.telemetry_longest_gap_s:.2f} s, "
+        f"{summary.telemetry_duplicates} duplicates, {summary.telemetry_reordered} reordered",
+    ]
+    for camera in summary.cameras:
+        lost = (
+            "drop n/a (vendor video has no sequence numbers)"
+            if camera.lost is None
+            else f"{camera.lost} lost: drop {_percent(camera.loss)}"
+        )
+        lines.append(
+            f"  video {camera.name:<7} {camera.frames} frames, {camera.fps:.1f} fps, {lost}"
+        )
+    if summary.malformed is not None:
+        lines.append(
+            f"  malformed datagrams {summary.malformed}, "
+            f"recorder dropped {summary.recorder_dropped} message(s)"
+        )
+    lines += ["", f"events ({summary.estops} emergency stop(s))"]
+    for offset_s, kind, event_state, message in summary.events:
+        detail = f"{event_state}: {message}" if event_state else message
+        lines.append(f"  {offset_s:+9.3f} s  {kind:<10} {detail}")
+    return "\n".join(lines)
+
+
+def as_json(summary: Summary) -> str:
+    """The summary as JSON, derived figures included."""
+    data = asdict(summary)
+    data["telemetry_loss"] = summary.telemetry_loss
+    for channel, source in zip(data["channels"], summary.channels, strict=True):
+        channel["rate_hz"] = source.rate_hz
+    for camera, source_camera in zip(data["cameras"], summary.cameras, strict=True):
+        camera["loss"] = source_camera.loss
+    return json.dumps(data, indent=2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Command-line options of `ocu inspect`."""
+    parser = argparse.ArgumentParser(
+        prog="ocu inspect",
+        description="Summarise an ocu recording: duration, per channel counts, rates and "
+        "bytes, link loss per direction, video rate per camera, e-stops and other events.",
+    )
+    parser.add_argument("file", help="an MCAP file written by `ocu --record` or the Record button")
+    parser.add_argument(
+        "--profile", metavar="FILE", help="robot profile when the recording holds none"
+    )
+    parser.add_argument("--json", action="store_true", help="print JSON instead of text")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of `ocu inspect`; 0 on success, 1 if the file cannot be read."""
+    args = build_parser().parse_args(argv)
+    try:
+        fallback = load_profile(args.profile)
+    except ProfileError as err:
+        print(f"ocu inspect: {err}", file=sys.stderr)
+        return 1
+    try:
+        with Recording(args.file) as recording:
+            summary = summarize(recording, recording.profile(fallback))
+    except RecordingError as err:
+        print(f"ocu inspect: {err}", file=sys.stderr)
+        return 1
+    print(as_json(summary) if args.json else render(summary))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

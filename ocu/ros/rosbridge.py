@@ -1,0 +1,422 @@
+"""The rospy side of the bridge: topics in and out around `BridgeCore`. Qt-free.
+
+`RosBridge` is what both the `ocu-ros` node and the console host. It subscribes to cmd_vel
+and joint goals, publishes joint states, camera images and diagnostics, and runs one thread
+("ocu-ros-bridge") for the cmd_vel timeout, position control and diagnostics.
+
+Topics (relative names resolve in the node's namespace; /diagnostics is global):
+
+- in  `cmd_vel`        geometry_msgs/Twist (or TwistStamped with twist_stamped)
+- in  `joint_goals`    sensor_msgs/JointState: name[] with position[] in radians
+- out `joint_states`   sensor_msgs/JointState: radians, rad/s, effort = motor current (A)
+- out `camera/compressed` and `camera/<name>/image/compressed`  sensor_msgs/CompressedImage
+- out `/diagnostics`   diagnostic_msgs/DiagnosticArray: link health and the bridge's state
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from typing import Any, Protocol
+
+from ocu.control.commands import VelocityLimits
+from ocu.control.position import PositionError
+from ocu.link.core import LinkListener, LinkState, StatusFrame, TelemetryFrame, VideoFrame
+from ocu.link.stats import LinkStats
+from ocu.profile import RobotProfile
+from ocu.ros.bridge import (
+    BridgeCore,
+    BridgeError,
+    BridgeSettings,
+    BridgeState,
+    DiagnosticReport,
+    StateCallback,
+    bridge_report,
+    camera_name,
+    joint_state,
+    link_report,
+)
+from ocu.ros.environment import ensure_ros_path
+
+ensure_ros_path()
+
+import rospy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from geometry_msgs.msg import Twist, TwistStamped  # noqa: E402
+from sensor_msgs.msg import CompressedImage, JointState  # noqa: E402
+
+log = logging.getLogger("ocu.ros")
+
+CMD_VEL_TOPIC = "cmd_vel"
+JOINT_GOALS_TOPIC = "joint_goals"
+JOINT_STATES_TOPIC = "joint_states"
+CAMERA_TOPIC = "camera/compressed"
+CAMERA_TOPIC_PER_CAMERA = "camera/{name}/image/compressed"
+DIAGNOSTICS_TOPIC = "/diagnostics"
+DIAGNOSTICS_PERIOD_S = 1.0
+WARNING_INTERVAL_S = 2.0
+STOP_JOIN_TIMEOUT_S = 5.0
+
+
+class BridgeLink(Protocol):
+    """What the bridge needs of a link; LinkCore has all of it."""
+
+    limits: VelocityLimits
+
+    @property
+    def state(self) -> LinkState: ...
+
+    def set_velocities(self, **velocities: float) -> None: ...
+
+    def heartbeat(self) -> None: ...
+
+    def stats(self) -> LinkStats: ...
+
+
+def init_node(
+    name: str, *, anonymous: bool = False, argv: list[str] | None = None, keep_logging: bool = True
+) -> None:
+    """rospy.init_node without rospy's signal handlers; blocks until the master answers.
+
+    rospy reconfigures the root logger (handlers, level); `keep_logging` puts it back, so a
+    host application (the console, pytest) keeps its own logging. Call once per process.
+    """
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    rospy.init_node(name, argv=argv, anonymous=anonymous, disable_signals=True)
+    if keep_logging:
+        for handler in root.handlers:
+            if handler not in handlers:
+                handler.close()
+        root.handlers[:] = handlers
+        root.setLevel(level)
+
+
+def _stamp(wall_time: float) -> Any:
+    return rospy.Time.from_sec(wall_time)
+
+
+def _diagnostic_status(report: DiagnosticReport) -> Any:
+    status = DiagnosticStatus()
+    status.level = int(report.level)
+    status.name = report.name
+    status.message = report.message
+    status.hardware_id = report.hardware_id
+    status.values = [KeyValue(key=key, value=value) for key, value in report.values]
+    return status
+
+
+class _Throttle:
+    """At most one log line per key and interval (a bad publisher can send 100 Hz)."""
+
+    def __init__(self, interval_s: float) -> None:
+        self.interval_s = interval_s
+        self._last: dict[str, float] = {}
+
+    def allow(self, key: str) -> bool:
+        now = time.monotonic()
+        last = self._last.get(key)
+        if last is not None and now - last < self.interval_s:
+            return False
+        self._last[key] = now
+        return True
+
+
+class _Publishers:
+    """The bridge's publishers; replaced as a whole on start and stop."""
+
+    def __init__(self, profile: RobotProfile) -> None:
+        self.joint_states = rospy.Publisher(JOINT_STATES_TOPIC, JointState, queue_size=10)
+        self.camera = rospy.Publisher(CAMERA_TOPIC, CompressedImage, queue_size=2)
+        self.cameras = {
+            name: rospy.Publisher(
+                CAMERA_TOPIC_PER_CAMERA.format(name=name), CompressedImage, queue_size=2
+            )
+            for name in profile.link.camera_names
+        }
+        self.diagnostics = rospy.Publisher(DIAGNOSTICS_TOPIC, DiagnosticArray, queue_size=2)
+
+    def unregister(self) -> None:
+        for publisher in (self.joint_states, self.camera, self.diagnostics, *self.cameras.values()):
+            publisher.unregister()
+
+
+class RosBridge:
+    """cmd_vel and joint goals in, joint states, images and diagnostics out; Qt-free.
+
+    `start(link)` subscribes and begins commanding; `stop()` unsubscribes and zeroes what
+    ROS was moving. `override()` hands control to the operator at once without sending
+    anything; `enable()` gives it back. `on_state_changed(state, text)` runs on a bridge or
+    rospy thread and must not block (emit a queued Qt signal).
+    """
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        settings: BridgeSettings | None = None,
+        *,
+        hardware_id: str = "",
+        heartbeat: bool = False,
+        on_state_changed: StateCallback | None = None,
+    ) -> None:
+        self.profile = profile
+        self.core = BridgeCore(profile, settings, on_state_changed=on_state_changed)
+        self.settings = self.core.settings
+        self.hardware_id = hardware_id
+        # The node beats the link's heartbeat from the bridge thread; the console's GUI
+        # thread beats it itself, so a stalled GUI still stops the robot.
+        self.heartbeat = heartbeat
+        self._life_lock = threading.Lock()
+        self._link: BridgeLink | None = None
+        self._subscribers: list[Any] = []
+        self._publishers: _Publishers | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        # Set when the bridge thread died; the node then exits (the console shows "off").
+        self.failed = threading.Event()
+        self._throttle = _Throttle(WARNING_INTERVAL_S)
+
+    # ---- life --------------------------------------------------------------------------
+
+    def start(self, link: BridgeLink) -> None:
+        """Subscribe, advertise and command `link`; rospy.init_node must have run."""
+        with self._life_lock:
+            if self._link is not None:
+                raise RuntimeError("the ROS bridge is already started")
+            self._link = link
+            self._publishers = _Publishers(self.profile)
+            self.core.attach(link, link.limits)
+            if self.settings.twist_stamped:
+                twist = rospy.Subscriber(
+                    CMD_VEL_TOPIC, TwistStamped, self._on_twist_stamped, queue_size=1
+                )
+            else:
+                twist = rospy.Subscriber(CMD_VEL_TOPIC, Twist, self._on_twist, queue_size=1)
+            goals = rospy.Subscriber(JOINT_GOALS_TOPIC, JointState, self._on_joint_goal)
+            self._subscribers = [twist, goals]
+            self._stop.clear()
+            self.failed.clear()
+            self._thread = threading.Thread(target=self._run, name="ocu-ros-bridge", daemon=True)
+            self._thread.start()
+        log.info(
+            "ROS bridge started: %s (%s), %s, min %.2f m/s / %.2f rad/s, timeout %.2f s",
+            CMD_VEL_TOPIC,
+            "TwistStamped" if self.settings.twist_stamped else "Twist",
+            JOINT_GOALS_TOPIC,
+            self.settings.min_linear_m_s,
+            self.settings.min_angular_rad_s,
+            self.settings.cmd_vel_timeout_s,
+        )
+
+    def stop(self, *, stop_motion: bool = True) -> None:
+        """Unsubscribe, stop the thread and (with stop_motion) zero what ROS moved; idempotent."""
+        with self._life_lock:
+            if self._link is None:
+                return
+            for subscriber in self._subscribers:
+                subscriber.unregister()
+            self._subscribers = []
+            self._stop.set()
+            thread, self._thread = self._thread, None
+            if thread is not None and thread is not threading.current_thread():
+                thread.join(STOP_JOIN_TIMEOUT_S)
+            # After detach the core refuses callbacks still in flight on rospy threads.
+            self.core.detach(stop=stop_motion)
+            publishers, self._publishers = self._publishers, None
+            self._link = None
+        if publishers is not None:
+            publishers.unregister()
+        log.info("ROS bridge stopped")
+
+    def override(self, reason: str = "operator") -> bool:
+        """The operator takes over; True if ROS had control. Sends nothing: the caller then
+        sends the operator's command, which replaces everything ROS commanded."""
+        return self.core.override(reason)
+
+    def enable(self) -> None:
+        """Give control back to ROS after an override."""
+        self.core.enable()
+
+    @property
+    def state(self) -> BridgeState:
+        """off, listening, commanding or overridden."""
+        return self.core.state
+
+    @property
+    def started(self) -> bool:
+        """Whether start() ran and stop() did not."""
+        with self._life_lock:
+            return self._link is not None
+
+    # ---- link events (any thread) ------------------------------------------------------
+
+    def on_telemetry(self, frame: TelemetryFrame) -> None:
+        """Feed the position controller and publish joint_states."""
+        publishers = self._publishers
+        if publishers is None:
+            return
+        self.core.on_telemetry(frame.readings, frame.received_at)
+        data = joint_state(self.profile, frame.readings)
+        message = JointState()
+        message.header.stamp = _stamp(frame.wall_time)
+        message.name = list(data.names)
+        message.position = list(data.positions_rad)
+        message.velocity = list(data.velocities_rad_s)
+        message.effort = list(data.currents_a)
+        self._publish(publishers.joint_states, message)
+
+    def on_video_frame(self, frame: VideoFrame) -> None:
+        """Publish a JPEG on camera/compressed and on its camera's own topic."""
+        publishers = self._publishers
+        if publishers is None:
+            return
+        name = camera_name(self.profile, frame.camera)
+        targets = [publishers.camera]
+        if name in publishers.cameras:
+            targets.append(publishers.cameras[name])
+        targets = [p for p in targets if p.get_num_connections() > 0]
+        if not targets:
+            return
+        message = CompressedImage()
+        message.header.stamp = _stamp(frame.wall_time)
+        message.header.frame_id = name
+        message.format = "jpeg"
+        message.data = frame.jpeg
+        for publisher in targets:
+            self._publish(publisher, message)
+
+    def wrap_listener(self, listener: LinkListener) -> LinkListener:
+        """A listener that passes every event to `listener` and telemetry and video to the
+        bridge too (the console wraps its LinkThread's listener with it)."""
+        return _TeeListener(listener, self)
+
+    def publish_diagnostics(self) -> None:
+        """Publish the link's and the bridge's health on /diagnostics."""
+        publishers, link = self._publishers, self._link
+        if publishers is None or link is None:
+            return
+        message = DiagnosticArray()
+        message.header.stamp = rospy.Time.now()
+        message.status = [
+            _diagnostic_status(link_report(link.state, link.stats(), self.hardware_id)),
+            _diagnostic_status(bridge_report(self.core.status(), self.hardware_id)),
+        ]
+        self._publish(publishers.diagnostics, message)
+
+    def _publish(self, publisher: Any, message: Any) -> None:
+        try:
+            publisher.publish(message)
+        except rospy.ROSException as err:
+            # Unregistered by stop() or rospy shutting down meanwhile.
+            log.debug("not published: %s", err)
+
+    # ---- ROS callbacks (rospy threads) -------------------------------------------------
+
+    def _on_twist(self, message: Any) -> None:
+        self._cmd_vel(message)
+
+    def _on_twist_stamped(self, message: Any) -> None:
+        self._cmd_vel(message.twist)
+
+    def _cmd_vel(self, twist: Any) -> None:
+        linear, angular = twist.linear, twist.angular
+        ignored = (float(linear.y), float(linear.z), float(angular.x), float(angular.y))
+        try:
+            drive = self.core.on_cmd_vel(float(linear.x), float(angular.z), ignored)
+        except BridgeError as err:
+            if self._throttle.allow("cmd_vel"):
+                log.warning("cmd_vel rejected, tracks stopped: %s", err)
+            return
+        if drive is None and self._throttle.allow("cmd_vel ignored"):
+            log.info("cmd_vel ignored: %s", self.core.state.value)
+
+    def _on_joint_goal(self, message: Any) -> None:
+        try:
+            goals = self.core.set_goals(list(message.name), list(message.position))
+        except PositionError as err:
+            log.error("joint goal rejected: %s", err)
+            return
+        if goals:
+            log.info(
+                "joint goal: %s",
+                ", ".join(f"{j} -> {a:.4f} rad ({math.degrees(a):.1f}°)" for j, a in goals.items()),
+            )
+        else:
+            log.info("joint goals cancelled")
+
+    # ---- bridge thread -----------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception:
+            # Without this loop nothing enforces the cmd_vel timeout: stop what ROS moves
+            # and take ROS off the robot (the heartbeat stops too, so the link zeroes the rest).
+            log.exception("ROS bridge loop failed: ROS control stopped")
+            self.failed.set()
+            self.core.detach(stop=True)
+
+    def _loop(self) -> None:
+        period_s = 1.0 / self.settings.rate_hz
+        next_step = time.monotonic()
+        next_diagnostics = next_step
+        link = self._link
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if self.heartbeat and link is not None:
+                link.heartbeat()
+            for text in self.core.step(now):
+                log.info("%s", text)
+            if now >= next_diagnostics:
+                next_diagnostics = now + DIAGNOSTICS_PERIOD_S
+                try:
+                    self.publish_diagnostics()
+                except Exception:
+                    log.exception("diagnostics failed")
+            next_step = max(next_step + period_s, now)
+            self._stop.wait(max(next_step - time.monotonic(), 0.0))
+
+
+class _TeeListener(LinkListener):
+    """Every event to the primary listener; telemetry and video to the bridge as well."""
+
+    def __init__(self, primary: LinkListener, bridge: RosBridge) -> None:
+        self.primary = primary
+        self.bridge = bridge
+
+    def telemetry_received(self, frame: TelemetryFrame) -> None:
+        try:
+            self.bridge.on_telemetry(frame)
+        except Exception:
+            log.exception("ROS bridge telemetry failed")
+        self.primary.telemetry_received(frame)
+
+    def video_frame_received(self, frame: VideoFrame) -> None:
+        try:
+            self.bridge.on_video_frame(frame)
+        except Exception:
+            log.exception("ROS bridge video failed")
+        self.primary.video_frame_received(frame)
+
+    def status_received(self, frame: StatusFrame) -> None:
+        self.primary.status_received(frame)
+
+    def extension_changed(self, active: bool, reason: str) -> None:
+        self.primary.extension_changed(active, reason)
+
+    def link_state_changed(self, state: LinkState, reason: str) -> None:
+        self.primary.link_state_changed(state, reason)
+
+    def stats_updated(self, stats: LinkStats) -> None:
+        self.primary.stats_updated(stats)
+
+    def safety_event(self, message: str) -> None:
+        self.primary.safety_event(message)
+
+    def datagram_sent(self, data: bytes, sent_at: float) -> None:
+        self.primary.datagram_sent(data, sent_at)
+
+    def datagram_received(self, data: bytes, received_at: float) -> None:
+        self.primary.datagram_received(data, received_at)

@@ -1,0 +1,434 @@
+"""The ROS-free bridge core: the 0.2 rule, cmd_vel timeout, joint goals, override, reports."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from ocu.control.commands import JointReading, VelocityLimits
+from ocu.control.position import PositionError
+from ocu.link.core import LinkState
+from ocu.link.stats import LinkStats
+from ocu.profile import RobotProfile
+from ocu.ros.bridge import (
+    DRIVE_LINEAR,
+    DRIVE_TURN,
+    BridgeCore,
+    BridgeError,
+    BridgeSettings,
+    BridgeState,
+    CmdVelTimeout,
+    DiagnosticLevel,
+    bridge_report,
+    camera_name,
+    joint_state,
+    link_report,
+    raise_to_minimum,
+    twist_to_drive,
+)
+
+
+class Clock:
+    """A hand-driven monotonic clock."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class Sink:
+    """Records every set_velocities call."""
+
+    def __init__(self) -> None:
+        self.sent: list[dict[str, float]] = []
+        self.current: dict[str, float] = {}
+
+    def set_velocities(self, **velocities: float) -> None:
+        self.sent.append(velocities)
+        self.current.update(velocities)
+
+
+def state_of(core: BridgeCore) -> BridgeState:
+    """The state, read through a call so mypy does not narrow it between asserts."""
+    return core.state
+
+
+def reading(name: str, angle_rad: float | None) -> JointReading:
+    return JointReading(name, 0, 1, 2, angle_rad, 0.5, 1.25, 0, angle_rad, 0.0, 0.0)
+
+
+@pytest.fixture
+def clock() -> Clock:
+    return Clock()
+
+
+@pytest.fixture
+def states() -> list[tuple[BridgeState, str]]:
+    return []
+
+
+@pytest.fixture
+def core(profile: RobotProfile, clock: Clock, states: list[tuple[BridgeState, str]]) -> BridgeCore:
+    return BridgeCore(
+        profile, clock=clock, on_state_changed=lambda state, text: states.append((state, text))
+    )
+
+
+@pytest.fixture
+def sink(core: BridgeCore) -> Sink:
+    sink = Sink()
+    core.attach(sink)
+    return sink
+
+
+# ---- the 0.2 rule -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        (0.1, 0.2),
+        (-0.1, -0.2),
+        (1e-9, 0.2),
+        (0.2, 0.2),
+        (-0.2, -0.2),
+        (0.5, 0.5),
+        (-0.35, -0.35),
+        (0.0, 0.0),
+    ],
+)
+def test_paper_rule_examples(value: float, expected: float) -> None:
+    assert raise_to_minimum(value, 0.2) == expected
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6)
+
+
+@given(value=finite, minimum=st.floats(min_value=0.0, max_value=10.0))
+def test_paper_rule_keeps_sign_and_lifts_to_the_minimum(value: float, minimum: float) -> None:
+    result = raise_to_minimum(value, minimum)
+    if value == 0.0:
+        assert result == 0.0
+    else:
+        assert math.copysign(1.0, result) == math.copysign(1.0, value)
+        assert abs(result) == max(abs(value), minimum)
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+def test_paper_rule_refuses_non_finite_speeds(value: float) -> None:
+    with pytest.raises(BridgeError, match="finite"):
+        raise_to_minimum(value, 0.2)
+
+
+def test_twist_mapping_lifts_then_clamps_to_the_channel_maximum(profile: RobotProfile) -> None:
+    limits = VelocityLimits(profile)
+    settings = BridgeSettings.from_profile(profile)
+    assert twist_to_drive(0.1, -0.05, settings, limits) == {DRIVE_LINEAR: 0.2, DRIVE_TURN: -0.2}
+    default_max = profile.channels[DRIVE_LINEAR].default_max
+    assert twist_to_drive(0.5, 0.0, settings, limits)[DRIVE_LINEAR] == default_max
+    limits.set(DRIVE_LINEAR, 0.45)
+    assert twist_to_drive(0.45, 0.0, settings, limits)[DRIVE_LINEAR] == 0.45
+    limits.set(DRIVE_LINEAR, 0.1)  # a maximum below the minimum wins: never faster than it
+    assert twist_to_drive(0.05, 0.0, settings, limits)[DRIVE_LINEAR] == 0.1
+
+
+def test_thresholds_default_to_the_profile_and_are_parameters(profile: RobotProfile) -> None:
+    settings = BridgeSettings.from_profile(profile)
+    assert settings.min_linear_m_s == profile.channels[DRIVE_LINEAR].min_speed == 0.2
+    assert settings.min_angular_rad_s == profile.channels[DRIVE_TURN].min_speed == 0.2
+    custom = BridgeSettings.from_profile(profile, min_linear_m_s=0.05)
+    assert twist_to_drive(0.1, 0.0, custom, VelocityLimits(profile))[DRIVE_LINEAR] == 0.1
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("min_linear_m_s", -0.1, "min_linear_m_s"),
+        ("min_angular_rad_s", math.nan, "min_angular_rad_s"),
+        ("cmd_vel_timeout_s", 0.0, "cmd_vel_timeout_s"),
+        ("rate_hz", 1.0, "rate_hz"),
+    ],
+)
+def test_bad_settings_are_refused(
+    profile: RobotProfile, field: str, value: float, match: str
+) -> None:
+    with pytest.raises(BridgeError, match=match):
+        BridgeSettings.from_profile(profile, **{field: value})
+
+
+# ---- cmd_vel timeout --------------------------------------------------------------------
+
+
+def test_timeout_fires_once_per_silence() -> None:
+    timeout = CmdVelTimeout(0.5)
+    assert not timeout.expired(10.0)  # nothing received yet
+    assert timeout.age(10.0) is None
+    timeout.feed(10.0)
+    assert not timeout.expired(10.5)
+    assert timeout.expired(10.51)
+    assert not timeout.expired(11.0)
+    timeout.feed(11.0)
+    assert timeout.age(11.25) == 0.25
+    assert timeout.expired(11.6)
+
+
+def test_core_stops_the_tracks_once_when_cmd_vel_stops(
+    core: BridgeCore, sink: Sink, clock: Clock, caplog: pytest.LogCaptureFixture
+) -> None:
+    assert core.on_cmd_vel(0.1, 0.0) == {DRIVE_LINEAR: 0.2, DRIVE_TURN: 0.0}
+    assert sink.current[DRIVE_LINEAR] == 0.2
+    assert state_of(core) is BridgeState.COMMANDING
+    clock.now += 0.49
+    core.step()
+    assert sink.current[DRIVE_LINEAR] == 0.2
+    caplog.set_level(logging.WARNING, logger="ocu.ros")
+    clock.now += 0.02
+    core.step()
+    assert sink.sent[-1] == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.0}
+    assert state_of(core) is BridgeState.LISTENING
+    sends = len(sink.sent)
+    clock.now += 1.0
+    core.step()
+    assert len(sink.sent) == sends
+    assert [r.message for r in caplog.records] == ["no cmd_vel for 0.50 s: tracks stopped"]
+    assert core.status().timeouts == 1
+
+
+def test_zero_cmd_vel_stops_and_non_finite_stops_too(core: BridgeCore, sink: Sink) -> None:
+    core.on_cmd_vel(0.3, 0.5)
+    assert state_of(core) is BridgeState.COMMANDING
+    core.on_cmd_vel(0.0, 0.0)
+    assert sink.current == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.0}
+    assert state_of(core) is BridgeState.LISTENING
+    core.on_cmd_vel(0.3, 0.0)
+    with pytest.raises(BridgeError):
+        core.on_cmd_vel(math.nan, 0.0)
+    assert sink.current == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.0}
+
+
+def test_other_twist_components_are_ignored_with_one_warning(
+    core: BridgeCore, sink: Sink, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, logger="ocu.ros")
+    for _ in range(3):
+        assert core.on_cmd_vel(0.25, 0.0, (0.3, 0.0, 0.0, 0.1)) == {
+            DRIVE_LINEAR: 0.25,
+            DRIVE_TURN: 0.0,
+        }
+    assert len(caplog.records) == 1
+    assert "ignored" in caplog.records[0].message
+
+
+def test_nothing_is_sent_before_attach(core: BridgeCore) -> None:
+    assert core.on_cmd_vel(0.3, 0.0) is None
+    assert core.step() == []
+    with pytest.raises(PositionError, match="not in control"):
+        core.set_goals(["waist"], [0.1])
+
+
+# ---- override (the console) -------------------------------------------------------------
+
+
+def test_override_silences_ros_at_once_and_sends_nothing(
+    core: BridgeCore, sink: Sink, clock: Clock, states: list[tuple[BridgeState, str]]
+) -> None:
+    core.on_cmd_vel(0.3, 0.0)
+    sends = len(sink.sent)
+    assert core.override("Space") is True
+    assert state_of(core) is BridgeState.OVERRIDDEN
+    assert len(sink.sent) == sends  # the console's own command replaces ROS's
+    assert core.on_cmd_vel(0.4, 0.0) is None
+    clock.now += 5.0
+    core.step()
+    assert len(sink.sent) == sends
+    assert core.override() is False  # already overridden
+    core.enable()
+    assert state_of(core) is BridgeState.LISTENING
+    assert core.on_cmd_vel(0.1, 0.0) == {DRIVE_LINEAR: 0.2, DRIVE_TURN: 0.0}
+    assert [s for s, _ in states] == [
+        BridgeState.LISTENING,
+        BridgeState.COMMANDING,
+        BridgeState.OVERRIDDEN,
+        BridgeState.LISTENING,
+        BridgeState.COMMANDING,
+    ]
+    assert states[2][1] == "ROS control overridden by the operator"
+
+
+def test_override_cancels_joint_goals(core: BridgeCore, sink: Sink) -> None:
+    core.on_telemetry({"waist": reading("waist", 0.0)}, core.clock())
+    core.set_goals(["waist"], [0.5])
+    core.step()
+    core.override()
+    assert core.status().goals_rad == {}
+    core.enable()
+    assert core.status().goals_rad == {}
+
+
+def test_detach_zeroes_only_what_ros_was_moving(core: BridgeCore, sink: Sink) -> None:
+    core.on_cmd_vel(0.0, 0.5)
+    core.on_telemetry({"elbow": reading("elbow", 0.0)}, core.clock())
+    core.set_goals(["elbow"], [0.4])
+    core.step()
+    core.detach()
+    assert sink.sent[-1] == {DRIVE_TURN: 0.0, "elbow": 0.0}
+    assert state_of(core) is BridgeState.OFF
+    sends = len(sink.sent)
+    assert core.on_cmd_vel(0.3, 0.0) is None
+    assert len(sink.sent) == sends
+
+
+def test_detach_without_motion_sends_nothing(core: BridgeCore, sink: Sink) -> None:
+    core.detach()
+    assert sink.sent == []
+
+
+# ---- joint goals ------------------------------------------------------------------------
+
+
+def test_joint_goal_runs_through_the_position_controller(
+    core: BridgeCore, sink: Sink, clock: Clock
+) -> None:
+    core.on_telemetry({"waist": reading("waist", 0.0)}, clock.now)
+    assert core.set_goals(["waist"], [0.5]) == {"waist": 0.5}
+    assert state_of(core) is BridgeState.COMMANDING
+    core.step()
+    assert sink.current["waist"] > 0.0
+    clock.now += 0.1
+    core.on_telemetry({"waist": reading("waist", 0.5)}, clock.now)
+    messages = core.step()
+    assert messages == ["waist: reached 28.6°"]
+    assert sink.current["waist"] == 0.0
+    assert state_of(core) is BridgeState.LISTENING
+
+
+@pytest.mark.parametrize(
+    ("names", "positions", "match"),
+    [
+        (["nonsense"], [0.1], "nonsense: not a joint driven by a velocity channel"),
+        (["waist"], [math.radians(175.0)], r"waist: target 175.0° outside the limits"),
+        (["waist", "elbow"], [0.1], "2 names but 1 positions"),
+        (["waist", "waist"], [0.1, 0.2], "named twice"),
+        (["waist"], [math.nan], "finite"),
+        (["left_track"], [0.0], "not a joint driven"),
+    ],
+)
+def test_bad_joint_goals_are_refused_whole(
+    core: BridgeCore, sink: Sink, names: list[str], positions: list[float], match: str
+) -> None:
+    core.set_goals(["elbow"], [0.2])
+    with pytest.raises(PositionError, match=match):
+        core.set_goals(names, positions)
+    assert core.status().goals_rad == {"elbow": 0.2}
+    assert core.status().rejected_count == 1
+
+
+def test_one_bad_joint_applies_no_goal(core: BridgeCore, sink: Sink) -> None:
+    with pytest.raises(PositionError):
+        core.set_goals(["waist", "shoulder"], [0.1, math.radians(150.0)])
+    assert core.status().goals_rad == {}
+
+
+def test_empty_goal_cancels_every_goal(core: BridgeCore, sink: Sink) -> None:
+    core.on_telemetry({"neck": reading("neck", 0.0)}, core.clock())
+    core.set_goals(["neck"], [0.6])
+    core.step()
+    assert sink.current["neck"] > 0.0
+    assert core.set_goals([], []) == {}
+    assert sink.current["neck"] == 0.0
+    assert state_of(core) is BridgeState.LISTENING
+
+
+# ---- what the node publishes ------------------------------------------------------------
+
+
+def test_joint_state_has_every_positioned_motor_in_profile_order(profile: RobotProfile) -> None:
+    readings = {
+        "elbow": reading("elbow", -0.4),
+        "left_track": reading("left_track", None),
+        "waist": reading("waist", 0.3),
+    }
+    data = joint_state(profile, readings)
+    assert data.names == ("waist", "elbow")
+    assert data.positions_rad == (0.3, -0.4)
+    assert data.velocities_rad_s == (0.5, 0.5)
+    assert data.currents_a == (1.25, 1.25)
+
+
+def test_camera_names(profile: RobotProfile) -> None:
+    assert camera_name(profile, 0) == "front"
+    assert camera_name(profile, 3) == "rear"
+    assert camera_name(profile, None) == "unknown"
+    assert camera_name(profile, 9) == "unknown"
+
+
+def stats(**changes: object) -> LinkStats:
+    values: dict[str, object] = {
+        "sent": 10,
+        "received": 8,
+        "telemetry": 7,
+        "video": 1,
+        "malformed": 2,
+        "foreign": 3,
+        "send_errors": 0,
+        "rcp_rate_hz": 5.0,
+        "telemetry_rate_hz": 1.0,
+        "video_rate_hz": 0.0,
+        "loss_estimate": 0.0,
+        "duplicates": 0,
+        "reordered": 0,
+        "last_valid_age_s": 0.2,
+        "send_rate_hz": 5.0,
+        "estop_latched": False,
+    }
+    values.update(changes)
+    return LinkStats(**values)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("state", "changes", "level", "message"),
+    [
+        (LinkState.CONNECTED, {}, DiagnosticLevel.OK, "connected"),
+        (LinkState.CONNECTED, {"estop_latched": True}, DiagnosticLevel.WARN, "e-stop|emergency"),
+        (LinkState.CONNECTED, {"loss_estimate": 0.3}, DiagnosticLevel.WARN, "loss 30%"),
+        (LinkState.CONNECTING, {}, DiagnosticLevel.WARN, "connecting"),
+        (LinkState.LOST, {}, DiagnosticLevel.ERROR, "LINK LOST"),
+        (LinkState.CLOSED, {}, DiagnosticLevel.ERROR, "closed"),
+    ],
+)
+def test_link_report_levels(
+    state: LinkState, changes: dict[str, object], level: DiagnosticLevel, message: str
+) -> None:
+    report = link_report(state, stats(**changes), "10.0.0.5:10000")
+    assert report.level is level
+    assert any(part in report.message for part in message.split("|"))
+    assert report.hardware_id == "10.0.0.5:10000"
+
+
+def test_link_report_values() -> None:
+    values = dict(link_report(LinkState.CONNECTED, stats(loss_estimate=None), "x").values)
+    assert values["malformed datagrams"] == "2"
+    assert values["foreign datagrams"] == "3"
+    assert values["telemetry loss"] == "n/a"
+    assert values["emergency stop latched"] == "false"
+    assert values["state"] == "connected"
+
+
+def test_bridge_report(core: BridgeCore, sink: Sink) -> None:
+    core.on_cmd_vel(0.1, 0.0)
+    core.set_goals(["waist"], [math.radians(10.0)])
+    report = bridge_report(core.status(), "sim")
+    values = dict(report.values)
+    assert report.level is DiagnosticLevel.OK
+    assert report.message == "ROS is commanding the robot"
+    assert values["drive_linear (m/s)"] == "0.200"
+    assert values["joint goals"] == "waist=10.0°"
+    assert values["cmd_vel received"] == "1"
+    core.override()
+    assert bridge_report(core.status(), "sim").level is DiagnosticLevel.WARN

@@ -1,0 +1,99 @@
+"""The node's private parameters and its command line, without ROS."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from ocu.profile import RobotProfile
+from ocu.ros.node import ConfigError, main, read_config, read_profile
+
+
+def getter(params: dict[str, Any]) -> Any:
+    def get(name: str, default: Any) -> Any:
+        return params.get(name, default)
+
+    return get
+
+
+def test_defaults_come_from_the_profile(profile: RobotProfile) -> None:
+    config = read_config(getter({}), profile, None)
+    assert config.robot is None  # the built-in simulator
+    assert config.bridge.min_linear_m_s == profile.channels["drive_linear"].min_speed
+    assert config.bridge.min_angular_rad_s == profile.channels["drive_turn"].min_speed
+    assert config.bridge.cmd_vel_timeout_s == 0.5
+    assert config.bridge.twist_stamped is False
+    assert config.max_linear_m_s == profile.channels["drive_linear"].default_max
+    assert config.camera is None
+    assert config.extension is False
+
+
+def test_parameters_are_read(profile: RobotProfile) -> None:
+    config = read_config(
+        getter(
+            {
+                "robot": "10.0.0.5",
+                "min_linear": 0.1,
+                "min_angular": 0,  # YAML gives an int
+                "cmd_vel_timeout": 1,
+                "twist_stamped": True,
+                "rate": 20,
+                "max_linear": 0.45,
+                "camera": "rear",
+                "sim_args": "--telemetry-hz 20",
+            }
+        ),
+        profile,
+        None,
+    )
+    assert config.robot == ("10.0.0.5", profile.link.port)
+    assert config.bridge.min_linear_m_s == 0.1
+    assert config.bridge.min_angular_rad_s == 0.0
+    assert config.bridge.cmd_vel_timeout_s == 1.0
+    assert config.bridge.twist_stamped is True
+    assert config.bridge.rate_hz == 20.0
+    assert config.max_linear_m_s == 0.45
+    assert config.camera == profile.link.camera_names.index("rear")
+    assert config.sim_args == ("--telemetry-hz", "20")
+    assert read_config(getter({"robot": "host:1234"}), profile, None).robot == ("host", 1234)
+
+
+@pytest.mark.parametrize(
+    ("params", "match"),
+    [
+        ({"robot": "host:0"}, "~robot: bad address"),
+        ({"robot": "host:http"}, "~robot: bad address"),
+        ({"robot": ":10000"}, "~robot: bad address"),
+        ({"robot": 5}, "~robot must be a string"),
+        ({"min_linear": "fast"}, "~min_linear must be a finite number"),
+        ({"min_linear": True}, "~min_linear must be a finite number"),
+        ({"min_angular": -0.1}, "min_angular_rad_s"),
+        ({"cmd_vel_timeout": 0}, "cmd_vel_timeout_s"),
+        ({"rate": 1000}, "rate_hz"),
+        ({"twist_stamped": "yes"}, "~twist_stamped must be true or false"),
+        ({"max_angular": -1.0}, "must be >= 0"),
+        ({"camera": "belly"}, "~camera: 'belly' is not one of"),
+        ({"sim_args": "'unclosed"}, "~sim_args"),
+    ],
+)
+def test_bad_parameters_are_refused(
+    profile: RobotProfile, params: dict[str, Any], match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match):
+        read_config(getter(params), profile, None)
+
+
+def test_profile_parameter(profile: RobotProfile, tmp_path: Any) -> None:
+    assert read_profile(getter({}))[1] is None
+    with pytest.raises(ConfigError, match="~profile: cannot read profile"):
+        read_profile(getter({"profile": str(tmp_path / "missing.toml")}))
+
+
+def test_help_lists_the_parameters(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    for name in ("~robot", "~min_linear", "~cmd_vel_timeout", "~twist_stamped", "~rate"):
+        assert name in out

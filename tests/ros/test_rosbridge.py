@@ -1,0 +1,154 @@
+"""RosBridge hosted in this process, as the console hosts it: ROS control, override, stop."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
+
+import pytest
+
+from ocu.control.commands import Command
+from ocu.link.core import LinkCore, LinkListener
+from ocu.profile import RobotProfile
+from ocu.ros.bridge import BridgeState
+from ocu.sim.simulator import RobotSimulator, SimState
+
+if TYPE_CHECKING:
+    from ocu.ros.rosbridge import RosBridge
+from tests.ros.conftest import ROSPY_WARNINGS, Collector, needs_ros, wait_for
+
+pytestmark = [pytest.mark.slow, *ROSPY_WARNINGS]
+
+
+def state_of(bridge: RosBridge) -> BridgeState:
+    """The state, read through a call so mypy does not narrow it between asserts."""
+    return bridge.state
+
+
+def drive_stopped(state: SimState) -> bool:
+    return state.commanded_velocities["drive_linear"] == 0.0
+
+
+def forward(speed: float) -> Any:
+    from geometry_msgs.msg import Twist
+
+    message = Twist()
+    message.linear.x = speed
+    return message
+
+
+@pytest.fixture
+def sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
+    needs_ros()
+    simulator = RobotSimulator(profile, telemetry_hz=20.0, video_fps=0.0)
+    simulator.start()
+    yield simulator
+    simulator.stop()
+
+
+@pytest.fixture
+def link(profile: RobotProfile, sim: RobotSimulator) -> Iterator[LinkCore]:
+    # The console's GUI thread beats the heartbeat; here nothing does, so no GUI watchdog.
+    core = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+    yield core
+    core.shutdown()
+
+
+def test_console_hosts_ros_control_and_the_operator_overrides_it(
+    profile: RobotProfile, sim: RobotSimulator, link: LinkCore, ros_client: None
+) -> None:
+    import rospy
+    from geometry_msgs.msg import Twist
+    from sensor_msgs.msg import JointState
+
+    from ocu.ros.rosbridge import RosBridge
+
+    states: list[BridgeState] = []
+    bridge = RosBridge(
+        profile, hardware_id="sim", on_state_changed=lambda state, _text: states.append(state)
+    )
+    link.listener = bridge.wrap_listener(LinkListener())
+    link.start()
+    cmd_vel = rospy.Publisher("cmd_vel", Twist, queue_size=10)
+    joint_states = Collector("joint_states", JointState)
+    try:
+        bridge.start(link)
+        assert wait_for(lambda: cmd_vel.impl.has_connection(rospy.get_caller_id()), 10.0)
+        cmd_vel.publish(forward(0.1))
+        assert sim.wait_until(lambda s: not drive_stopped(s), 5.0)
+        assert sim.state().commanded_velocities["drive_linear"] == pytest.approx(0.2, abs=1e-4)
+        assert state_of(bridge) is BridgeState.COMMANDING
+        joint_states.wait(lambda m: "waist" in m.name)
+
+        # Any operator input: override first, then the console sends its own command.
+        assert bridge.override("slider") is True
+        link.set_command(Command())
+        assert sim.wait_until(drive_stopped, 2.0)
+        rejected = bridge.core.status().rejected_count
+        cmd_vel.publish(forward(0.3))
+        assert wait_for(lambda: bridge.core.status().rejected_count > rejected, 5.0)
+        assert drive_stopped(sim.state())
+        assert state_of(bridge) is BridgeState.OVERRIDDEN
+
+        bridge.enable()
+        cmd_vel.publish(forward(0.25))
+        assert sim.wait_until(lambda s: not drive_stopped(s), 5.0)
+    finally:
+        bridge.stop()
+        cmd_vel.unregister()
+        joint_states.close()
+    # stop() zeroed what ROS was moving.
+    assert sim.wait_until(drive_stopped, 2.0)
+    assert states == [
+        BridgeState.LISTENING,
+        BridgeState.COMMANDING,
+        BridgeState.OVERRIDDEN,
+        BridgeState.LISTENING,
+        BridgeState.COMMANDING,
+        BridgeState.OFF,
+    ]
+    assert not bridge.started
+
+
+def test_start_twice_is_refused_and_stop_is_idempotent(
+    profile: RobotProfile, link: LinkCore, ros_client: None
+) -> None:
+    from ocu.ros.rosbridge import RosBridge
+
+    bridge = RosBridge(profile)
+    bridge.start(link)
+    try:
+        with pytest.raises(RuntimeError, match="already started"):
+            bridge.start(link)
+    finally:
+        bridge.stop()
+    bridge.stop()
+    assert state_of(bridge) is BridgeState.OFF
+
+
+def test_a_failing_bridge_loop_stops_ros_control(
+    link: LinkCore,
+    sim: RobotSimulator,
+    ros_client: None,
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    from ocu.ros.rosbridge import RosBridge
+
+    bridge = RosBridge(link.profile)
+    link.start()
+    bridge.start(link)
+    try:
+        bridge.core.on_cmd_vel(0.3, 0.0)
+        assert sim.wait_until(lambda s: not drive_stopped(s), 5.0)
+
+        def broken(now: float | None = None) -> list[str]:
+            raise RuntimeError("boom")
+
+        monkeypatch.setattr(bridge.core, "step", broken)
+        assert bridge.failed.wait(5.0)
+        assert sim.wait_until(drive_stopped, 2.0)
+        assert state_of(bridge) is BridgeState.OFF
+        assert "ROS bridge loop failed" in caplog.text
+    finally:
+        bridge.stop()
