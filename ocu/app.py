@@ -1,4 +1,8 @@
-"""The `ocu` command: start the console on the built-in simulator or a real robot."""
+"""The `ocu` command: start the console on the built-in simulator or a real robot.
+
+Also `ocu --record FILE`, `ocu --replay FILE`, `ocu inspect FILE` (docs/recordings.md) and
+`ocu screenshot [--window] OUT.png` (the model, or the whole console, without a display).
+"""
 
 from __future__ import annotations
 
@@ -14,7 +18,11 @@ from typing import TYPE_CHECKING
 from ocu.profile import ProfileError, RobotProfile, load_profile
 
 if TYPE_CHECKING:
+    from PySide6.QtCore import QSettings
+    from PySide6.QtWidgets import QApplication
+
     from ocu.hotkeys import KeyMap
+    from ocu.windows.main_window import MainWindow
 
 log = logging.getLogger("ocu")
 
@@ -51,17 +59,33 @@ def build_parser() -> argparse.ArgumentParser:
         prog="ocu",
         description="Operator Control Unit for the Servosila Engineer. With no --robot it "
         "starts the built-in simulator on 127.0.0.1 and connects to it.",
-        epilog="Subcommands: `ocu screenshot OUT.png [--joints name=deg ...]` renders without "
-        "a display.",
+        epilog="Subcommands: `ocu screenshot OUT.png [--joints name=deg ...]` renders the model "
+        "without a display; `ocu screenshot --window OUT.png [--seconds S]` the whole console "
+        "on the built-in simulator; `ocu inspect FILE.mcap` summarises a recording.",
     )
     parser.add_argument("--robot", metavar="HOST[:PORT]", help="connect to a robot")
+    files = parser.add_mutually_exclusive_group()
+    files.add_argument(
+        "--record",
+        metavar="FILE.mcap",
+        type=Path,
+        help="record the session from the start (the file is overwritten)",
+    )
+    files.add_argument(
+        "--replay",
+        metavar="FILE.mcap",
+        type=Path,
+        help="replay a recording in the console: no simulator, no robot, commands disabled",
+    )
     parser.add_argument("--profile", metavar="FILE", help="robot profile (TOML)")
     parser.add_argument(
         "--sim-arg",
         action="append",
         default=[],
         metavar="ARG",
-        help="extra argument for the built-in simulator, e.g. --sim-arg=--loss=0.1",
+        help="extra argument for the built-in simulator, e.g. --sim-arg=--loss=0.1; "
+        "--sim-arg=--extended makes it speak the protocol extension (four cameras, battery, "
+        "headlight, roll/pitch)",
     )
     parser.add_argument(
         "--quit-after", type=float, metavar="S", help="quit by itself after S seconds"
@@ -84,11 +108,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `ocu` console script."""
     args_list = list(sys.argv[1:] if argv is None else argv)
     if args_list and args_list[0] == "screenshot":
+        if "--window" in args_list[1:]:
+            from ocu.windows.screenshot import main as window_screenshot_main
+
+            return window_screenshot_main(args_list[1:])
         from ocu.render.screenshot import main as screenshot_main
 
         return screenshot_main(args_list[1:])
+    if args_list and args_list[0] == "inspect":
+        from ocu.record.inspect import main as inspect_main
+
+        return inspect_main(args_list[1:])
     parser = build_parser()
     args = parser.parse_args(args_list)
+    if args.replay is not None and (args.robot or args.sim_arg):
+        parser.error("--replay plays a file: --robot and --sim-arg do not apply")
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:
         profile = load_profile(args.profile)
@@ -110,6 +144,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         key_map = load_key_map(profile, override)
     except KeyMapError as err:
         parser.error(str(err))
+    if args.replay is not None:
+        return run_replay(
+            profile, args.replay, args.quit_after, config_dir=config_dir, key_map=key_map
+        )
     return run_console(
         profile,
         robot,
@@ -118,6 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.quit_after,
         config_dir=config_dir,
         key_map=key_map,
+        record_path=args.record,
     )
 
 
@@ -130,33 +169,46 @@ def run_console(
     *,
     config_dir: Path,
     key_map: KeyMap,
+    record_path: Path | None = None,
 ) -> int:
     """Start simulator (if no robot), link and window; run the Qt event loop."""
-    from PySide6.QtCore import QSettings, QTimer
     from PySide6.QtWidgets import QApplication
 
     from ocu.link.core import LinkCore, LinkError
     from ocu.link.qt import LinkThread
+    from ocu.record.errors import RecordingError
+    from ocu.record.recorder import Recorder
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
     from ocu.windows.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
-    simulator: SimulatorProcess | None = None
-    if robot is None:
+    assert isinstance(app, QApplication)
+    recorder = Recorder(profile)
+    if record_path is not None:
+        # Before anything starts: a path that cannot be written stops here, with the reason.
         try:
-            simulator = SimulatorProcess(profile_path, sim_args)
-        except SimulatorProcessError as err:
+            recorder.start(record_path)
+        except RecordingError as err:
             log.error("%s", err)
             return 1
-        robot = simulator.address
-        address_text = f"simulator {robot[0]}:{robot[1]}"
-    else:
-        address_text = f"robot {robot[0]}:{robot[1]}"
-    robot_address = robot
+    simulator: SimulatorProcess | None = None
     try:
+        if robot is None:
+            try:
+                simulator = SimulatorProcess(profile_path, sim_args)
+            except SimulatorProcessError as err:
+                log.error("%s", err)
+                return 1
+            robot = simulator.address
+            address_text = f"simulator {robot[0]}:{robot[1]}"
+        else:
+            address_text = f"robot {robot[0]}:{robot[1]}"
+        robot_address = robot
         try:
             # The first link is made here so a bad address fails before any window opens.
-            first_link: list[LinkThread] = [LinkThread(LinkCore(profile, robot_address))]
+            first_link: list[LinkThread] = [
+                LinkThread(LinkCore(profile, robot_address, extension=True))
+            ]
         except LinkError as err:
             log.error("%s", err)
             return 1
@@ -164,44 +216,90 @@ def run_console(
         def make_link() -> LinkThread:
             if first_link:
                 return first_link.pop()
-            return LinkThread(LinkCore(profile, robot_address))
+            return LinkThread(LinkCore(profile, robot_address, extension=True))
 
-        config_dir.mkdir(parents=True, exist_ok=True)
-        settings = QSettings(str(config_dir / SETTINGS_FILE), QSettings.Format.IniFormat)
-        window = MainWindow(profile, make_link, address_text, settings, key_map)
-        app.aboutToQuit.connect(window.shutdown)
-        # Python runs a signal handler between any two bytecodes of the main thread, e.g. in
-        # the middle of a send that holds the link's lock: the handler only raises a flag, and
-        # a short timer (which also lets Python see the signal at all) quits Qt from the
-        # event loop, so shutdown sends zeros before the process ends.
-        stop_signals: list[int] = []
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda signum, _frame: stop_signals.append(signum))
-
-        def quit_on_signal() -> None:
-            if stop_signals:
-                log.info("%s received, quitting", signal.Signals(stop_signals[0]).name)
-                app.quit()
-
-        pulse = QTimer()
-        pulse.start(SIGNAL_POLL_MS)
-        pulse.timeout.connect(quit_on_signal)
-        if quit_after_s is not None:
-            QTimer.singleShot(int(quit_after_s * 1000), app.quit)
-        if window.layout_restored:
-            window.show()
-        else:
-            # First run: the whole screen for the cockpit (also without a window manager).
-            screen = window.screen()
-            if screen is not None:
-                window.resize(screen.availableGeometry().size())
-            window.showMaximized()
-        code = app.exec()
-        window.shutdown()
-        return code
+        settings = open_settings(config_dir)
+        window = MainWindow(profile, make_link, address_text, settings, key_map, recorder=recorder)
+        return run_window(app, window, quit_after_s)
     finally:
+        recorder.stop()  # after the window's shutdown: the link's closing zeros are in it
         if simulator is not None:
             simulator.stop()
+
+
+def run_replay(
+    profile: RobotProfile,
+    path: Path,
+    quit_after_s: float | None,
+    *,
+    config_dir: Path,
+    key_map: KeyMap,
+) -> int:
+    """The console on a recording: no simulator, no link; plays from the start."""
+    from PySide6.QtWidgets import QApplication
+
+    from ocu.record.errors import RecordingError
+    from ocu.record.replay import ReplaySource
+    from ocu.windows.main_window import MainWindow
+
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    assert isinstance(app, QApplication)
+    try:
+        source = ReplaySource(path, profile)
+    except RecordingError as err:
+        log.error("%s", err)
+        return 1
+    settings = open_settings(config_dir)
+    window = MainWindow(
+        source.profile, None, f"replay {path.name}", settings, key_map, replay=source
+    )
+    source.play()
+    return run_window(app, window, quit_after_s)
+
+
+def open_settings(config_dir: Path) -> QSettings:
+    """The window layout file in the config directory (created if needed)."""
+    from PySide6.QtCore import QSettings
+
+    config_dir.mkdir(parents=True, exist_ok=True)
+    return QSettings(str(config_dir / SETTINGS_FILE), QSettings.Format.IniFormat)
+
+
+def run_window(app: QApplication, window: MainWindow, quit_after_s: float | None) -> int:
+    """Show the console, run Qt's event loop until quit (signals, --quit-after), shut down."""
+    from PySide6.QtCore import QTimer
+
+    app.aboutToQuit.connect(window.shutdown)
+    # Python runs a signal handler between any two bytecodes of the main thread, e.g. in
+    # the middle of a send that holds the link's lock: the handler only raises a flag, and
+    # a short timer (which also lets Python see the signal at all) quits Qt from the
+    # event loop, so shutdown sends zeros before the process ends.
+    stop_signals: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: stop_signals.append(signum))
+
+    def quit_on_signal() -> None:
+        if stop_signals:
+            log.info("%s received, quitting", signal.Signals(stop_signals[0]).name)
+            app.quit()
+
+    pulse = QTimer()
+    pulse.start(SIGNAL_POLL_MS)
+    pulse.timeout.connect(quit_on_signal)
+    if quit_after_s is not None:
+        QTimer.singleShot(int(quit_after_s * 1000), app.quit)
+    if window.layout_restored:
+        window.show()
+    else:
+        # First run: the whole screen for the cockpit (also without a window manager).
+        screen = window.screen()
+        if screen is not None:
+            window.resize(screen.availableGeometry().size())
+        window.showMaximized()
+    code = app.exec()
+    window.shutdown()
+    pulse.stop()
+    return code
 
 
 if __name__ == "__main__":

@@ -2,36 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 from ocu.profile import RobotProfile
 from ocu.sim.simulator import RobotSimulator
-
-RUN_TIMEOUT_S = 60
-
-
-def run_ocu(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "OCU_CONFIG_DIR": str(tmp_path / "cfg")}
-    return subprocess.run(
-        [sys.executable, "-m", "ocu", *args],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=RUN_TIMEOUT_S,
-        check=False,
-    )
-
-
-def qt_complaints(stderr: str) -> list[str]:
-    """Lines that are not our log lines: Qt warnings, tracebacks."""
-    return [
-        line
-        for line in stderr.splitlines()
-        if line.strip() and not line[:4].isdigit() and "OpenGL_accelerate" not in line
-    ]
+from tests.windows.console_fixtures import qt_complaints, run_ocu
 
 
 def test_ocu_starts_its_simulator_and_quits_by_itself(tmp_path: Path) -> None:
@@ -62,3 +37,35 @@ def test_bad_key_map_is_refused_before_any_window(tmp_path: Path) -> None:
     result = run_ocu(tmp_path, "--keys", str(keys))
     assert result.returncode == 2
     assert "unknown channel 'tail'" in result.stderr
+
+
+def test_window_screenshot_renders_the_whole_console(tmp_path: Path) -> None:
+    from PIL import Image
+
+    out = tmp_path / "console.png"
+    result = run_ocu(
+        tmp_path,
+        "screenshot",
+        "--window",
+        str(out),
+        "--seconds",
+        "1.5",
+        "--size",
+        "1280x800",
+        "--joints",
+        "waist=20",
+    )
+    assert result.returncode == 0, result.stderr
+    assert qt_complaints(result.stderr) == []
+    with Image.open(out) as image:
+        assert image.size == (1280, 800)
+        assert len(image.convert("RGB").getcolors(1 << 20) or []) > 500  # docks, 3D, text
+    # The model-only screenshot is still `ocu screenshot OUT.png`.
+    model = tmp_path / "model.png"
+    result = run_ocu(tmp_path, "screenshot", str(model), "--size", "320x240")
+    assert result.returncode == 0, result.stderr
+    with Image.open(model) as image:
+        assert image.size == (320, 240)
+    bad = run_ocu(tmp_path, "screenshot", "--window", str(out), "--joints", "knee=10")
+    assert bad.returncode == 1
+    assert "knee=10" in bad.stderr

@@ -101,6 +101,9 @@ class TeleopEvents:
         self.help_changed: Event[[bool]] = Event()
         self.message: Event[[str]] = Event()
         self.position_message: Event[[str]] = Event()
+        # Before any operator input or emergency stop takes effect (a host hands control back
+        # from another commander, e.g. ROS, before the operator's command is sent).
+        self.operator_acted: Event[[]] = Event()
 
 
 def _check_finite(channel: str, value: float) -> float:
@@ -368,6 +371,7 @@ class TeleopModel:
 
     def emergency_stop(self, reason: str = "operator") -> None:
         """Link e-stop at once, everything to zero, targets cancelled, latched until acted."""
+        self.events.operator_acted.emit()
         self.events.estop_requested.emit(reason)
         self._zero_all()
         self._estop_reason = reason
@@ -430,6 +434,7 @@ class TeleopModel:
             raise CommandError(f"unknown velocity channel {channel!r}")
 
     def _operator_acted(self) -> None:
+        self.events.operator_acted.emit()
         if self._estopped:
             self._estopped = False
             self._estop_reason = ""

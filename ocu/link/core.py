@@ -308,26 +308,32 @@ class LinkCore:
     def set_command(self, command: Command) -> None:
         """Replace the command; sends it at once when it differs from the current one."""
         with self._lock:
-            if self._owner_thread in (None, threading.get_ident()):
-                self._gui_alive_at = self.clock()
-                self._gui_tripped = False
-            elif self._owner_silent():
-                # Commands from another thread (a ROS bridge hosted by the GUI) must neither
-                # hide a stalled owner nor move the robot while it is stalled.
-                command = command.stopped()
-            if command.is_motion:
-                self._estop_latched = False
-            if command == self._command:
-                return
-            self._command = command
-        if self.send_on_change:
+            changed = self._replace_command(command)
+        if changed and self.send_on_change:
             self._send_current()
 
     def set_velocities(self, **velocities: float) -> None:
-        """Change some channels of the current command (SI units)."""
+        """Change some channels of the current command (SI units), atomically."""
         with self._lock:
-            command = self._command.with_velocities(velocities)
-        self.set_command(command)
+            changed = self._replace_command(self._command.with_velocities(velocities))
+        if changed and self.send_on_change:
+            self._send_current()
+
+    def _replace_command(self, command: Command) -> bool:
+        """Install a new command (lock held); whether it differs from the old one."""
+        if self._owner_thread in (None, threading.get_ident()):
+            self._gui_alive_at = self.clock()
+            self._gui_tripped = False
+        elif self._owner_silent():
+            # Commands from another thread (a ROS bridge hosted by the GUI) must neither
+            # hide a stalled owner nor move the robot while it is stalled.
+            command = command.stopped()
+        if command.is_motion:
+            self._estop_latched = False
+        if command == self._command:
+            return False
+        self._command = command
+        return True
 
     def set_max_velocity(self, channel: str, value: float) -> float:
         """Change a channel's maximum (clipped to the hard maximum); resends if that matters."""

@@ -1,11 +1,15 @@
-"""Status-bar widgets: link state with telemetry age, rates, loss, address and e-stop state."""
+"""Status-bar widgets: link state with telemetry age, rates, loss, address and e-stop state.
+
+Other parts of the console (the Record button, the ROS state) sit between the address and
+the e-stop indicator, which stays at the right edge.
+"""
 
 from __future__ import annotations
 
 import time
 
 from PySide6.QtCore import QTimer
-from PySide6.QtWidgets import QHBoxLayout, QLabel, QWidget
+from PySide6.QtWidgets import QGridLayout, QHBoxLayout, QLabel, QWidget
 
 from ocu.link.core import LinkState, TelemetryFrame
 from ocu.link.stats import LinkStats
@@ -26,7 +30,11 @@ STATE_TEXT = {
 ESTOP_STYLE = "background:#c62828;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
 MOVING_STYLE = "background:#ef6c00;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
 READY_STYLE = "background:#37474f;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
+REPLAY_STYLE = "background:#b00020;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
 INFO_STYLE = "font-size:12pt;padding:0 8px;"
+# Two lines of link facts fit the height of the big indicators: the status bar stays one
+# row tall and wide enough for the Record button and the ROS state at 1600 px.
+FACT_STYLE = "font-size:10pt;padding:0 6px;"
 AGE_REFRESH_MS = 250
 
 
@@ -46,22 +54,30 @@ class LinkStatus(QWidget):
         self.last_telemetry_at: float | None = None
         self.estop_active = False
         self.moving = False
+        self.replay = False
         layout = QHBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)
         layout.setSpacing(6)
         self.state_label = _label("link_state")
-        self.age_label = _label("telemetry_age")
-        self.rates_label = _label("link_rates")
-        self.loss_label = _label("link_loss")
-        self.address_label = _label("link_address")
+        self.age_label = _label("telemetry_age", FACT_STYLE)
+        self.rates_label = _label("link_rates", FACT_STYLE)
+        self.loss_label = _label("link_loss", FACT_STYLE)
+        self.address_label = _label("link_address", FACT_STYLE)
         self.address_label.setText(address_text)
         self.estop_label = _label("estop_state")
         self.estop_label.setMinimumWidth(220)
-        for label in (self.state_label, self.age_label, self.rates_label, self.loss_label):
-            layout.addWidget(label)
+        facts = QGridLayout()
+        facts.setContentsMargins(0, 0, 0, 0)
+        facts.setVerticalSpacing(0)
+        facts.addWidget(self.age_label, 0, 0)
+        facts.addWidget(self.loss_label, 0, 1)
+        facts.addWidget(self.rates_label, 1, 0, 1, 2)
+        layout.addWidget(self.state_label)
+        layout.addLayout(facts)
         layout.addStretch(1)
         layout.addWidget(self.address_label)
         layout.addWidget(self.estop_label)
+        self._layout = layout
         self.rates_label.setText("RCP — Hz · telemetry — Hz")
         self.loss_label.setText("loss —")
         self._show_estop()
@@ -71,6 +87,10 @@ class LinkStatus(QWidget):
         self._age_timer.timeout.connect(self._refresh_state)
         self._age_timer.start()
         self._refresh_state()
+
+    def add_indicator(self, widget: QWidget) -> None:
+        """Show another widget left of the e-stop indicator (Record button, ROS state)."""
+        self._layout.insertWidget(self._layout.indexOf(self.estop_label), widget)
 
     def set_address(self, address_text: str) -> None:
         """The simulator or robot address shown."""
@@ -102,6 +122,11 @@ class LinkStatus(QWidget):
             f"duplicates {stats.duplicates}, reordered {stats.reordered}"
         )
 
+    def set_replay(self) -> None:
+        """A replay: the motion indicator says REPLAY for good (nothing is ever sent)."""
+        self.replay = True
+        self._show_estop()
+
     def set_estop(self, active: bool, reason: str = "") -> None:
         """Whether an emergency stop holds the robot until the operator acts again."""
         self.estop_active = active
@@ -114,7 +139,11 @@ class LinkStatus(QWidget):
         self._show_estop()
 
     def _show_estop(self) -> None:
-        if self.estop_active:
+        if self.replay:
+            self.estop_label.setText("REPLAY · nothing sent")
+            self.estop_label.setStyleSheet(REPLAY_STYLE)
+            self.estop_label.setToolTip("A recording is replayed: no robot is commanded")
+        elif self.estop_active:
             self.estop_label.setText("E-STOP")
             self.estop_label.setStyleSheet(ESTOP_STYLE)
         elif self.moving:

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from PySide6.QtCore import QRect, QRectF, QSize, QStandardPaths, Qt, QTimer, Signal, SignalInstance
 from PySide6.QtGui import (
@@ -54,6 +54,12 @@ from ocu.profile import RobotProfile
 from ocu.protocol.extended import CameraRequest
 from ocu.video.correction import CorrectionSettings
 from ocu.widgets.video_status import AttitudeIndicator, BatteryGauge, HeadlightIndicator
+
+if TYPE_CHECKING:
+    from ocu.record.replay import ReplaySource
+
+    # A live link or a replay of one: the same signals, decoder, corrector and frames.
+    VideoLink = LinkThread | ReplaySource
 
 log = logging.getLogger("ocu.video")
 
@@ -396,7 +402,7 @@ class VideoPanel(QWidget):
     def __init__(
         self,
         profile: RobotProfile,
-        link_thread: LinkThread | None,
+        link_thread: VideoLink | None,
         parent: QWidget | None = None,
         *,
         snapshot_dir: Path | None = None,
@@ -405,7 +411,7 @@ class VideoPanel(QWidget):
         self.setObjectName("video_panel")
         self.profile = profile
         self.camera_names = profile.link.camera_names
-        self.link: LinkThread | None = None
+        self.link: VideoLink | None = None
         self.extension_active = False
         self.status: StatusFrame | None = None
         self.snapshot_dir = snapshot_dir or default_snapshot_dir()
@@ -504,6 +510,7 @@ class VideoPanel(QWidget):
         self.attitude = AttitudeIndicator()
         self.counters_label = _named(QLabel(), "video_counters")
         self.counters_label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        self.counters_label.setWordWrap(True)  # two lines beside the attitude, not cut off
         self.message_label = _named(QLabel(), "video_message")
         status = QHBoxLayout()
         status.addWidget(self.protocol_label)
@@ -544,7 +551,7 @@ class VideoPanel(QWidget):
 
     # ---- link -----------------------------------------------------------------------------
 
-    def set_link(self, link_thread: LinkThread | None) -> None:
+    def set_link(self, link_thread: VideoLink | None) -> None:
         """Show the video of a (new) link thread; None shows nothing."""
         old = self.link
         if old is not None:
@@ -569,7 +576,7 @@ class VideoPanel(QWidget):
         self._sync_controls()
         self._update_live()
 
-    def _connections(self, link: LinkThread) -> list[tuple[SignalInstance, Callable[..., None]]]:
+    def _connections(self, link: VideoLink) -> list[tuple[SignalInstance, Callable[..., None]]]:
         return [
             (link.video_frame_ready, self.view.on_frame_ready),
             (link.status_received, self._on_status),
@@ -697,8 +704,11 @@ class VideoPanel(QWidget):
         name = self.camera_names[camera]
         self.correction_label.setText(f"{name}:")
         has_link = self.link is not None
-        for widget in (self.colour_box, self.undistort_box, self.bitrate_box):
-            widget.setEnabled(has_link)
+        # A replay sends nothing: what would go to the robot (bit-rate, stream) is disabled.
+        commands = isinstance(self.link, LinkThread)
+        self.colour_box.setEnabled(has_link)
+        self.undistort_box.setEnabled(has_link)
+        self.bitrate_box.setEnabled(commands)
         widgets = (self.colour_box, self.undistort_box, self.size_box, self.fps_box)
         for widget in widgets:
             widget.blockSignals(True)
@@ -723,8 +733,8 @@ class VideoPanel(QWidget):
         self.size_box.setCurrentIndex(size_index)
         self.fps_box.setValue(request.fps)
         stream_tip = "" if self.extension_active else " (needs the protocol extension)"
-        self.size_box.setEnabled(has_link and self.extension_active)
-        self.fps_box.setEnabled(has_link and self.extension_active)
+        self.size_box.setEnabled(commands and self.extension_active)
+        self.fps_box.setEnabled(commands and self.extension_active)
         self.size_box.setToolTip(f"Resolution asked of the robot{stream_tip}")
         for widget in widgets:
             widget.blockSignals(False)

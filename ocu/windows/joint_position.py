@@ -91,6 +91,8 @@ class JointPositionPanel(QWidget):
         buttons.addWidget(self.cancel_button)
         buttons.addWidget(self.message_label, 1)
         top = QWidget()
+        top.setObjectName("position_targets")
+        self.targets_panel = top  # the command part (a replay disables it)
         top_layout = QVBoxLayout(top)
         top_layout.setContentsMargins(0, 0, 0, 0)
         top_layout.addWidget(targets)

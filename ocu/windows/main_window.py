@@ -4,6 +4,11 @@ The window owns the operator model, the link's lifetime (Connect/Disconnect) and
 of the safety rules: focus loss, hiding, minimising, a lost link and closing all stop the
 robot through the model; a stalled GUI thread is caught by the link's own watchdog, and the
 model is halted when the thread comes back so nothing resumes by itself.
+
+Beside the operator: the video panel shows the link's cameras, a Recorder (if given) tees
+every link into an MCAP file, and the ROS toggle lets a ROS 1 planner drive until the
+operator acts. Built on a ReplaySource instead of links, the same window replays a
+recording: REPLAY banner, command widgets disabled, no hotkeys, nothing sent.
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 from PySide6.QtCore import QByteArray, QEvent, QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent, QHideEvent
@@ -19,6 +25,8 @@ from PySide6.QtWidgets import (
     QDockWidget,
     QListWidget,
     QMainWindow,
+    QSizePolicy,
+    QToolBar,
     QWidget,
 )
 
@@ -28,54 +36,78 @@ from ocu.hotkeys import KeyMap
 from ocu.link.core import LinkState, TelemetryFrame
 from ocu.link.qt import LinkThread
 from ocu.profile import RobotProfile
+from ocu.record.qt import RecordButton
+from ocu.record.recorder import Recorder
+from ocu.record.replay import ReplayBanner, ReplayControls, ReplaySource
 from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.model3d import Model3DWidget
+from ocu.widgets.video import VideoPanel
 from ocu.windows.help_overlay import HelpOverlay
 from ocu.windows.joint_position import JointPositionPanel
 from ocu.windows.key_filter import KeyFilter
 from ocu.windows.max_velocity import MaxVelocityPanel
+from ocu.windows.ros_control import RosControl
 from ocu.windows.velocity import VelocityPanel
 
 log = logging.getLogger("ocu.console")
 
 CONTROL_PERIOD_MS = 50
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2  # 2: the Video dock
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
+REPLAY_DISABLED_TIP = "Replay: commands are disabled"
 
 LinkFactory = Callable[[], LinkThread]
+# What the window connects to: a live link, or a recording replayed with the same signals.
+LinkSource = LinkThread | ReplaySource
 
 
 class MainWindow(QMainWindow):
-    """The operator console; `link_factory` makes a fresh, not yet started link per Connect."""
+    """The operator console; `link_factory` makes a fresh, not yet started link per Connect.
+
+    With `replay` (and no link factory) the console shows a recording instead; with a
+    `recorder` it has a Record button and records every link it makes.
+    """
 
     def __init__(
         self,
         profile: RobotProfile,
-        link_factory: LinkFactory,
+        link_factory: LinkFactory | None,
         address_text: str,
         settings: QSettings,
         key_map: KeyMap | None = None,
         *,
         connect: bool = True,
+        recorder: Recorder | None = None,
+        replay: ReplaySource | None = None,
         parent: QWidget | None = None,
     ) -> None:
         super().__init__(parent)
+        if (link_factory is None) == (replay is None):
+            raise ValueError("a console needs either a link factory or a replay source")
         self.setObjectName("ocu_main_window")
         self.profile = profile
         self.link_factory = link_factory
+        self.replay = replay
+        self.recorder = recorder if replay is None else None
         self.settings = settings
         self.key_map = key_map if key_map is not None else hotkeys.load_key_map(profile)
         self.model = TeleopModel(profile, fine_factor=self.key_map.fine_factor)
-        self.link: LinkThread | None = None
+        self.link: LinkSource | None = None
         self._shut = False
         self._last_tick: float | None = None
-        self.setWindowTitle(f"ocu — {profile.name} — {address_text}")
+        if replay is None:
+            self.setWindowTitle(f"ocu — {profile.name} — {address_text}")
+        else:
+            self.setWindowTitle(
+                f"ocu — REPLAY {replay.path.name} — {profile.name} — commands disabled"
+            )
 
         self.velocity_panel = VelocityPanel(self.model)
         self.max_panel = MaxVelocityPanel(self.model)
         self.joint_panel = JointPositionPanel(self.model)
+        self.video_panel = VideoPanel(profile, None)
         self.event_log = QListWidget()
         self.event_log.setObjectName("event_log")
         self.event_log.setFocusPolicy(Qt.FocusPolicy.NoFocus)
@@ -87,17 +119,21 @@ class MainWindow(QMainWindow):
         self.max_dock = self._dock("max_velocity_dock", "Max velocity", self.max_panel)
         self.joint_dock = self._dock("joint_position_dock", "Joint position", self.joint_panel)
         self.log_dock = self._dock("event_log_dock", "Events", self.event_log)
+        self.video_dock = self._dock("video_dock", "Video", self.video_panel)
+        # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
+        # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
-        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.joint_dock)
-        self.splitDockWidget(self.velocity_dock, self.max_dock, Qt.Orientation.Vertical)
-        self.tabifyDockWidget(self.max_dock, self.log_dock)
-        self.max_dock.raise_()
+        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.video_dock)
+        self.splitDockWidget(self.video_dock, self.joint_dock, Qt.Orientation.Vertical)
         self.model_dock = add_model_dock(self)
+        self.tabifyDockWidget(self.model_dock, self.max_dock)
+        self.tabifyDockWidget(self.max_dock, self.log_dock)
+        self.model_dock.raise_()
         self.resizeDocks(
-            [self.velocity_dock, self.joint_dock], [520, 1040], Qt.Orientation.Horizontal
+            [self.velocity_dock, self.video_dock], [500, 1100], Qt.Orientation.Horizontal
         )
-        self.resizeDocks([self.velocity_dock, self.max_dock], [520, 380], Qt.Orientation.Vertical)
-        self.resizeDocks([self.joint_dock, self.model_dock], [560, 340], Qt.Orientation.Vertical)
+        self.resizeDocks([self.velocity_dock, self.model_dock], [440, 490], Qt.Orientation.Vertical)
+        self.resizeDocks([self.video_dock, self.joint_dock], [480, 450], Qt.Orientation.Vertical)
         model_view = self.model_dock.widget()
         assert isinstance(model_view, Model3DWidget)
         self.model_view = model_view
@@ -105,13 +141,37 @@ class MainWindow(QMainWindow):
         self.link_status = LinkStatus(address_text)
         self.statusBar().addPermanentWidget(self.link_status, 1)
         self.statusBar().setSizeGripEnabled(False)
+        self.record_button: RecordButton | None = None
+        if self.recorder is not None:
+            self.record_button = RecordButton(self.recorder, parent=self)
+            self.record_button.recording_started.connect(
+                lambda path: self.log_event(f"recording to {path}")
+            )
+            self.record_button.recording_stopped.connect(
+                lambda summary: self.log_event(f"recording finished: {summary}")
+            )
+            self.record_button.recording_failed.connect(
+                lambda message: self.log_event(f"recording failed: {message}")
+            )
+            self.link_status.add_indicator(self.record_button)
+        self.ros = RosControl(
+            profile,
+            address_text,
+            before_start=lambda: self.model.halt("ROS control on"),
+            log_event=self.log_event,
+            parent=self,
+            disabled_reason="a replay has no robot to command" if replay is not None else None,
+        )
+        self.link_status.add_indicator(self.ros.label)
         self.help_overlay = HelpOverlay(self.model, self.key_map, self)
         self._build_menu()
 
-        self.key_filter = KeyFilter(self.model, self.key_map, self.owns, parent=self)
+        self.key_filter: KeyFilter | None = None
         app = QApplication.instance()
         assert isinstance(app, QApplication)
-        app.installEventFilter(self.key_filter)
+        if replay is None:
+            self.key_filter = KeyFilter(self.model, self.key_map, self.owns, parent=self)
+            app.installEventFilter(self.key_filter)
         app.applicationStateChanged.connect(self._on_application_state)
         app.focusWindowChanged.connect(self._on_focus_window)
 
@@ -121,8 +181,20 @@ class MainWindow(QMainWindow):
         events.estop_changed.connect(self.link_status.set_estop)
         events.max_changed.connect(self._push_max)
         events.connection_changed.connect(self._on_connection)
+        events.operator_acted.connect(self._on_operator_acted)
         events.message.connect(self.log_event)
         events.position_message.connect(self.log_event)
+        video = self.video_panel
+        video.status_changed.connect(self.velocity_panel.headlight.show_status)
+        video.snapshot_saved.connect(lambda path: self.log_event(f"snapshot saved: {path}"))
+        video.snapshot_failed.connect(self.log_event)
+        video.extension_active_changed.connect(
+            lambda active: self.log_event(
+                "robot speaks the protocol extension" if active else "vendor protocol"
+            )
+        )
+        if replay is not None:
+            self._build_replay_bar(replay)
 
         self._control_timer = QTimer(self)
         self._control_timer.setInterval(CONTROL_PERIOD_MS)
@@ -159,9 +231,12 @@ class MainWindow(QMainWindow):
         return self.findChildren(QDockWidget)
 
     def _build_menu(self) -> None:
-        view = self.menuBar().addMenu("&View")
+        view = self.view_menu = self.menuBar().addMenu("&View")
         for dock in self.docks():
             view.addAction(dock.toggleViewAction())
+        view.addSeparator()
+        view.addAction(self.ros.action)
+        view.aboutToShow.connect(self.ros.probe)
         view.addSeparator()
         reset = QAction("Reset layout", self)
         reset.triggered.connect(self.reset_layout)
@@ -169,6 +244,27 @@ class MainWindow(QMainWindow):
         help_action = QAction("Hotkeys (F1 or ?)", self)
         help_action.triggered.connect(lambda: hotkeys.toggle_help(self.model))
         self.menuBar().addAction(help_action)
+
+    def _build_replay_bar(self, source: ReplaySource) -> None:
+        """REPLAY banner and play/seek/speed on top; every command widget disabled."""
+        bar = QToolBar("Replay", self)
+        bar.setObjectName("replay_toolbar")
+        bar.setMovable(False)
+        bar.setFloatable(False)
+        bar.toggleViewAction().setEnabled(False)  # the banner cannot be hidden
+        self.replay_banner = ReplayBanner(source.path)
+        self.replay_controls = ReplayControls(source)
+        self.replay_controls.setSizePolicy(
+            QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Preferred
+        )
+        bar.addWidget(self.replay_banner)
+        bar.addWidget(self.replay_controls)
+        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, bar)
+        self.replay_bar = bar
+        for widget in (self.velocity_panel, self.max_panel, self.joint_panel.targets_panel):
+            widget.setEnabled(False)
+            widget.setToolTip(REPLAY_DISABLED_TIP)
+        self.link_status.set_replay()
 
     def restore_layout(self) -> bool:
         """Window geometry and dock layout from the settings; False if none was saved."""
@@ -208,7 +304,12 @@ class MainWindow(QMainWindow):
     def _start_link(self) -> None:
         if self.link is not None or self._shut:
             return
-        link = self.link_factory()
+        link: LinkSource
+        if self.replay is not None:
+            link = self.replay
+        else:
+            assert self.link_factory is not None
+            link = self.link_factory()
         # Not started yet: no other thread touches the limits.
         for channel in self.profile.channels:
             link.core.limits.set(channel, self.model.max_velocity(channel))
@@ -218,17 +319,29 @@ class MainWindow(QMainWindow):
         link.safety_event.connect(self._on_safety_event)
         self.link = link
         self.link_status.on_state(LinkState.CONNECTING, "connecting")
-        link.set_command(self.model.command(link.core.command))
+        self.video_panel.set_link(link)
+        if isinstance(link, LinkThread):
+            # Both tee beside the listener LinkThread set, before any datagram flows.
+            if self.recorder is not None:
+                self.recorder.attach(link.core)
+            self.ros.link_started(link)
+            link.set_command(self.model.command(link.core.command))
         link.start_link()
-        self.log_event("link started")
+        self.log_event("replay started" if self.replay is not None else "link started")
 
     def _stop_link(self) -> None:
         link, self.link = self.link, None
         if link is None:
             return
+        self.video_panel.set_link(None)
+        if isinstance(link, LinkThread):
+            self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
         link.shutdown()
         self.link_status.on_state(LinkState.CLOSED, "disconnected by the operator")
-        self.log_event("link stopped (zeros sent last)")
+        if self.replay is not None:
+            self.log_event("replay stopped")
+        else:
+            self.log_event("link stopped (zeros sent last)")
 
     def _on_connection(self, connected: bool) -> None:
         if connected:
@@ -238,16 +351,32 @@ class MainWindow(QMainWindow):
 
     def _push_command(self) -> None:
         self.link_status.set_moving(self.model.is_moving)
-        if self.link is not None:
-            self.link.set_command(self.model.command(self.link.core.command))
+        link = self.link
+        if not isinstance(link, LinkThread):
+            return  # no link, or a replay: nothing is ever sent
+        if self.ros.in_control and not self.model.is_moving:
+            # ROS drives (any operator motion overrides it first): only the operator's
+            # switches change, ROS's velocities stay.
+            link.set_command(replace(link.core.command, torch=self.model.torch))
+            return
+        link.set_command(self.model.command(link.core.command))
 
     def _push_max(self, channel: str, value: float) -> None:
         if self.link is not None:
             self.link.core.set_max_velocity(channel, value)
 
     def _link_estop(self, reason: str) -> None:
-        if self.link is not None:
+        if isinstance(self.link, LinkThread):
             self.link.emergency_stop(reason)
+
+    def _on_operator_acted(self) -> None:
+        self._override_ros("operator")
+
+    def _override_ros(self, reason: str) -> None:
+        """ROS loses control at once; the model's command replaces everything ROS sent."""
+        link = self.link
+        if self.ros.override(reason) and isinstance(link, LinkThread):
+            link.set_command(self.model.command(link.core.command))
 
     def _is_current_link(self) -> bool:
         # Queued signals of a link stopped meanwhile may still arrive; they are stale.
@@ -268,12 +397,14 @@ class MainWindow(QMainWindow):
         self.log_event(f"link {state.value}: {reason}")
         if state == LinkState.LOST:
             self.model.halt("link lost")
+            self._override_ros("link lost")
 
     def _on_safety_event(self, message: str) -> None:
         self.log_event(f"link: {message}")
-        # The link zeroed the command by itself (watchdog, link lost): make the model agree,
-        # so that nothing resumes when the GUI or the link comes back.
+        # The link zeroed the command by itself (watchdog, link lost): make the model and
+        # ROS agree, so that nothing resumes when the GUI or the link comes back.
         self.model.halt(message)
+        self._override_ros(message)
 
     # ---- control loop ----------------------------------------------------------------------
 
@@ -327,10 +458,14 @@ class MainWindow(QMainWindow):
         self._control_timer.stop()
         app = QApplication.instance()
         if isinstance(app, QApplication):
-            app.removeEventFilter(self.key_filter)
+            if self.key_filter is not None:
+                app.removeEventFilter(self.key_filter)
             app.applicationStateChanged.disconnect(self._on_application_state)
             app.focusWindowChanged.disconnect(self._on_focus_window)
-        self._stop_link()
+        self._stop_link()  # the link's closing zeros land in a recording
+        self.ros.shutdown()
+        if self.record_button is not None:
+            self.record_button.stop_recording()
         self._shut = True
 
     # ---- messages --------------------------------------------------------------------------
@@ -347,10 +482,10 @@ class MainWindow(QMainWindow):
 
 
 def add_model_dock(window: MainWindow) -> QDockWidget:
-    """The 3D model dock under the joint-position dock: live pose, a ghost at the targets."""
+    """The 3D model dock under the velocity dock: live pose, a ghost at the targets."""
     widget = Model3DWidget(window.profile)
     dock = window._dock("model3d_dock", "3D model", widget)
-    window.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
-    window.splitDockWidget(window.joint_dock, dock, Qt.Orientation.Vertical)
+    window.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, dock)
+    window.splitDockWidget(window.velocity_dock, dock, Qt.Orientation.Vertical)
     window.model.events.targets_changed.connect(lambda targets: widget.set_ghost(targets or None))
     return dock

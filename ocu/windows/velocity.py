@@ -1,4 +1,8 @@
-"""Velocity window: a slider and a text box per channel, switches, torch, connect, StopAll."""
+"""Velocity window: a slider and a text box per channel, switches, torch, connect, StopAll.
+
+Beside the Torch checkbox (what the operator asks for) the headlight indicator shows what
+the robot reports; the console feeds it from the video panel's status (protocol extension).
+"""
 
 from __future__ import annotations
 
@@ -19,6 +23,7 @@ from ocu import hotkeys
 from ocu.control.teleop import ChannelCommand, Source, TeleopModel
 from ocu.widgets.number_box import NumberBox, NumberError, format_number
 from ocu.widgets.value_slider import ValueSlider
+from ocu.widgets.video_status import HeadlightIndicator
 
 # Words for the + and - directions of the channels that have a switch (the key map's sign
 # convention: + is up / open).
@@ -35,6 +40,7 @@ STOP_ALL_STYLE = (
     "QPushButton { background: #c62828; color: white; font-size: 16pt; font-weight: bold;"
     " padding: 8px 18px; border-radius: 6px; }"
     "QPushButton:pressed { background: #8e0000; }"
+    "QPushButton:disabled { background: #bdbdbd; color: #eeeeee; }"
 )
 ERROR_TEXT_STYLE = "color: #c62828; font-weight: bold;"
 
@@ -135,6 +141,7 @@ class VelocityPanel(QWidget):
         self.torch_box = QCheckBox("Torch")
         self.torch_box.setObjectName("torch_box")
         self.torch_box.toggled.connect(model.set_torch)
+        self.headlight = HeadlightIndicator()
         self.stop_button = QPushButton("STOP ALL")
         self.stop_button.setObjectName("stop_all")
         self.stop_button.setToolTip("Emergency stop (Space, from anywhere in the window)")
@@ -143,6 +150,7 @@ class VelocityPanel(QWidget):
         self.stop_button.clicked.connect(lambda: hotkeys.emergency_stop(model, "StopAll"))
         bottom.addWidget(self.connect_button)
         bottom.addWidget(self.torch_box)
+        bottom.addWidget(self.headlight)
         bottom.addStretch(1)
         bottom.addWidget(self.stop_button)
         layout.addLayout(bottom)

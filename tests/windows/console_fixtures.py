@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -13,11 +16,13 @@ from pytestqt.qtbot import QtBot
 from ocu.link.core import LinkCore, LinkState
 from ocu.link.qt import LinkThread
 from ocu.profile import RobotProfile
+from ocu.record.recorder import Recorder
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator, SimState
 from ocu.windows.main_window import MainWindow
 
 DEADLINE_MS = 5000
 DEADLINE_S = DEADLINE_MS / 1000
+RUN_TIMEOUT_S = 60
 
 
 @pytest.fixture
@@ -45,11 +50,19 @@ def make_console(
     """Build, show and activate consoles; each is shut down after the test."""
     windows: list[MainWindow] = []
 
-    def make(sim: RobotSimulator, *, connected: bool = True, **link_kwargs: object) -> MainWindow:
+    def make(
+        sim: RobotSimulator,
+        *,
+        connected: bool = True,
+        recorder: Recorder | None = None,
+        **link_kwargs: object,
+    ) -> MainWindow:
         def link_factory() -> LinkThread:
             return LinkThread(LinkCore(profile, sim.address, **link_kwargs))  # type: ignore[arg-type]
 
-        window = MainWindow(profile, link_factory, "simulator", settings, connect=connected)
+        window = MainWindow(
+            profile, link_factory, "simulator", settings, connect=connected, recorder=recorder
+        )
         qtbot.addWidget(window)
         windows.append(window)
         window.show()
@@ -105,3 +118,30 @@ def drive_axis(profile: RobotProfile, rcp: ReceivedRcp, channel: str) -> int:
 def is_zero(rcp: ReceivedRcp) -> bool:
     """Whether an RCP commands no motion at all."""
     return not any(rcp.packet.axes)
+
+
+def run_ocu(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """`python -m ocu ARGS` offscreen, with its config (and recordings) under tmp_path."""
+    env = {
+        **os.environ,
+        "QT_QPA_PLATFORM": "offscreen",
+        "OCU_CONFIG_DIR": str(tmp_path / "cfg"),
+        "OCU_RECORDINGS_DIR": str(tmp_path / "recordings"),
+    }
+    return subprocess.run(
+        [sys.executable, "-m", "ocu", *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=RUN_TIMEOUT_S,
+        check=False,
+    )
+
+
+def qt_complaints(stderr: str) -> list[str]:
+    """Lines that are not our log lines: Qt warnings, tracebacks."""
+    return [
+        line
+        for line in stderr.splitlines()
+        if line.strip() and not line[:4].isdigit() and "OpenGL_accelerate" not in line
+    ]

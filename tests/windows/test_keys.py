@@ -129,6 +129,7 @@ def test_auto_repeat_pairs_are_ignored(
 def test_keys_work_by_position_on_a_russian_layout(
     console: MainWindow, sim: RobotSimulator, qtbot: QtBot
 ) -> None:
+    assert console.key_filter is not None
     console.key_filter.platform = "xcb"  # offscreen synthesises no scan codes; X11 sends these
     # The key at the W position prints 'ц' on the Russian layout; Qt's key code is 'Ц'.
     send_key(console, QEvent.Type.KeyPress, ord("Ц"), "ц", scan_code=XCB_W)

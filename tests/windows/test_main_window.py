@@ -19,6 +19,7 @@ DOCKS = {
     "joint_position_dock",
     "event_log_dock",
     "model3d_dock",
+    "video_dock",
 }
 
 
