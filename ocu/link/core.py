@@ -663,20 +663,9 @@ class LinkCore:
         with self._lock:
             hello = self._hello
         data = self._ext_codec.encode(hello)
-        with self._send_lock:
-            if self._closed:
-                return
-            try:
-                self._sock.sendto(data, self.robot_address)
-            except OSError as err:
-                with self._lock:
-                    self._send_errors += 1
-                log.debug("hello send failed: %s", err)
-                return
-            now = self.clock()
-        with self._lock:
-            self._hellos_sent += 1
-        self._call(self.listener.datagram_sent, data, now)
+        if self._send_datagram(data) is not None:
+            with self._lock:
+                self._hellos_sent += 1
 
     def _send_zeros(self) -> None:
         with self._lock:
@@ -684,22 +673,27 @@ class LinkCore:
         self._send_packet(zero)
 
     def _send_packet(self, packet: RemoteControlPacket) -> None:
-        data = self._codec.encode(packet)
+        sent_at = self._send_datagram(self._codec.encode(packet))
+        if sent_at is not None:
+            with self._lock:
+                self._sent += 1
+                self._rcp_rate.add(sent_at)
+
+    def _send_datagram(self, data: bytes) -> float | None:
+        """Put one datagram on the wire; its send time, or None if closed or it failed."""
         with self._send_lock:
             if self._closed:
-                return
+                return None
             try:
                 self._sock.sendto(data, self.robot_address)
             except OSError as err:
                 with self._lock:
                     self._send_errors += 1
                 log.debug("send failed: %s", err)
-                return
-            now = self.clock()
-        with self._lock:
-            self._sent += 1
-            self._rcp_rate.add(now)
-        self._call(self.listener.datagram_sent, data, now)
+                return None
+            sent_at = self.clock()
+        self._call(self.listener.datagram_sent, data, sent_at)
+        return sent_at
 
     # ---- state and stats -------------------------------------------------------------------
 
