@@ -10,8 +10,9 @@ GUI takes the newest image with `take_video_frame(camera)`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
-from PySide6.QtCore import QMetaMethod, QObject, QThread, QTimer, Signal
+from PySide6.QtCore import QMetaMethod, QObject, QThread, QTimer, Signal, SignalInstance
 from PySide6.QtGui import QImage
 
 from ocu.control.commands import Command
@@ -52,10 +53,35 @@ def wrap_pixels(decoded: DecodedFrame) -> QImage:
     )
 
 
-class _SignalListener(LinkListener):
-    """Forwards the core's callbacks (loop thread) to the QThread's signals (queued)."""
+class SignalOwner(Protocol):
+    """What a SignalForwarder emits into: a LinkThread, or a replay with the same signals."""
 
-    def __init__(self, owner: LinkThread) -> None:
+    @property
+    def telemetry_received(self) -> SignalInstance: ...
+
+    @property
+    def status_received(self) -> SignalInstance: ...
+
+    @property
+    def extension_changed(self) -> SignalInstance: ...
+
+    @property
+    def link_state_changed(self) -> SignalInstance: ...
+
+    @property
+    def stats_updated(self) -> SignalInstance: ...
+
+    @property
+    def safety_event(self) -> SignalInstance: ...
+
+    @property
+    def decoder(self) -> VideoDecoder: ...
+
+
+class SignalForwarder(LinkListener):
+    """Forwards link callbacks (loop or player thread) to the owner's signals (queued)."""
+
+    def __init__(self, owner: SignalOwner) -> None:
         self.owner = owner
 
     def telemetry_received(self, frame: TelemetryFrame) -> None:
@@ -104,7 +130,7 @@ class LinkThread(QThread):
         self.frames: LatestFrames[DecodedVideoFrame] = LatestFrames(cameras)
         self.decoder = VideoDecoder(cameras, self.corrector, self._on_decoded, self._on_corrupt)
         self._legacy_signal = QMetaMethod.fromSignal(self.video_frame_received)
-        core.listener = _SignalListener(self)
+        core.listener = SignalForwarder(self)
         # The timer lives in the GUI thread: if that thread stalls, heartbeats stop and the
         # core zeroes any motion after gui_alive_timeout_s.
         self._heartbeat = QTimer(self)

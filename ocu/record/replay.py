@@ -28,9 +28,8 @@ from PySide6.QtWidgets import (
 )
 
 from ocu.control.commands import Command, CommandMapper, make_codec
-from ocu.link.core import LinkListener, LinkState, StatusFrame, TelemetryFrame, VideoFrame
-from ocu.link.qt import DecodedVideoFrame, wrap_pixels
-from ocu.link.stats import LinkStats
+from ocu.link.core import VideoFrame
+from ocu.link.qt import DecodedVideoFrame, SignalForwarder, wrap_pixels
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket
 from ocu.record.player import SPEEDS, ReplayCore, ReplayPlayer
@@ -48,34 +47,14 @@ REPLAY_STYLE = (
 )
 
 
-class _SignalListener(LinkListener):
-    """Forwards the player's calls (player thread) to the source's signals (queued)."""
+class _ReplayForwarder(SignalForwarder):
+    """The link's forwarding, plus the commands that were sent, decoded for the console."""
 
     def __init__(self, owner: ReplaySource) -> None:
-        self.owner = owner
+        super().__init__(owner)
+        self.source = owner
         self._codec = make_codec(owner.profile)
         self._mapper = CommandMapper(owner.profile)
-
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        self.owner.telemetry_received.emit(frame)
-
-    def video_frame_received(self, frame: VideoFrame) -> None:
-        self.owner.decoder.submit(frame)
-
-    def status_received(self, frame: StatusFrame) -> None:
-        self.owner.status_received.emit(frame)
-
-    def extension_changed(self, active: bool, reason: str) -> None:
-        self.owner.extension_changed.emit(active, reason)
-
-    def link_state_changed(self, state: LinkState, reason: str) -> None:
-        self.owner.link_state_changed.emit(state, reason)
-
-    def stats_updated(self, stats: LinkStats) -> None:
-        self.owner.stats_updated.emit(stats)
-
-    def safety_event(self, message: str) -> None:
-        self.owner.safety_event.emit(message)
 
     def datagram_sent(self, data: bytes, sent_at: float) -> None:
         if not data or data[0] != self._codec.rcp_type:
@@ -84,7 +63,7 @@ class _SignalListener(LinkListener):
             packet = RemoteControlPacket.decode(data, data[0])
         except ProtocolError:
             return
-        self.owner.command_replayed.emit(self._mapper.to_command(packet))
+        self.source.command_replayed.emit(self._mapper.to_command(packet))
 
 
 class ReplaySource(QObject):
@@ -131,7 +110,7 @@ class ReplaySource(QObject):
         self.player = ReplayPlayer(
             self.recording,
             self.profile,
-            _SignalListener(self),
+            _ReplayForwarder(self),
             on_finished=self.finished.emit,
         )
         # LinkThread's `core`, as far as the console reads it; it sends nothing.
