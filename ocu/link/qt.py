@@ -25,6 +25,7 @@ from ocu.link.core import (
     VideoFrame,
 )
 from ocu.link.stats import LinkStats
+from ocu.profile import RobotProfile
 from ocu.video.correction import Corrector
 from ocu.video.decoder import DecodedFrame, VideoDecoder
 from ocu.video.slot import LatestFrames
@@ -51,6 +52,53 @@ def wrap_pixels(decoded: DecodedFrame) -> QImage:
     return QImage(
         pixels.data, decoded.width, decoded.height, pixels.strides[0], QImage.Format.Format_RGB32
     )
+
+
+class VideoOwner(Protocol):
+    """A QObject with the two video signals of LinkThread (the link or a replay)."""
+
+    @property
+    def video_frame_ready(self) -> SignalInstance: ...
+
+    @property
+    def video_frame_received(self) -> SignalInstance: ...
+
+    def isSignalConnected(self, signal: QMetaMethod) -> bool: ...
+
+
+class VideoPipeline:
+    """Decoder thread, per-camera correction and latest-frame slots, feeding an owner's signals.
+
+    `video_frame_ready(camera)` fires when a camera's slot goes from empty to full, so at most
+    one is queued per camera; the GUI takes the newest image with `take(camera)`.
+    `video_frame_received` (one signal per frame, which would queue) fires only while
+    something is connected to it.
+    """
+
+    def __init__(self, profile: RobotProfile, owner: VideoOwner) -> None:
+        cameras = len(profile.link.camera_names)
+        self.corrector = Corrector(profile.cameras)
+        self.frames: LatestFrames[DecodedVideoFrame] = LatestFrames(cameras)
+        self.decoder = VideoDecoder(cameras, self.corrector, self._on_decoded, self._on_corrupt)
+        self._owner = owner
+        self._legacy_signal = QMetaMethod.fromSignal(owner.video_frame_received)
+
+    def take(self, camera: int) -> DecodedVideoFrame | None:
+        """The newest decoded frame of a camera not yet taken, or None (any thread)."""
+        return self.frames.take(camera)
+
+    def _on_decoded(self, decoded: DecodedFrame) -> None:
+        # Decoder thread: QImage (unlike QPixmap) may be built outside the GUI thread.
+        frame = DecodedVideoFrame(decoded.source, wrap_pixels(decoded), decoded)
+        if self.frames.put(decoded.slot, frame):
+            self._owner.video_frame_ready.emit(decoded.slot)
+        if self._owner.isSignalConnected(self._legacy_signal):
+            self._owner.video_frame_received.emit(frame)
+
+    def _on_corrupt(self, frame: VideoFrame, slot: int) -> None:
+        # Counted by the decoder (decoder.stats); the viewer keeps showing the last good frame.
+        if self._owner.isSignalConnected(self._legacy_signal):
+            self._owner.video_frame_received.emit(DecodedVideoFrame(frame, QImage()))
 
 
 class SignalOwner(Protocol):
@@ -125,11 +173,12 @@ class LinkThread(QThread):
         super().__init__(parent)
         self.setObjectName("ocu-link")
         self.core = core
-        cameras = len(core.profile.link.camera_names)
-        self.corrector = Corrector(core.profile.cameras)
-        self.frames: LatestFrames[DecodedVideoFrame] = LatestFrames(cameras)
-        self.decoder = VideoDecoder(cameras, self.corrector, self._on_decoded, self._on_corrupt)
-        self._legacy_signal = QMetaMethod.fromSignal(self.video_frame_received)
+        self.video = VideoPipeline(core.profile, self)
+        self.corrector, self.frames, self.decoder = (
+            self.video.corrector,
+            self.video.frames,
+            self.video.decoder,
+        )
         core.listener = SignalForwarder(self)
         # The timer lives in the GUI thread: if that thread stalls, heartbeats stop and the
         # core zeroes any motion after gui_alive_timeout_s.
@@ -146,20 +195,7 @@ class LinkThread(QThread):
 
     def take_video_frame(self, camera: int) -> DecodedVideoFrame | None:
         """The newest decoded frame of a camera not yet taken, or None (any thread)."""
-        return self.frames.take(camera)
-
-    def _on_decoded(self, decoded: DecodedFrame) -> None:
-        # Decoder thread: QImage (unlike QPixmap) may be built outside the GUI thread.
-        frame = DecodedVideoFrame(decoded.source, wrap_pixels(decoded), decoded)
-        if self.frames.put(decoded.slot, frame):
-            self.video_frame_ready.emit(decoded.slot)
-        if self.isSignalConnected(self._legacy_signal):
-            self.video_frame_received.emit(frame)
-
-    def _on_corrupt(self, frame: VideoFrame, slot: int) -> None:
-        # Counted by the decoder (decoder.stats); the viewer keeps showing the last good frame.
-        if self.isSignalConnected(self._legacy_signal):
-            self.video_frame_received.emit(DecodedVideoFrame(frame, QImage()))
+        return self.video.take(camera)
 
     def run(self) -> None:
         """QThread body: the core's loop."""

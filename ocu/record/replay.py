@@ -15,8 +15,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from PySide6.QtCore import QMetaMethod, QObject, Qt, QTimer, Signal
-from PySide6.QtGui import QImage
+from PySide6.QtCore import QObject, Qt, QTimer, Signal
 from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
@@ -28,15 +27,11 @@ from PySide6.QtWidgets import (
 )
 
 from ocu.control.commands import Command, CommandMapper, make_codec
-from ocu.link.core import VideoFrame
-from ocu.link.qt import DecodedVideoFrame, SignalForwarder, wrap_pixels
+from ocu.link.qt import DecodedVideoFrame, SignalForwarder, VideoPipeline
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket
 from ocu.record.player import SPEEDS, ReplayCore, ReplayPlayer
 from ocu.record.reader import Recording
-from ocu.video.correction import Corrector
-from ocu.video.decoder import DecodedFrame, VideoDecoder
-from ocu.video.slot import LatestFrames
 
 log = logging.getLogger("ocu.record")
 
@@ -102,11 +97,12 @@ class ReplaySource(QObject):
         except BaseException:
             self.recording.close()
             raise
-        cameras = len(self.profile.link.camera_names)
-        self.corrector = Corrector(self.profile.cameras)
-        self.frames: LatestFrames[DecodedVideoFrame] = LatestFrames(cameras)
-        self.decoder = VideoDecoder(cameras, self.corrector, self._on_decoded, self._on_corrupt)
-        self._legacy_signal = QMetaMethod.fromSignal(self.video_frame_received)
+        self.video = VideoPipeline(self.profile, self)
+        self.corrector, self.frames, self.decoder = (
+            self.video.corrector,
+            self.video.frames,
+            self.video.decoder,
+        )
         self.player = ReplayPlayer(
             self.recording,
             self.profile,
@@ -181,7 +177,7 @@ class ReplaySource(QObject):
 
     def take_video_frame(self, camera: int) -> DecodedVideoFrame | None:
         """The newest decoded frame of a camera not yet taken, or None (any thread)."""
-        return self.frames.take(camera)
+        return self.video.take(camera)
 
     def set_command(self, command: Command) -> None:
         """Nothing: a replay sends no commands."""
@@ -205,17 +201,6 @@ class ReplaySource(QObject):
         if playing != self._was_playing:
             self._was_playing = playing
             self.playing_changed.emit(playing)
-
-    def _on_decoded(self, decoded: DecodedFrame) -> None:
-        frame = DecodedVideoFrame(decoded.source, wrap_pixels(decoded), decoded)
-        if self.frames.put(decoded.slot, frame):
-            self.video_frame_ready.emit(decoded.slot)
-        if self.isSignalConnected(self._legacy_signal):
-            self.video_frame_received.emit(frame)
-
-    def _on_corrupt(self, frame: VideoFrame, slot: int) -> None:
-        if self.isSignalConnected(self._legacy_signal):
-            self.video_frame_received.emit(DecodedVideoFrame(frame, QImage()))
 
 
 def format_time(seconds: float) -> str:
