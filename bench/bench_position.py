@@ -11,40 +11,16 @@ from __future__ import annotations
 
 import argparse
 import math
-import threading
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import ConstantSpeedController, PositionController
 from ocu.control.runner import PositionRunner
 from ocu.link.core import LinkCore, LinkListener, TelemetryFrame
 from ocu.profile import load_profile
-from ocu.sim.simulator import RobotSimulator, SimState
+from ocu.sim.simulator import RobotSimulator, StateRecorder
 
 JOINT = "shoulder"
 SETTLE_BAND_DEG = 0.5
-
-
-class Recorder:
-    """Ground-truth (time, angle) of one joint at every simulator physics step."""
-
-    def __init__(self, sim: RobotSimulator) -> None:
-        self.sim = sim
-        self.samples: list[tuple[float, float]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="bench-truth")
-        self._thread.start()
-
-    def _record(self, state: SimState) -> bool:
-        self.samples.append((state.time_s, state.joints_rad[JOINT]))
-        return self._stop.is_set()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            self.sim.wait_until(self._record, timeout=0.5)
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
 
 
 class Forward(LinkListener):
@@ -73,7 +49,7 @@ def step_response(
     runner = PositionRunner(controller, link)
     link.listener = Forward(runner)
     link.start()
-    recorder = Recorder(sim)
+    recorder = StateRecorder(sim)
     try:
         sim.wait_until(lambda s: s.telemetry_sent >= 1, 5.0)
         target = math.radians(step_deg)
@@ -86,7 +62,11 @@ def step_response(
         recorder.stop()
         link.shutdown()
         sim.stop()
-    trace = [(t - start_s, math.degrees(a)) for t, a in recorder.samples if t >= start_s]
+    trace = [
+        (state.time_s - start_s, math.degrees(state.joints_rad[JOINT]))
+        for state in recorder.samples
+        if state.time_s >= start_s
+    ]
     final = trace[-1][1]
     overshoot = max(0.0, max(a for _, a in trace) - step_deg)
     settle = math.nan

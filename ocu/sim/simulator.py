@@ -804,3 +804,31 @@ class RobotSimulator:
         with self._condition:
             self._snapshot = snapshot
             self._condition.notify_all()
+
+
+class StateRecorder:
+    """Ground truth for tests and benchmarks: every snapshot the simulator publishes.
+
+    A thread of its own waits on the simulator's condition, so no physics step is missed.
+    """
+
+    def __init__(self, sim: RobotSimulator) -> None:
+        self.sim = sim
+        self.samples: list[SimState] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="sim-state-recorder")
+        self._thread.start()
+
+    def _record(self, state: SimState) -> bool:
+        if not self.samples or self.samples[-1] is not state:
+            self.samples.append(state)
+        return self._stop.is_set()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.sim.wait_until(self._record, timeout=0.5)
+
+    def stop(self) -> None:
+        """Stop recording and join the thread."""
+        self._stop.set()
+        self._thread.join(2.0)

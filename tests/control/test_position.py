@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import threading
 from collections.abc import Iterator
 
 import pytest
@@ -13,7 +12,7 @@ from ocu.control.position import PositionController, PositionError
 from ocu.control.runner import PositionRunner
 from ocu.link.core import LinkCore, LinkListener, TelemetryFrame
 from ocu.profile import RobotProfile
-from ocu.sim.simulator import RobotSimulator, SimState
+from ocu.sim.simulator import RobotSimulator, StateRecorder
 
 
 def reading(name: str, angle_rad: float) -> JointReading:
@@ -137,29 +136,6 @@ def test_several_joints_and_cancel(controller: PositionController) -> None:
 # ---- against the real simulator -----------------------------------------------------------
 
 
-class GroundTruth:
-    """Records the simulator's true joint angles at every physics step, on its own thread."""
-
-    def __init__(self, sim: RobotSimulator) -> None:
-        self.sim = sim
-        self.samples: list[dict[str, float]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="test-ground-truth")
-        self._thread.start()
-
-    def _record(self, state: SimState) -> bool:
-        self.samples.append(dict(state.joints_rad))
-        return self._stop.is_set()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            self.sim.wait_until(self._record, timeout=0.5)
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
-
-
 class Forward(LinkListener):
     def __init__(self, runner: PositionRunner) -> None:
         self.runner = runner
@@ -186,7 +162,7 @@ def test_reaches_four_targets_at_1hz_without_oscillating(
     runner = PositionRunner(controller, link)
     link.listener = Forward(runner)
     link.start()
-    truth = GroundTruth(sim)
+    truth = StateRecorder(sim)
     try:
         assert sim.wait_until(lambda s: s.telemetry_sent >= 1, 3.0)
         for name, deg in targets_deg.items():
@@ -201,5 +177,5 @@ def test_reaches_four_targets_at_1hz_without_oscillating(
     final = sim.state().joints_rad
     for name, deg in targets_deg.items():
         assert math.degrees(final[name]) == pytest.approx(deg, abs=0.5), name
-        peak = max(math.degrees(s[name]) * math.copysign(1, deg) for s in truth.samples)
+        peak = max(math.degrees(s.joints_rad[name]) * math.copysign(1, deg) for s in truth.samples)
         assert peak <= abs(deg) + 1.0, f"{name} overshot to {peak:.2f}°"
