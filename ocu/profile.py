@@ -146,6 +146,9 @@ class Motor:
     ticks_per_rad: float | None
     zero_offset_ticks: int
     limits_rad: tuple[float, float] | None
+    # The limits as the profile writes them: an operator types degrees, and 120° must be
+    # compared with 120, not with degrees(radians(120)) = 119.99999999999999.
+    limits_deg: tuple[float, float] | None = None
 
     @property
     def has_position(self) -> bool:
@@ -333,6 +336,7 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
     ticks_per_rad: float | None = None
     zero_offset = 0
     limits: tuple[float, float] | None = None
+    limits_deg: tuple[float, float] | None = None
     if reader.optional("ticks_per_rad"):
         ticks_per_rad = reader.number("ticks_per_rad", low=1e-9)
         zero_offset = reader.integer("zero_offset_ticks", low=0, high=2**32 - 1)
@@ -350,7 +354,8 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
                 f"{reader.where}.limits_deg: two finite numbers; "
                 "must be [low, high] with low < high"
             )
-        limits = (math.radians(raw_limits[0]), math.radians(raw_limits[1]))
+        limits_deg = (float(raw_limits[0]), float(raw_limits[1]))
+        limits = (math.radians(limits_deg[0]), math.radians(limits_deg[1]))
     return Motor(
         name=name,
         device_id=device_id,
@@ -359,6 +364,7 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
         ticks_per_rad=ticks_per_rad,
         zero_offset_ticks=zero_offset,
         limits_rad=limits,
+        limits_deg=limits_deg,
     )
 
 
