@@ -16,6 +16,12 @@ from ocu.protocol import (
     TelemetryPacket,
 )
 
+# The chassis channels: linear speed (m/s) and turn rate (rad/s) of the tracks.
+DRIVE_LINEAR = "drive_linear"
+DRIVE_TURN = "drive_turn"
+DRIVE_CHANNELS = (DRIVE_LINEAR, DRIVE_TURN)
+_I16_MAX = 32767
+
 
 class CommandError(ValueError):
     """A command names an unknown channel or holds a value that is not a finite number."""
@@ -162,6 +168,13 @@ class JointReading:
     target_angle_rad: float | None
     speed_command_rad_s: float
     current_command_a: float
+    # Why the OCU does not believe this reading (ocu.control.plausibility); None: plausible.
+    fault: str | None = None
+
+    @property
+    def plausible(self) -> bool:
+        """Whether the reading may be acted on."""
+        return self.fault is None
 
 
 def ticks_to_rad(motor: Motor, ticks: int) -> float:
@@ -208,3 +221,34 @@ def read_telemetry(profile: RobotProfile, packet: TelemetryPacket) -> dict[str, 
         if reading is not None:
             readings[reading.name] = reading
     return readings
+
+
+def track_speeds(profile: RobotProfile, velocities: Mapping[str, float]) -> tuple[float, float]:
+    """Left and right belt speeds (m/s) of a drive command (differential drive)."""
+    linear_m_s = velocities.get(DRIVE_LINEAR, 0.0)
+    turn_rad_s = velocities.get(DRIVE_TURN, 0.0)
+    half_width_m = profile.track_width_m / 2.0
+    return (linear_m_s - turn_rad_s * half_width_m, linear_m_s + turn_rad_s * half_width_m)
+
+
+def speed_to_raw(profile: RobotProfile, speed: float) -> int:
+    """A speed (rad/s, or m/s for a track) in the telemetry's i16 units."""
+    raw = round(speed * profile.telemetry_speed_per_rad_s)
+    return int(min(max(raw, -_I16_MAX - 1), _I16_MAX))
+
+
+def commanded_motor_speeds(profile: RobotProfile, command: Command) -> dict[int, int]:
+    """Device ID to the speed command each motor reports while it runs `command` (raw).
+
+    The link compares these with the echo in telemetry to measure its delay
+    (ocu.link.delay); the simulator reports exactly these.
+    """
+    left, right = track_speeds(profile, command.velocities)
+    speeds: dict[int, int] = {}
+    for motor in profile.motors.values():
+        if motor.track is not None:
+            belt_m_s = left if motor.track == "left" else right
+            speeds[motor.device_id] = speed_to_raw(profile, belt_m_s)
+        elif motor.channel is not None:
+            speeds[motor.device_id] = speed_to_raw(profile, command.velocity(motor.channel))
+    return speeds

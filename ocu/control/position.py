@@ -1,15 +1,36 @@
-"""Joint position control on the OCU side, through velocity commands (no Qt).
+"""Joint position control on the OCU side, through velocity commands, under radio delay (no Qt).
 
-The vendor protocol carries only velocities, and telemetry may come once per second. The
-paper's controller drives at one constant speed until telemetry shows the target passed, so
-it overshoots and hunts. This one commands a speed proportional to the remaining error,
-bounded by the channel's maximum and lifted to the smallest speed that still moves the servo,
-and predicts the joint angle between telemetry packets by integrating the velocities it
-commanded; each packet resets the prediction to the measurement.
+The vendor protocol carries only velocities; telemetry may come once per second, 100-200 ms
+late, lost, reordered and noisy. The paper's controller drives at one constant speed until a
+reading shows the target passed: it overshoots and hunts. A controller that resets its
+prediction to each reading does better on a perfect link, but a reading is a picture of the
+past: the joint has moved since it was taken, and commands are still in flight.
+
+This controller is a Smith predictor. Per joint it keeps the integral I(t) of every velocity
+sent on the joint's channel (by anyone: keys, sliders, this controller) and one unknown, the
+offset b between the joint's angle and that integral. A reading taken by the robot when the
+commands sent up to `received_at - delay` had landed says b = angle - I(received_at - delay);
+a one-state Kalman filter merges such observations (each reading is trusted fully while the
+joint moves, and averaged when it stands still and the readings are noisy). Then
+
+- the angle the joint will end at once every sent command has landed is b + I(now): the
+  controller steers that one to the target, so commands in flight are never sent twice;
+- the angle the joint has now is b + I(now - delay/2): the predictive display draws it.
+
+The delay is measured online by the link (ocu.link.delay) and comes with every reading. The
+speed is proportional to the predicted error, bounded by the channel's maximum, lifted to the
+servo's starting speed, and its gain shrinks as the delay grows (seed 003 §4.1: delay eats
+phase margin; a model error of the servo's speed is corrected one delay late). "Reached" is
+said only when a reading taken after the joint's last command landed confirms it within the
+band; a joint whose readings are too noisy to confirm gives up after a settle timeout with a
+message instead of hunting forever. The stall check compares a reading's travel with the
+travel commanded one delay earlier. A joint whose reading is implausible (see
+ocu.control.plausibility) is never acted on.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -17,62 +38,244 @@ from dataclasses import dataclass
 from ocu.control.commands import JointReading, VelocityLimits
 from ocu.profile import Motor, RobotProfile
 
-DEFAULT_GAIN_PER_S = 10.0
+DEFAULT_MAX_GAIN_PER_S = 10.0
+# The gain times the delay is kept at or below this: a servo 50 % off its commanded speed
+# then still leaves the delayed correction loop a phase margin above 30°.
+DEFAULT_GAIN_DELAY_PRODUCT = 1.5
 DEFAULT_TOLERANCE_RAD = math.radians(0.3)
+# A target counts as reached when the estimate, widened by twice its uncertainty, lies in
+# this band (the settle band the benchmarks measure against).
+REACHED_BAND_RAD = math.radians(0.5)
 STALE_PERIODS = 2.5
 STALL_MIN_COMMANDED_RAD = math.radians(2.0)
+STALL_NOISE_SIGMAS = 6.0
 STALL_FRACTION = 0.25
 STALL_PACKETS = 2
 LIMIT_MARGIN_RAD = math.radians(0.5)
 DEFAULT_PERIOD_S = 0.05
+# Kalman filter of the offset b: the servo's speed may differ from the command by this share
+# of the travel, and readings are never trusted below the encoder's resolution.
+MODEL_SPEED_ERROR = 0.05
+DRIFT_RAD_PER_S = math.radians(0.01)
+NOISE_FLOOR_RAD = math.radians(0.01)
+NOISE_PRIOR_RAD = math.radians(0.2)
+NOISE_ALPHA = 0.2
+# Consecutive readings closer than this in commanded travel show the reading noise.
+NOISE_PAIR_TRAVEL_RAD = math.radians(1.0)
+# Give up confirming after this many telemetry periods (plus two delays), 4 s at least.
+SETTLE_PERIODS = 8.0
+MIN_SETTLE_TIMEOUT_S = 4.0
+# History of sent velocities kept per joint (longer than any delay the link measures).
+HISTORY_S = 10.0
 
 
 class PositionError(ValueError):
     """A target that cannot be controlled: unknown joint, no position feedback, off limits."""
 
 
+class JointPredictor:
+    """What the OCU believes about one joint: the commanded integral and the offset b.
+
+    Times are the OCU's monotonic seconds. See the module docstring for the model.
+    """
+
+    def __init__(self) -> None:
+        # Breakpoints of the piecewise-constant velocity: (time, velocity, I, A) where I is
+        # the integral of the velocity and A of its magnitude, both up to that time.
+        self._times: list[float] = []
+        self._points: list[tuple[float, float, float]] = []
+        self.offset_rad: float | None = None
+        self.variance: float = 0.0
+        self.noise_var: float = NOISE_PRIOR_RAD**2
+        self.noise_samples = 0
+        self.last_angle_rad: float | None = None
+        self.last_received_at: float | None = None
+        self.last_taken_at: float | None = None
+        self._last_observation: tuple[float, float] | None = None  # (b_obs, A at taken)
+
+    # ---- commands --------------------------------------------------------------------------
+
+    def command(self, at: float, velocity: float) -> None:
+        """The velocity sent on the joint's channel from time `at` on."""
+        if self._times:
+            at = max(at, self._times[-1])
+            previous_v = self._points[-1][0]
+            if previous_v == velocity:
+                return
+            integral, travel = self._integrals(at)
+            if at == self._times[-1]:
+                self._times.pop()
+                self._points.pop()
+        else:
+            integral = travel = 0.0
+        self._times.append(at)
+        self._points.append((velocity, integral, travel))
+        self._trim(at - HISTORY_S)
+
+    @property
+    def last_change_at(self) -> float | None:
+        """When the sent velocity last changed (None: never sent)."""
+        return self._times[-1] if self._times else None
+
+    def velocity(self, at: float) -> float:
+        """The velocity sent at a time (0 before anything was sent)."""
+        index = bisect.bisect_right(self._times, at) - 1
+        return self._points[index][0] if index >= 0 else 0.0
+
+    def _integrals(self, at: float) -> tuple[float, float]:
+        index = bisect.bisect_right(self._times, at) - 1
+        if index < 0:
+            return (self._points[0][1], self._points[0][2]) if self._points else (0.0, 0.0)
+        velocity, integral, travel = self._points[index]
+        dt = at - self._times[index]
+        return integral + velocity * dt, travel + abs(velocity) * dt
+
+    def integral(self, at: float) -> float:
+        """∫ of the sent velocity up to `at` (an arbitrary but fixed origin)."""
+        return self._integrals(at)[0]
+
+    def travel(self, start: float, end: float) -> float:
+        """∫ |sent velocity| between two times."""
+        return abs(self._integrals(end)[1] - self._integrals(start)[1])
+
+    def _trim(self, before: float) -> None:
+        cut = bisect.bisect_right(self._times, before) - 1
+        if cut > 0:
+            del self._times[:cut]
+            del self._points[:cut]
+
+    # ---- readings --------------------------------------------------------------------------
+
+    def on_reading(self, angle_rad: float, received_at: float, delay_s: float) -> None:
+        """A plausible reading, taken by the robot when commands sent `delay_s` earlier landed."""
+        taken_at = received_at - delay_s
+        integral, travel = self._integrals(taken_at)
+        observed = angle_rad - integral
+        if self.offset_rad is None or self.last_taken_at is None:
+            self.offset_rad = observed
+            self.variance = self.noise_var
+        else:
+            moved = abs(travel - self._last_travel())
+            elapsed = max(taken_at - self.last_taken_at, 0.0)
+            self.variance += (MODEL_SPEED_ERROR * moved) ** 2 + (DRIFT_RAD_PER_S * elapsed) ** 2
+            gain = self.variance / (self.variance + self.noise_var)
+            self.offset_rad += gain * (observed - self.offset_rad)
+            self.variance *= 1.0 - gain
+            if self._last_observation is not None and moved <= NOISE_PAIR_TRAVEL_RAD:
+                # Two readings with (almost) no travel between them differ by noise alone.
+                difference = observed - self._last_observation[0]
+                sample = max(difference * difference / 2.0, NOISE_FLOOR_RAD**2)
+                if self.noise_samples == 0:
+                    self.noise_var = sample
+                else:
+                    self.noise_var += NOISE_ALPHA * (sample - self.noise_var)
+                self.noise_samples += 1
+        self._last_observation = (observed, travel)
+        self.last_angle_rad = angle_rad
+        self.last_received_at = received_at
+        self.last_taken_at = taken_at
+
+    def _last_travel(self) -> float:
+        return self._last_observation[1] if self._last_observation is not None else 0.0
+
+    @property
+    def known(self) -> bool:
+        """Whether a reading has arrived."""
+        return self.offset_rad is not None
+
+    @property
+    def sigma_rad(self) -> float:
+        """Standard deviation of the estimate."""
+        return math.sqrt(max(self.variance, 0.0))
+
+    @property
+    def noise_rad(self) -> float:
+        """Estimated standard deviation of one reading."""
+        return math.sqrt(self.noise_var)
+
+    def eventual(self, now: float) -> float:
+        """Where the joint ends up once every command sent until now has landed."""
+        assert self.offset_rad is not None
+        return self.offset_rad + self.integral(now)
+
+    def current(self, now: float, delay_s: float) -> float:
+        """Where the joint is now (commands need half the round trip to land)."""
+        assert self.offset_rad is not None
+        return self.offset_rad + self.integral(now - delay_s / 2.0)
+
+
 @dataclass
 class _Track:
-    """What the controller knows about one joint under control."""
+    """A joint under position control."""
 
     motor: Motor
     target_rad: float
-    estimate_rad: float | None = None
-    estimate_at: float | None = None
-    last_measured_rad: float | None = None
-    last_measured_at: float | None = None
-    commanded_since_packet_rad: float = 0.0
-    velocity_rad_s: float = 0.0
-    stall_packets: int = 0
     started_at: float | None = None
+    # Whether the joint holds still near its target (corrections then need a clear error).
+    holding: bool = False
+    near_since: float | None = None
+    stall_packets: int = 0
+    velocity_rad_s: float = 0.0
 
 
 class PositionController:
-    """Drives several joints to target angles at once with proportional, predicted control."""
+    """Drives several joints to target angles at once; see the module docstring."""
 
     def __init__(
         self,
         profile: RobotProfile,
         limits: VelocityLimits,
         *,
-        gain_per_s: float = DEFAULT_GAIN_PER_S,
+        max_gain_per_s: float = DEFAULT_MAX_GAIN_PER_S,
+        gain_delay_product: float = DEFAULT_GAIN_DELAY_PRODUCT,
         tolerance_rad: float = DEFAULT_TOLERANCE_RAD,
         stale_after_s: float | None = None,
+        settle_timeout_s: float | None = None,
     ) -> None:
         self.profile = profile
         self.limits = limits
-        self.gain_per_s = gain_per_s
+        self.max_gain_per_s = max_gain_per_s
+        self.gain_delay_product = gain_delay_product
         self.tolerance_rad = tolerance_rad
-        self.stale_after_s = (
-            STALE_PERIODS / profile.link.telemetry_rate_hz
-            if stale_after_s is None
-            else stale_after_s
+        period_s = 1.0 / profile.link.telemetry_rate_hz
+        self._stale_base_s = STALE_PERIODS * period_s if stale_after_s is None else stale_after_s
+        self._settle_base_s = (
+            max(MIN_SETTLE_TIMEOUT_S, SETTLE_PERIODS * period_s)
+            if settle_timeout_s is None
+            else settle_timeout_s
         )
+        self.predictors: dict[str, JointPredictor] = {
+            motor.name: JointPredictor() for motor in profile.positioned_motors
+        }
+        self._channel_joint = {
+            motor.channel: motor.name for motor in profile.positioned_motors if motor.channel
+        }
+        self.delay_s: float | None = None
+        self.faults: dict[str, str] = {}
         self._tracks: dict[str, _Track] = {}
-        self._latest: dict[str, tuple[float, float]] = {}
         self._messages: list[str] = []
         self._last_update_at: float | None = None
         self._period_s = DEFAULT_PERIOD_S
+
+    # ---- derived settings ------------------------------------------------------------------
+
+    @property
+    def gain_per_s(self) -> float:
+        """The proportional gain now: the maximum, reduced as the measured delay grows."""
+        delay = self.delay_s or 0.0
+        if delay <= 0.0:
+            return self.max_gain_per_s
+        return min(self.max_gain_per_s, self.gain_delay_product / delay)
+
+    @property
+    def stale_after_s(self) -> float:
+        """A joint under control stops when its readings are this old (grows with the delay)."""
+        return self._stale_base_s + (self.delay_s or 0.0)
+
+    @property
+    def settle_timeout_s(self) -> float:
+        """How long a joint near its target may take to confirm it."""
+        return self._settle_base_s + 2.0 * (self.delay_s or 0.0)
 
     # ---- targets ---------------------------------------------------------------------------
 
@@ -91,12 +294,10 @@ class PositionController:
                 f"{joint}: target {math.degrees(angle_rad):.1f}° outside the limits "
                 f"[{math.degrees(low):.1f}°, {math.degrees(high):.1f}°]"
             )
-        track = _Track(motor=motor, target_rad=angle_rad)
-        latest = self._latest.get(joint)
-        if latest is not None:
-            track.estimate_rad, track.estimate_at = latest
-            track.last_measured_rad, track.last_measured_at = latest
-        self._tracks[joint] = track
+        fault = self.faults.get(joint)
+        if fault is not None:
+            raise PositionError(f"{joint}: its reading is implausible ({fault})")
+        self._tracks[joint] = _Track(motor=motor, target_rad=angle_rad)
 
     def cancel(self, joint: str | None = None) -> None:
         """Drop one target (a manual command took the joint back) or all of them."""
@@ -116,46 +317,85 @@ class PositionController:
         assert channel is not None
         return channel
 
-    def predicted_angle(self, joint: str) -> float | None:
-        """The controller's current estimate of a joint's angle (None before telemetry)."""
-        track = self._tracks.get(joint)
-        return None if track is None else track.estimate_rad
+    def predicted_angle(self, joint: str, now: float | None = None) -> float | None:
+        """The angle the joint has now by the prediction (None before its first reading).
+
+        Without `now`, the angle at the last update (where the controller steers from).
+        """
+        predictor = self.predictors.get(joint)
+        if predictor is None or not predictor.known:
+            return None
+        at = self._last_update_at if now is None else now
+        if at is None:
+            return predictor.last_angle_rad
+        return predictor.current(at, self.delay_s or 0.0)
+
+    def predicted_angles(self, now: float) -> dict[str, float]:
+        """Every joint's predicted angle now (joints with a reading and plausible)."""
+        delay = self.delay_s or 0.0
+        return {
+            name: predictor.current(now, delay)
+            for name, predictor in self.predictors.items()
+            if predictor.known and name not in self.faults
+        }
 
     def pop_messages(self) -> list[str]:
-        """Why joints stopped since the last call (reached, stale, stalled, at limit)."""
+        """Why joints stopped since the last call (reached, stale, stalled, at limit, ...)."""
         messages, self._messages = self._messages, []
         return messages
 
     # ---- inputs ----------------------------------------------------------------------------
 
-    def on_telemetry(self, readings: Mapping[str, JointReading], received_at: float) -> None:
-        """Correct the prediction of every joint from a telemetry packet."""
-        for name, reading in readings.items():
-            if reading.angle_rad is None:
-                continue
-            self._latest[name] = (reading.angle_rad, received_at)
-            track = self._tracks.get(name)
-            if track is None:
-                continue
-            self._check_motion(name, track, reading.angle_rad)
-            track.last_measured_rad = reading.angle_rad
-            track.last_measured_at = received_at
-            track.commanded_since_packet_rad = 0.0
-            # The measurement replaces the prediction; the velocity commanded since it was
-            # taken is integrated again by the next update().
-            track.estimate_rad = reading.angle_rad
-            track.estimate_at = received_at
-            # Only a measurement ends control: a prediction that says "there" keeps the
-            # joint still until the next packet confirms it or asks for a correction.
-            if abs(track.target_rad - reading.angle_rad) <= self.tolerance_rad:
-                self._finish(name, f"{name}: reached {math.degrees(track.target_rad):.1f}°")
+    def note_sent(self, now: float, velocities: Mapping[str, float]) -> None:
+        """The whole command that went to the robot at `now` (channels missing are zero)."""
+        for channel, joint in self._channel_joint.items():
+            velocity = float(velocities.get(channel, 0.0))
+            # Below its starting speed the servo does not move (documents): the model agrees.
+            if abs(velocity) < self.profile.channels[channel].min_speed:
+                velocity = 0.0
+            self.predictors[joint].command(now, velocity)
 
-    def _check_motion(self, name: str, track: _Track, measured_rad: float) -> None:
-        if track.last_measured_rad is None:
-            return
-        commanded = track.commanded_since_packet_rad
-        moved = measured_rad - track.last_measured_rad
-        if abs(commanded) >= STALL_MIN_COMMANDED_RAD and (
+    def on_telemetry(
+        self,
+        readings: Mapping[str, JointReading],
+        received_at: float,
+        delay_s: float | None = None,
+    ) -> None:
+        """Correct every joint's estimate from one telemetry packet."""
+        if delay_s is not None:
+            self.delay_s = delay_s
+        delay = self.delay_s or 0.0
+        for name, reading in readings.items():
+            predictor = self.predictors.get(name)
+            if predictor is None or reading.angle_rad is None:
+                continue
+            if reading.fault is not None:
+                self.faults[name] = reading.fault
+                if name in self._tracks:
+                    self._finish(name, f"{name}: stopped, reading implausible: {reading.fault}")
+                continue
+            self.faults.pop(name, None)
+            previous_angle = predictor.last_angle_rad
+            previous_taken = predictor.last_taken_at
+            predictor.on_reading(reading.angle_rad, received_at, delay)
+            track = self._tracks.get(name)
+            if track is not None and previous_angle is not None and previous_taken is not None:
+                self._check_motion(name, track, predictor, previous_angle, previous_taken)
+
+    def _check_motion(
+        self,
+        name: str,
+        track: _Track,
+        predictor: JointPredictor,
+        previous_angle: float,
+        previous_taken: float,
+    ) -> None:
+        assert predictor.last_angle_rad is not None
+        assert predictor.last_taken_at is not None
+        commanded = predictor.integral(predictor.last_taken_at) - predictor.integral(previous_taken)
+        moved = predictor.last_angle_rad - previous_angle
+        threshold = max(STALL_MIN_COMMANDED_RAD, STALL_NOISE_SIGMAS * predictor.noise_rad)
+        if abs(commanded) >= threshold and (
             moved * commanded <= 0 or abs(moved) < STALL_FRACTION * abs(commanded)
         ):
             track.stall_packets += 1
@@ -178,42 +418,47 @@ class PositionController:
         output: dict[str, float] = {}
         for name, track in list(self._tracks.items()):
             channel = self.channel_of(name)
-            if track.estimate_rad is None or track.estimate_at is None:
-                if track.started_at is None:
-                    track.started_at = now
-                if now - track.started_at > self.stale_after_s:
-                    self._finish(name, f"{name}: stopped, no telemetry for this joint")
-                    continue
-                output[channel] = 0.0
-                continue
-            if (
-                track.last_measured_at is not None
-                and now - track.last_measured_at > self.stale_after_s
-            ):
-                self._finish(
-                    name,
-                    f"{name}: stopped, telemetry stale ({now - track.last_measured_at:.1f} s old)",
-                )
-                output[channel] = 0.0
-                continue
-            dt = max(now - track.estimate_at, 0.0)
-            step = track.velocity_rad_s * dt
-            track.estimate_rad += step
-            track.commanded_since_packet_rad += step
-            track.estimate_at = now
-            velocity = self._velocity(name, track)
-            if name not in self._tracks:  # _velocity may finish the joint (limit)
-                output[channel] = 0.0
-                continue
+            velocity = self._step(name, track, now)
+            if name not in self._tracks:
+                velocity = 0.0
             track.velocity_rad_s = velocity
             output[channel] = velocity
         return output
 
-    def _velocity(self, name: str, track: _Track) -> float:
-        assert track.estimate_rad is not None
-        error = track.target_rad - track.estimate_rad
-        if abs(error) <= self.tolerance_rad:
+    def _step(self, name: str, track: _Track, now: float) -> float:
+        predictor = self.predictors[name]
+        if track.started_at is None:
+            track.started_at = now
+        if not predictor.known or predictor.last_received_at is None:
+            if now - track.started_at > self.stale_after_s:
+                self._finish(name, f"{name}: stopped, no telemetry for this joint")
             return 0.0
+        age = now - predictor.last_received_at
+        if age > self.stale_after_s and now - track.started_at > self.stale_after_s:
+            self._finish(name, f"{name}: stopped, telemetry stale ({age:.1f} s old)")
+            return 0.0
+        estimate = predictor.eventual(now)
+        error = track.target_rad - estimate
+        sigma = predictor.sigma_rad
+        # Holding still near the target, only a clearly wrong estimate starts a correction:
+        # noisy readings must not make the joint twitch back and forth.
+        threshold = self.tolerance_rad + (2.0 * sigma if track.holding else 0.0)
+        if abs(error) <= threshold:
+            track.holding = True
+            if track.near_since is None:
+                track.near_since = now
+            if self._confirmed(predictor, error, now):
+                self._finish(name, f"{name}: reached {math.degrees(track.target_rad):.1f}°")
+            elif now - track.near_since > self.settle_timeout_s:
+                self._finish(
+                    name,
+                    f"{name}: stopped near {math.degrees(track.target_rad):.1f}° without "
+                    f"confirming ±{math.degrees(self.tolerance_rad):.1f}°: readings scatter "
+                    f"±{math.degrees(predictor.noise_rad):.1f}° (σ), estimate "
+                    f"{math.degrees(estimate):.1f}° ± {math.degrees(sigma):.1f}°",
+                )
+            return 0.0
+        track.holding = False
         channel = self.profile.channels[self.channel_of(name)]
         v_max = self.limits.get(channel.name)
         if v_max <= 0.0:
@@ -223,14 +468,28 @@ class PositionController:
         speed = min(max(self.gain_per_s * abs(error), channel.min_speed), v_max)
         speed = min(speed, abs(error) / self._period_s)
         limits = track.motor.limits_rad
-        if limits is not None and track.last_measured_rad is not None:
+        measured = predictor.last_angle_rad
+        if limits is not None and measured is not None:
             low, high = limits
-            at_low = error < 0 and track.last_measured_rad <= low + LIMIT_MARGIN_RAD
-            at_high = error > 0 and track.last_measured_rad >= high - LIMIT_MARGIN_RAD
+            at_low = error < 0 and measured <= low + LIMIT_MARGIN_RAD
+            at_high = error > 0 and measured >= high - LIMIT_MARGIN_RAD
             if at_low or at_high:
                 self._finish(name, f"{name}: stopped at its limit")
                 return 0.0
         return math.copysign(speed, error)
+
+    def _confirmed(self, predictor: JointPredictor, error: float, now: float) -> bool:
+        """The joint's channel sends zero, and a reading taken after the last velocity change
+        landed puts the estimate in the band."""
+        if predictor.velocity(now) != 0.0 or predictor.last_taken_at is None:
+            return False
+        changed_at = predictor.last_change_at
+        if changed_at is not None and predictor.last_taken_at < changed_at:
+            return False
+        return (
+            abs(error) <= self.tolerance_rad
+            and abs(error) + 2.0 * predictor.sigma_rad <= REACHED_BAND_RAD
+        )
 
     def _finish(self, name: str, message: str) -> None:
         self._tracks.pop(name, None)
@@ -245,7 +504,7 @@ class ConstantSpeedController(PositionController):
     """
 
     def __init__(self, profile: RobotProfile, limits: VelocityLimits, speed_rad_s: float) -> None:
-        super().__init__(profile, limits, stale_after_s=math.inf)
+        super().__init__(profile, limits, stale_after_s=math.inf, settle_timeout_s=math.inf)
         self.speed_rad_s = speed_rad_s
 
     def update(self, now: float) -> dict[str, float]:
@@ -253,22 +512,22 @@ class ConstantSpeedController(PositionController):
         output: dict[str, float] = {}
         for name, track in list(self._tracks.items()):
             channel = self.channel_of(name)
-            if track.last_measured_rad is None:
+            measured = self.predictors[name].last_angle_rad
+            if measured is None:
                 output[channel] = 0.0
                 continue
-            error = track.target_rad - track.last_measured_rad
+            error = track.target_rad - measured
             output[channel] = (
                 0.0 if abs(error) <= self.tolerance_rad else math.copysign(self.speed_rad_s, error)
             )
         return output
 
-    def on_telemetry(self, readings: Mapping[str, JointReading], received_at: float) -> None:
-        """Record measurements only."""
-        for name, reading in readings.items():
-            if reading.angle_rad is None:
-                continue
-            self._latest[name] = (reading.angle_rad, received_at)
-            track = self._tracks.get(name)
-            if track is not None:
-                track.last_measured_rad = reading.angle_rad
-                track.last_measured_at = received_at
+    def _check_motion(
+        self,
+        name: str,
+        track: _Track,
+        predictor: JointPredictor,
+        previous_angle: float,
+        previous_taken: float,
+    ) -> None:
+        """The paper's controller has no stall check."""

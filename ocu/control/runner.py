@@ -42,11 +42,18 @@ class PositionRunner:
     def __init__(self, controller: PositionController, sink: CommandSink) -> None:
         self.controller = controller
         self.sink = sink
-        self._telemetry: queue.Queue[tuple[Mapping[str, JointReading], float]] = queue.Queue()
+        self._telemetry: queue.Queue[tuple[Mapping[str, JointReading], float, float | None]] = (
+            queue.Queue()
+        )
 
-    def on_readings(self, readings: Mapping[str, JointReading], received_at: float) -> None:
+    def on_readings(
+        self,
+        readings: Mapping[str, JointReading],
+        received_at: float,
+        delay_s: float | None = None,
+    ) -> None:
         """Thread-safe entry for telemetry (call from the link's listener)."""
-        self._telemetry.put((readings, received_at))
+        self._telemetry.put((readings, received_at, delay_s))
 
     def run(
         self,
@@ -66,10 +73,10 @@ class PositionRunner:
             # Waiting on the queue both paces the loop and reacts to telemetry at once.
             while (remaining := next_step - clock()) > 0:
                 try:
-                    readings, received_at = self._telemetry.get(timeout=remaining)
+                    readings, received_at, delay_s = self._telemetry.get(timeout=remaining)
                 except queue.Empty:
                     break
-                self.controller.on_telemetry(readings, received_at)
+                self.controller.on_telemetry(readings, received_at, delay_s)
                 for name, reading in readings.items():
                     if reading.angle_rad is not None:
                         result.trace.setdefault(name, []).append((received_at, reading.angle_rad))
@@ -79,6 +86,7 @@ class PositionRunner:
                 velocities.setdefault(channel, 0.0)
             self.sink.heartbeat()
             self.sink.set_velocities(**velocities)
+            self.controller.note_sent(now, velocities)
             result.messages.extend(self.controller.pop_messages())
             if not self.controller.targets:
                 idle_since = now if idle_since is None else idle_since
@@ -87,4 +95,5 @@ class PositionRunner:
                     break
         result.elapsed_s = clock() - start
         self.sink.set_velocities(**dict.fromkeys(channels, 0.0))
+        self.controller.note_sent(clock(), {})
         return result

@@ -22,7 +22,16 @@ from dataclasses import dataclass, replace
 from enum import Enum
 from typing import Generic, ParamSpec
 
-from ocu.control.commands import Command, CommandError, JointReading, VelocityLimits
+from ocu.control.commands import (
+    DRIVE_CHANNELS,
+    DRIVE_LINEAR,
+    DRIVE_TURN,
+    Command,
+    CommandError,
+    JointReading,
+    VelocityLimits,
+)
+from ocu.control.drive import DriveBounds, scale_drive
 from ocu.control.position import PositionController
 from ocu.profile import RobotProfile
 
@@ -131,6 +140,10 @@ class TeleopModel:
         self.controller = PositionController(profile, self.limits)
         self.fine_factor = fine_factor
         self._channels = {name: ChannelCommand() for name in profile.channels}
+        # What the operator asked of the two drive channels; `_channels` holds what is sent:
+        # both scaled by one factor so the turn radius is kept (ocu.control.drive).
+        self._drive = all(name in profile.channels for name in DRIVE_CHANNELS)
+        self._drive_request = {name: ChannelCommand() for name in DRIVE_CHANNELS}
         self._hotkey_speed: dict[str, float | None] = dict.fromkeys(profile.channels)
         self._held: dict[str, tuple[str, int]] = {}
         self._fine = False
@@ -220,8 +233,14 @@ class TeleopModel:
         return limit if speed is None else min(speed, limit)
 
     def fine_speed(self, channel: str) -> float:
-        """Hotkey speed with Shift: a fraction, but not below the speed that moves the servo."""
+        """Hotkey speed with Shift: a fraction, but not below the speed that moves the servo.
+
+        The drive channels are lifted as a pair when the command is composed (the turn
+        radius is kept), not one by one here.
+        """
         speed = self.hotkey_speed(channel)
+        if self._drive and channel in DRIVE_CHANNELS:
+            return speed * self.fine_factor
         floor = min(self.profile.channels[channel].min_speed, speed)
         return max(speed * self.fine_factor, floor)
 
@@ -238,15 +257,18 @@ class TeleopModel:
         if source not in (Source.SLIDER, Source.TEXT):
             raise ValueError(f"set_velocities takes slider or text input, not {source.value}")
         checked = {}
-        for channel, value in values.items():
+        for channel, raw in values.items():
             self._check_channel(channel)
-            checked[channel] = self.limits.clamp(channel, _check_finite(channel, value))
+            value = _check_finite(channel, raw)
+            # The drive pair is bounded together when it is composed (turn radius kept).
+            drive = self._drive and channel in DRIVE_CHANNELS
+            checked[channel] = value if drive else self.limits.clamp(channel, value)
         self._operator_acted()
         for channel, value in checked.items():
             self._take_manual(channel)
             self._set_channel(channel, value, source)
         self._publish()
-        return checked
+        return {channel: self._channels[channel].velocity for channel in checked}
 
     def set_switch(self, channel: str, direction: int) -> None:
         """Flipper/gripper switch: move at the hotkey speed in a direction (+1, -1) or stop (0)."""
@@ -407,9 +429,18 @@ class TeleopModel:
 
     # ---- robot input -----------------------------------------------------------------------
 
-    def on_telemetry(self, readings: Mapping[str, JointReading], received_at: float) -> None:
-        """Feed a telemetry packet to the position controller."""
-        self.controller.on_telemetry(readings, received_at)
+    def on_telemetry(
+        self,
+        readings: Mapping[str, JointReading],
+        received_at: float,
+        delay_s: float | None = None,
+    ) -> None:
+        """Feed a telemetry packet (and the round trip it took) to the position controller."""
+        self.controller.on_telemetry(readings, received_at, delay_s)
+
+    def predicted_angles(self, now: float | None = None) -> dict[str, float]:
+        """Where the joints are now by the prediction (readings advanced by what was sent)."""
+        return self.controller.predicted_angles(self.clock() if now is None else now)
 
     def update(self, now: float | None = None) -> None:
         """One position-control step: merge the controller's velocities into the channels."""
@@ -425,7 +456,7 @@ class TeleopModel:
         for message in self.controller.pop_messages():
             self.events.position_message.emit(message)
         self._sync_targets()
-        self._publish()
+        self._publish(now)
 
     # ---- internals -------------------------------------------------------------------------
 
@@ -468,25 +499,55 @@ class TeleopModel:
             speed = self.fine_speed(channel) if self._fine else self.hotkey_speed(channel)
             velocity = math.copysign(speed, net) if net else 0.0
             self._set_channel(channel, velocity, Source.HOTKEY)
-        elif self._channels[channel].source is Source.HOTKEY:
+        elif self._requested(channel).source is Source.HOTKEY:
             self._set_channel(channel, 0.0, Source.NONE)
+
+    def _requested(self, channel: str) -> ChannelCommand:
+        """What the operator asked of a channel (the drive pair is sent scaled)."""
+        if self._drive and channel in DRIVE_CHANNELS:
+            return self._drive_request[channel]
+        return self._channels[channel]
 
     def _rebound(self, channel: str) -> None:
         """Re-apply a channel's command after its maximum or hotkey speed changed."""
-        command = self._channels[channel]
+        command = self._requested(channel)
         if command.source is Source.HOTKEY:
             self._apply_hotkeys(channel)
         elif command.source is Source.SWITCH:
             direction = 1.0 if command.velocity > 0 else -1.0
             self._set_channel(channel, direction * self.hotkey_speed(channel), Source.SWITCH)
         elif command.source in (Source.SLIDER, Source.TEXT):
-            self._set_channel(channel, self.limits.clamp(channel, command.velocity), command.source)
+            if self._drive and channel in DRIVE_CHANNELS:
+                self._apply_drive()  # the pair is bounded again from the operator's request
+            else:
+                clamped = self.limits.clamp(channel, command.velocity)
+                self._set_channel(channel, clamped, command.source)
 
     def _set_channel(self, channel: str, velocity: float, source: Source) -> None:
-        command = ChannelCommand(float(velocity), source)
+        if self._drive and channel in DRIVE_CHANNELS:
+            self._drive_request[channel] = ChannelCommand(float(velocity), source)
+            self._apply_drive()
+            return
+        self._store(channel, ChannelCommand(float(velocity), source))
+
+    def _store(self, channel: str, command: ChannelCommand) -> None:
         if command != self._channels[channel]:
             self._channels[channel] = command
             self.events.channel_changed.emit(channel, command)
+
+    def _apply_drive(self) -> None:
+        """Both drive channels from the operator's request, scaled by one factor."""
+        linear, turn = self._drive_request[DRIVE_LINEAR], self._drive_request[DRIVE_TURN]
+        channels = self.profile.channels
+        bounds = DriveBounds(
+            max_linear_m_s=self.limits.get(DRIVE_LINEAR),
+            max_angular_rad_s=self.limits.get(DRIVE_TURN),
+            min_linear_m_s=channels[DRIVE_LINEAR].min_speed,
+            min_angular_rad_s=channels[DRIVE_TURN].min_speed,
+        )
+        v, w = scale_drive(linear.velocity, turn.velocity, bounds)
+        self._store(DRIVE_LINEAR, ChannelCommand(v, linear.source if v else Source.NONE))
+        self._store(DRIVE_TURN, ChannelCommand(w, turn.source if w else Source.NONE))
 
     def _zero_all(self) -> None:
         had_keys = bool(self._held)
@@ -504,8 +565,10 @@ class TeleopModel:
             self._targets = targets
             self.events.targets_changed.emit(dict(targets))
 
-    def _publish(self) -> None:
+    def _publish(self, now: float | None = None) -> None:
         state = (self.velocities(), self._torch)
         if state != self._published:
             self._published = state
+            # The predictor integrates what is sent, whoever sent it.
+            self.controller.note_sent(self.clock() if now is None else now, state[0])
             self.events.command_changed.emit()

@@ -15,7 +15,7 @@ import socket
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 from ocu.control.commands import (
@@ -23,9 +23,12 @@ from ocu.control.commands import (
     CommandMapper,
     JointReading,
     VelocityLimits,
+    commanded_motor_speeds,
     make_codec,
     read_telemetry,
 )
+from ocu.control.plausibility import PlausibilityChecker
+from ocu.link.delay import DelayEstimator
 from ocu.link.reassembly import Reassembler, ReassemblyStats
 from ocu.link.stats import LinkStats, LossEstimator, RateMeter
 from ocu.profile import RobotProfile
@@ -49,6 +52,9 @@ RECV_BUFFER_BYTES = 65536
 RECV_SOCKET_BYTES = 4 * 1024 * 1024
 MAX_DATAGRAMS_PER_WAKE = 256
 STATS_PERIOD_S = 0.5
+# A telemetry tick this far (in seconds of ticks) below the newest one is a robot that
+# restarted, not a late packet.
+TICK_RESTART_S = 10.0
 
 
 class LinkError(OSError):
@@ -66,12 +72,23 @@ class LinkState(Enum):
 
 @dataclass(frozen=True)
 class TelemetryFrame:
-    """One decoded telemetry packet with its SI readings and arrival times."""
+    """One decoded telemetry packet with its SI readings and arrival times.
+
+    Readings the OCU does not believe carry their `fault`. `delay_s` is the round trip this
+    packet took by the link's measurement (ocu.link.delay): the reading was taken when the
+    commands sent `delay_s` before `received_at` had reached the robot. None: not known.
+    """
 
     packet: TelemetryPacket
     readings: dict[str, JointReading]
     received_at: float
     wall_time: float
+    delay_s: float | None = None
+
+    @property
+    def faults(self) -> dict[str, str]:
+        """Joint name to why its reading is implausible."""
+        return {name: r.fault for name, r in self.readings.items() if r.fault is not None}
 
 
 @dataclass(frozen=True)
@@ -259,6 +276,10 @@ class LinkCore:
         self._telemetry_rate = RateMeter()
         self._video_rate = RateMeter(window_s=1.0)
         self._loss = LossEstimator()
+        self._delay = DelayEstimator()
+        self._plausibility = PlausibilityChecker(profile)
+        self._last_tick: int | None = None
+        self._stale_telemetry = 0
 
         # The protocol extension: probe with a hello on every tick when asked to and the
         # profile defines it (and does not switch probing off).
@@ -327,6 +348,9 @@ class LinkCore:
         elif self._owner_silent():
             # Commands from another thread (a ROS bridge hosted by the GUI) must neither
             # hide a stalled owner nor move the robot while it is stalled.
+            command = command.stopped()
+        if self._state is LinkState.LOST:
+            # A robot the OCU cannot hear may still hear the OCU: it would drive blind.
             command = command.stopped()
         if command.is_motion:
             self._estop_latched = False
@@ -518,6 +542,10 @@ class LinkCore:
             with self._lock:
                 had_motion = self._command.is_motion
                 self._command = self._command.stopped()
+            with self._lock:
+                # The robot may restart while the OCU cannot hear it.
+                self._last_tick = None
+                self._plausibility.reset()
             self._set_state(LinkState.LOST, reason)
             if had_motion:
                 self._send_current()
@@ -577,6 +605,7 @@ class LinkCore:
             with self._lock:
                 self._foreign += 1  # an RCP never comes from the robot
             return
+        frame: TelemetryFrame | None = None
         with self._lock:
             self._received += 1
             self._last_valid_at = now
@@ -584,6 +613,7 @@ class LinkCore:
                 self._telemetry += 1
                 self._telemetry_rate.add(now)
                 self._loss.add(packet.tick, now)
+                frame = self._telemetry_frame(packet, now)
             else:
                 self._video += 1
                 self._video_rate.add(now)
@@ -593,12 +623,36 @@ class LinkCore:
             self._set_state(LinkState.CONNECTED, f"packets from {source[0]}:{source[1]}")
         wall = time.time()
         if isinstance(packet, TelemetryPacket):
-            frame = TelemetryFrame(packet, read_telemetry(self.profile, packet), now, wall)
-            self._call(self.listener.telemetry_received, frame)
+            if frame is not None:
+                self._call(self.listener.telemetry_received, replace(frame, wall_time=wall))
         elif isinstance(packet, VideoFramePacket):
             self._call(
                 self.listener.video_frame_received, VideoFrame(packet.jpeg, camera, now, wall)
             )
+
+    def _telemetry_frame(self, packet: TelemetryPacket, now: float) -> TelemetryFrame | None:
+        """Readings judged and the delay measured; None for an old packet (lock held).
+
+        A packet whose tick is not newer than the newest seen is a duplicate or came late
+        (reordered): its readings are older than what the OCU already knows, so it is counted
+        and goes no further.
+        """
+        last = self._last_tick
+        restart = self.profile.link.telemetry_tick_hz * TICK_RESTART_S
+        if last is not None and packet.tick <= last and last - packet.tick < restart:
+            self._stale_telemetry += 1
+            return None
+        if last is not None and packet.tick < last:
+            log.info("telemetry tick went back from %d to %d: robot restarted", last, packet.tick)
+            self._plausibility.reset()
+        self._last_tick = packet.tick
+        readings = read_telemetry(self.profile, packet)
+        faults = self._plausibility.check(packet, readings)
+        for name, fault in faults.items():
+            readings[name] = replace(readings[name], fault=fault)
+        echoes = {record.device_id: record.speed_command for record in packet.motors}
+        delay_s = self._delay.on_telemetry(now, echoes)
+        return TelemetryFrame(packet, readings, now, 0.0, delay_s)
 
     def _handle_extended(self, data: bytes, source: tuple[str, int], now: float) -> None:
         assert self._ext_codec is not None
@@ -675,9 +729,11 @@ class LinkCore:
     def _send_packet(self, packet: RemoteControlPacket) -> None:
         sent_at = self._send_datagram(self._codec.encode(packet))
         if sent_at is not None:
+            echoes = commanded_motor_speeds(self.profile, self._mapper.to_command(packet))
             with self._lock:
                 self._sent += 1
                 self._rcp_rate.add(sent_at)
+                self._delay.on_sent(sent_at, echoes)
 
     def _send_datagram(self, data: bytes) -> float | None:
         """Put one datagram on the wire; its send time, or None if closed or it failed."""
@@ -726,6 +782,8 @@ class LinkCore:
                 last_valid_age_s=None if self._last_valid_at is None else now - self._last_valid_at,
                 send_rate_hz=self._rate_hz,
                 estop_latched=self._estop_latched,
+                delay_s=self._delay.estimate_s,
+                stale_telemetry=self._stale_telemetry,
             )
 
     def _emit_stats(self, now: float) -> None:

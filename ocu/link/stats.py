@@ -133,3 +133,7 @@ class LinkStats:
     last_valid_age_s: float | None
     send_rate_hz: float
     estop_latched: bool
+    # Round trip measured from the robot's echoed speed commands (ocu.link.delay); None:
+    # nothing measured yet. Telemetry packets dropped for coming late or twice.
+    delay_s: float | None = None
+    stale_telemetry: int = 0

@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import random
 import selectors
 import socket
 import threading
@@ -37,7 +38,14 @@ from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import NamedTuple
 
-from ocu.control.commands import Command, CommandMapper, make_codec, rad_to_ticks
+from ocu.control.commands import (
+    DRIVE_CHANNELS,
+    Command,
+    CommandMapper,
+    make_codec,
+    rad_to_ticks,
+    track_speeds,
+)
 from ocu.profile import Motor, RobotProfile
 from ocu.protocol import (
     MotorRecord,
@@ -80,7 +88,6 @@ MAX_DATAGRAM_BYTES = 65_535
 MAX_DATAGRAMS_PER_WAKE = 256
 STOP_JOIN_TIMEOUT_S = 5.0
 
-DRIVE_CHANNELS = ("drive_linear", "drive_turn")
 WAIST_CHANNEL = "waist"
 
 _I16_MIN = -32768
@@ -184,6 +191,7 @@ class RobotSimulator:
         status_hz: float = DEFAULT_STATUS_HZ,
         battery_percent: float = 100.0,
         battery_drain_percent_per_s: float = DEFAULT_DRAIN_PERCENT_PER_S,
+        noise_deg: float = 0.0,
     ) -> None:
         self.profile = profile
         rate_hz = profile.link.telemetry_rate_hz if telemetry_hz is None else telemetry_hz
@@ -195,6 +203,11 @@ class RobotSimulator:
             raise ValueError(
                 f"physics_hz must be >= {1.0 / MAX_PHYSICS_STEP_S:.0f}, got {physics_hz!r}"
             )
+        if not (math.isfinite(noise_deg) and noise_deg >= 0.0):
+            raise ValueError(f"noise_deg must be >= 0, got {noise_deg!r}")
+        self._noise_rad = math.radians(noise_deg)
+        self._noise_rng = random.Random(seed)
+        self._raw_faults: dict[str, int] = {}
         self._telemetry_hz = rate_hz
         self._video_fps = video_fps
         self._physics_period_s = 1.0 / physics_hz
@@ -389,6 +402,27 @@ class RobotSimulator:
             self._faults = replace(self._faults, **changes)
             faults = self._faults
         log.info("faults set: %s", faults)
+
+    def set_raw_position(self, joint: str, raw: int | None) -> None:
+        """Report this raw position for a joint (a broken encoder); None: the true one again."""
+        motor = self.profile.motors.get(joint)
+        if motor is None or not motor.has_position:
+            raise ValueError(f"{joint!r} is not a motor with a position")
+        if raw is not None and not 0 <= raw <= 0xFFFFFFFF:
+            raise ValueError(f"raw position must be a u32, got {raw!r}")
+        with self._fault_lock:
+            if raw is None:
+                self._raw_faults.pop(joint, None)
+            else:
+                self._raw_faults[joint] = raw
+        log.info("%s reports raw position %s", joint, "truly" if raw is None else f"0x{raw:08x}")
+
+    def set_noise_deg(self, noise_deg: float) -> None:
+        """Reported positions get uniform noise of ±noise_deg (the true angle is unchanged)."""
+        if not (math.isfinite(noise_deg) and noise_deg >= 0.0):
+            raise ValueError(f"noise_deg must be >= 0, got {noise_deg!r}")
+        with self._fault_lock:
+            self._noise_rad = math.radians(noise_deg)
 
     def cut_link(self) -> None:
         """Drop every datagram in both directions until restore_link()."""
@@ -647,11 +681,18 @@ class RobotSimulator:
             name: self._command.velocity(name) if active and self._command is not None else 0.0
             for name in self.profile.channels
         }
-        # Servo deadband: below min_speed a servo does not start moving.
+        # Servo deadband: below min_speed a servo does not start moving. The tracks move as a
+        # pair: a turn fast enough to start them carries a slow linear speed along (and the
+        # other way round), as the OCU's drive scaling assumes (seed 002, eq. 5.4).
+        channels = self.profile.channels
         effective = {
-            name: speed if abs(speed) >= self.profile.channels[name].min_speed else 0.0
+            name: speed if abs(speed) >= channels[name].min_speed else 0.0
             for name, speed in commanded.items()
         }
+        drive = [name for name in DRIVE_CHANNELS if name in commanded]
+        if any(effective[name] != 0.0 for name in drive):
+            for name in drive:
+                effective[name] = commanded[name]
         # The vendor server refuses to turn the waist while the chassis moves.
         driving = any(effective.get(name, 0.0) != 0.0 for name in DRIVE_CHANNELS)
         self._waist_suppressed = driving and effective.get(WAIST_CHANNEL, 0.0) != 0.0
@@ -669,10 +710,7 @@ class RobotSimulator:
         self._commanded_tracks_m_s = self._tracks(commanded)
 
     def _tracks(self, velocities: Mapping[str, float]) -> tuple[float, float]:
-        linear_m_s = velocities.get(DRIVE_CHANNELS[0], 0.0)
-        turn_rad_s = velocities.get(DRIVE_CHANNELS[1], 0.0)
-        half_width_m = self.profile.track_width_m / 2.0
-        return (linear_m_s - turn_rad_s * half_width_m, linear_m_s + turn_rad_s * half_width_m)
+        return track_speeds(self.profile, velocities)
 
     def _integrate(self, dt_s: float) -> None:
         if dt_s <= 0.0:
@@ -725,7 +763,12 @@ class RobotSimulator:
             idle_a, amps_per_speed = JOINT_IDLE_CURRENT_A, JOINT_CURRENT_A_PER_RAD_S
             if motor.has_position:
                 angle_rad = self._angles_rad[motor.name]
-                position = rad_to_ticks(motor, angle_rad)
+                with self._fault_lock:
+                    noise_rad, raw_fault = self._noise_rad, self._raw_faults.get(motor.name)
+                reported_rad = angle_rad
+                if noise_rad > 0.0:
+                    reported_rad += self._noise_rng.uniform(-noise_rad, noise_rad)
+                position = rad_to_ticks(motor, reported_rad) if raw_fault is None else raw_fault
                 low_rad, high_rad = _limits_rad(motor)
                 if angle_rad <= low_rad:
                     status |= STATUS_AT_LOWER_LIMIT
