@@ -211,7 +211,8 @@ class DelayEstimator:
                 if depth == best:
                     regions.append((start, point))
                 depth -= 1
-        middles = [(low + high) / 2.0 for low, high in regions]
+        # A region open to the maximum only says "at least": its lower end is what is known.
+        middles = [low if high >= self.max_delay_s else (low + high) / 2.0 for low, high in regions]
         previous = self._estimate
         if previous is None:
             return max(middles)  # the larger delay predicts more: the safe side

@@ -108,6 +108,11 @@ class SignalOwner(Protocol):
     def telemetry_received(self) -> SignalInstance: ...
 
     @property
+    def telemetry_ready(self) -> SignalInstance: ...
+
+    def isSignalConnected(self, signal: QMetaMethod) -> bool: ...
+
+    @property
     def status_received(self) -> SignalInstance: ...
 
     @property
@@ -127,13 +132,29 @@ class SignalOwner(Protocol):
 
 
 class SignalForwarder(LinkListener):
-    """Forwards link callbacks (loop or player thread) to the owner's signals (queued)."""
+    """Forwards link callbacks (loop or player thread) to the owner's signals (queued).
+
+    Telemetry goes through a one-frame mailbox, as video does: `telemetry_ready` fires only
+    when the mailbox goes from empty to full, so a robot flooding the link with telemetry
+    queues at most one signal, never a backlog in front of the operator's key presses. The
+    GUI takes the newest frame with `take_telemetry()` at the pace it can show.
+    `telemetry_received` (every frame) fires only while something is connected to it.
+    """
 
     def __init__(self, owner: SignalOwner) -> None:
         self.owner = owner
+        self._telemetry: LatestFrames[TelemetryFrame] = LatestFrames(1)
+        self._every_frame = QMetaMethod.fromSignal(owner.telemetry_received)
+
+    def take_telemetry(self) -> TelemetryFrame | None:
+        """The newest telemetry frame not yet taken (any thread)."""
+        return self._telemetry.take(0)
 
     def telemetry_received(self, frame: TelemetryFrame) -> None:
-        self.owner.telemetry_received.emit(frame)
+        if self._telemetry.put(0, frame):
+            self.owner.telemetry_ready.emit()
+        if self.owner.isSignalConnected(self._every_frame):
+            self.owner.telemetry_received.emit(frame)
 
     def video_frame_received(self, frame: VideoFrame) -> None:
         self.owner.decoder.submit(frame)
@@ -157,7 +178,10 @@ class SignalForwarder(LinkListener):
 class LinkThread(QThread):
     """Runs a LinkCore's loop; the GUI thread proves it is alive with a heartbeat timer."""
 
+    # Every telemetry frame: emitted only while something is connected (tests, tools).
+    # Views use telemetry_ready and take_telemetry(), which never queue a backlog.
     telemetry_received = Signal(object)
+    telemetry_ready = Signal()
     # One signal per decoded frame with its image: it queues when the GUI is slow, so it is
     # emitted only while something is connected (recording, tests). Viewers use
     # video_frame_ready and take_video_frame instead.
@@ -179,7 +203,8 @@ class LinkThread(QThread):
             self.video.frames,
             self.video.decoder,
         )
-        core.listener = SignalForwarder(self)
+        self.forwarder = SignalForwarder(self)
+        core.listener = self.forwarder
         # The timer lives in the GUI thread: if that thread stalls, heartbeats stop and the
         # core zeroes any motion after gui_alive_timeout_s.
         self._heartbeat = QTimer(self)
@@ -196,6 +221,10 @@ class LinkThread(QThread):
     def take_video_frame(self, camera: int) -> DecodedVideoFrame | None:
         """The newest decoded frame of a camera not yet taken, or None (any thread)."""
         return self.video.take(camera)
+
+    def take_telemetry(self) -> TelemetryFrame | None:
+        """The newest telemetry frame not yet taken, or None (any thread)."""
+        return self.forwarder.take_telemetry()
 
     def run(self) -> None:
         """QThread body: the core's loop."""

@@ -17,6 +17,7 @@ between messages so they come out at the recorded pace times `speed`. No Qt here
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -260,6 +261,9 @@ def link_stats(message: Any) -> LinkStats:
         last_valid_age_s=s.none_if_nan(message.last_valid_age_s),
         send_rate_hz=float(message.send_rate_hz),
         estop_latched=bool(message.estop_latched),
+        # Recordings made before these fields existed lack them.
+        delay_s=s.none_if_nan(getattr(message, "delay_s", math.nan)),
+        stale_telemetry=int(getattr(message, "stale_telemetry", 0)),
     )
 
 

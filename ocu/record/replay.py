@@ -27,6 +27,7 @@ from PySide6.QtWidgets import (
 )
 
 from ocu.control.commands import Command, CommandMapper, make_codec
+from ocu.link.core import TelemetryFrame
 from ocu.link.qt import DecodedVideoFrame, SignalForwarder, VideoPipeline
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket
@@ -65,6 +66,7 @@ class ReplaySource(QObject):
     """A recording played as if it were the link; paused at the start until play()."""
 
     telemetry_received = Signal(object)
+    telemetry_ready = Signal()
     # As on LinkThread: emitted only while something is connected; viewers use
     # video_frame_ready(camera) and take_video_frame(camera).
     video_frame_received = Signal(object)
@@ -103,10 +105,11 @@ class ReplaySource(QObject):
             self.video.frames,
             self.video.decoder,
         )
+        self.forwarder = _ReplayForwarder(self)
         self.player = ReplayPlayer(
             self.recording,
             self.profile,
-            _ReplayForwarder(self),
+            self.forwarder,
             on_finished=self.finished.emit,
         )
         # LinkThread's `core`, as far as the console reads it; it sends nothing.
@@ -178,6 +181,10 @@ class ReplaySource(QObject):
     def take_video_frame(self, camera: int) -> DecodedVideoFrame | None:
         """The newest decoded frame of a camera not yet taken, or None (any thread)."""
         return self.video.take(camera)
+
+    def take_telemetry(self) -> TelemetryFrame | None:
+        """The newest telemetry frame not yet taken, or None (any thread)."""
+        return self.forwarder.take_telemetry()
 
     def set_command(self, command: Command) -> None:
         """Nothing: a replay sends no commands."""

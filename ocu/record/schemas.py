@@ -144,7 +144,10 @@ LINK_STATS_TYPE = MessageType(
         "bool estop_latched\n"
         "bool extension_active\n"
         "# Messages the recorder itself dropped so far (its queue was full).\n"
-        "uint64 recorder_dropped\n",
+        "uint64 recorder_dropped\n"
+        "# Round trip measured from the robot's echoed speed commands (s); late or repeated\n"
+        "# telemetry packets dropped.\n"
+        "float64 delay_s\nuint64 stale_telemetry\n",
         ("builtin_interfaces/Time", _TIME),
     ),
 )

@@ -390,6 +390,8 @@ class RecordingFile:
                 "estop_latched": stats.estop_latched,
                 "extension_active": self._extension_active,
                 "recorder_dropped": dropped,
+                "delay_s": s.nan_if_none(stats.delay_s),
+                "stale_telemetry": stats.stale_telemetry,
             },
         )
 

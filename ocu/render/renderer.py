@@ -232,7 +232,12 @@ class ModelRenderer:
             GL.glBindVertexArray(self._grid.vao)
             GL.glDrawArrays(self._grid.mode, 0, self._grid.count)
             GL.glUniform1i(u["u_lit"], 1 if frame.lit else 0)
-        if frame.ghosts:
+        for overlay, alpha in (
+            (frame.readings, frame.reading_alpha),
+            (frame.ghosts, frame.ghost_alpha),
+        ):
+            if not overlay:
+                continue
             GL.glEnable(GL.GL_BLEND)
             # Blend colour only: the target's alpha stays opaque, or Qt's compositor (and a
             # PNG) would show the window behind the ghost.
@@ -240,8 +245,8 @@ class ModelRenderer:
                 GL.GL_SRC_ALPHA, GL.GL_ONE_MINUS_SRC_ALPHA, GL.GL_ZERO, GL.GL_ONE
             )
             GL.glDepthMask(GL.GL_FALSE)
-            GL.glUniform1f(u["u_alpha"], frame.ghost_alpha)
-            self._draw_links(frame.ghosts)
+            GL.glUniform1f(u["u_alpha"], alpha)
+            self._draw_links(overlay)
             GL.glDepthMask(GL.GL_TRUE)
             GL.glDisable(GL.GL_BLEND)
         GL.glBindVertexArray(0)

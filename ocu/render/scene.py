@@ -17,6 +17,11 @@ WARNING_TINT: Rgba = (1.0, 0.55, 0.0, 0.75)  # rgb and how much of it replaces t
 GHOST_TINT: Rgba = (0.35, 0.75, 1.0, 0.6)
 GHOST_ALPHA = 0.35
 GHOST_TOLERANCE = 1e-6
+# The pose of the last reading, behind the predicted one: faint and colourless.
+READING_TINT: Rgba = (0.85, 0.85, 0.85, 0.8)
+READING_ALPHA = 0.22
+# A joint whose reading the OCU does not believe.
+FAULT_TINT: Rgba = (0.9, 0.1, 0.1, 0.85)
 
 
 @dataclass(frozen=True)
@@ -38,6 +43,9 @@ class RenderFrame:
     links: Sequence[LinkDraw]
     ghosts: Sequence[LinkDraw] = ()
     ghost_alpha: float = GHOST_ALPHA
+    # Where the last reading put the links that the prediction has moved since.
+    readings: Sequence[LinkDraw] = ()
+    reading_alpha: float = READING_ALPHA
     background: Rgba = BACKGROUND
     show_grid: bool = True
     lit: bool = True
@@ -70,8 +78,11 @@ def build_frame(
     stale_joints: Collection[str] = (),
     show_grid: bool = True,
     flat_colors: Mapping[str, Rgba] | None = None,
+    reading: KinematicTree | None = None,
+    fault_joints: Collection[str] = (),
 ) -> RenderFrame:
-    """A frame of the live pose, tinted where stale, with the ghost where it differs.
+    """A frame of the live pose, tinted where stale or implausible, with the ghost and the
+    last reading's pose where they differ from it.
 
     With `flat_colors` every link is drawn unlit in one colour (links not named are left
     out): an ID image for picking and for tests that find a link's pixels.
@@ -79,6 +90,7 @@ def build_frame(
     tree = live or model.tree
     world = tree.world_transforms()
     warn = stale_links(tree, stale_joints)
+    faulty = stale_links(tree, fault_joints)
     links: list[LinkDraw] = []
     for name in tree.links:
         if model.meshes[name].vertex_count == 0:
@@ -87,15 +99,20 @@ def build_frame(
             if name in flat_colors:
                 links.append(LinkDraw(name, world[name].copy(), flat_colors[name]))
             continue
-        links.append(LinkDraw(name, world[name].copy(), WARNING_TINT if name in warn else None))
+        tint = FAULT_TINT if name in faulty else WARNING_TINT if name in warn else None
+        links.append(LinkDraw(name, world[name].copy(), tint))
     ghosts: list[LinkDraw] = []
-    if ghost is not None and flat_colors is None:
-        ghost_world = ghost.world_transforms()
-        ghosts = [
-            LinkDraw(name, ghost_world[name].copy(), GHOST_TINT)
-            for name in ghost_links(tree, ghost)
-            if model.meshes[name].vertex_count > 0
-        ]
+    readings: list[LinkDraw] = []
+    if flat_colors is None:
+        for other, tint, out in ((ghost, GHOST_TINT, ghosts), (reading, READING_TINT, readings)):
+            if other is None:
+                continue
+            other_world = other.world_transforms()
+            out.extend(
+                LinkDraw(name, other_world[name].copy(), tint)
+                for name in ghost_links(tree, other)
+                if model.meshes[name].vertex_count > 0
+            )
     eye = camera.eye()
     return RenderFrame(
         view=camera.view_matrix(),
@@ -103,6 +120,7 @@ def build_frame(
         eye=(float(eye[0]), float(eye[1]), float(eye[2])),
         links=links,
         ghosts=ghosts,
+        readings=readings,
         show_grid=show_grid and flat_colors is None,
         lit=flat_colors is None,
     )

@@ -79,7 +79,7 @@ class LinkStatus(QWidget):
         layout.addWidget(self.estop_label)
         self._layout = layout
         self.rates_label.setText("RCP — Hz · telemetry — Hz")
-        self.loss_label.setText("loss —")
+        self.loss_label.setText("loss — · delay —")
         self._show_estop()
         # The age of the last telemetry must tick even when nothing arrives.
         self._age_timer = QTimer(self)
@@ -116,10 +116,14 @@ class LinkStatus(QWidget):
             f" · video {stats.video_rate_hz:.0f} fps"
         )
         loss = "—" if stats.loss_estimate is None else f"{100 * stats.loss_estimate:.0f} %"
-        self.loss_label.setText(f"loss {loss}")
+        delay = "—" if stats.delay_s is None else f"{1000 * stats.delay_s:.0f} ms"
+        self.loss_label.setText(f"loss {loss} · delay {delay}")
         self.loss_label.setToolTip(
-            f"telemetry loss estimate; malformed {stats.malformed}, foreign {stats.foreign}, "
-            f"duplicates {stats.duplicates}, reordered {stats.reordered}"
+            "telemetry loss estimate, and the round trip measured from the speed commands the "
+            "robot echoes (— until something has moved); "
+            f"malformed {stats.malformed}, foreign {stats.foreign}, "
+            f"duplicates {stats.duplicates}, reordered {stats.reordered}, "
+            f"late telemetry dropped {stats.stale_telemetry}"
         )
 
     def set_replay(self) -> None:

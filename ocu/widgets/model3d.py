@@ -87,6 +87,10 @@ class Model3DWidget(QWidget):
         self.live: KinematicTree = self.model.tree.copy()
         self.ghost: KinematicTree | None = None
         self._ghost_targets: dict[str, float] = {}
+        # The pose of the last reading (drawn faintly behind the predicted pose) and the
+        # joints whose reading is implausible (drawn red).
+        self.reading: KinematicTree | None = None
+        self._faults: frozenset[str] = frozenset()
         self.stale_after_s = (
             profile.link.link_lost_after_s if stale_after_s is None else stale_after_s
         )
@@ -156,6 +160,37 @@ class Model3DWidget(QWidget):
             if reading.angle_rad is not None
         }
         self.set_joint_angles(angles, fresh_at=frame.received_at)
+
+    def show_reading(self, frame: TelemetryFrameLike) -> None:
+        """Where the last reading put each joint, drawn faintly behind the live pose.
+
+        The live pose is the predicted one (set_joint_angles): under delay the last reading
+        shows the past, and the operator should not steer by it. Joints whose reading is
+        implausible are drawn red and keep their last believable pose.
+        """
+        angles = {
+            name: reading.angle_rad
+            for name, reading in frame.readings.items()
+            if reading.angle_rad is not None
+            and reading.fault is None
+            and name in self.live.actuated_joints
+            and math.isfinite(reading.angle_rad)
+        }
+        faults = frozenset(
+            name
+            for name, reading in frame.readings.items()
+            if reading.fault is not None and name in self.live.joints
+        )
+        if self.reading is None:
+            self.reading = self.live.copy()
+        self.reading.set_positions(angles)
+        self._faults = faults
+        self.request_render()
+
+    @property
+    def fault_joints(self) -> frozenset[str]:
+        """Joints drawn red: their reading is implausible."""
+        return self._faults
 
     def set_ghost(self, targets_rad: Mapping[str, float] | None) -> None:
         """Show a translucent robot at these targets (None or empty: no ghost)."""
@@ -257,6 +292,8 @@ class Model3DWidget(QWidget):
             live=self.live,
             ghost=self.ghost,
             stale_joints=self._drawn_stale,
+            reading=self.reading,
+            fault_joints=self._faults,
         )
 
     def _surface_rendered(self) -> None:

@@ -81,7 +81,10 @@ class TelemetryPlots(QWidget):
             series = self.samples.get(name)
             if series is None:
                 continue
-            angle = None if reading.angle_rad is None else math.degrees(reading.angle_rad)
+            # An implausible angle (-11796480° for a broken encoder) would flatten the plot.
+            angle = None
+            if reading.angle_rad is not None and reading.fault is None:
+                angle = math.degrees(reading.angle_rad)
             series.append((at, angle, reading.speed_rad_s, reading.current_a))
             while series and series[0][0] < at - self.window_s:
                 series.popleft()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import QHeaderView, QTableWidget, QTableWidgetItem, QWidget
 
 from ocu.link.core import TelemetryFrame
@@ -23,6 +24,10 @@ COLUMNS = (
     "speed cmd",
     "cur cmd A",
 )
+
+
+FAULT_BACKGROUND = QColor("#ffcdd2")
+FAULT_MARK = "⚠ "
 
 
 def _deg(angle_rad: float | None) -> str:
@@ -54,6 +59,7 @@ class TelemetryTable(QTableWidget):
         """Fill the rows from one telemetry packet."""
         for row in range(MOTOR_SLOTS):
             values = ["—"] * len(COLUMNS)
+            fault: str | None = None
             if row < len(frame.packet.motors):
                 record = frame.packet.motors[row]
                 motor = self.profile.motor_by_device(record.device_id)
@@ -64,7 +70,8 @@ class TelemetryTable(QTableWidget):
                 values[3] = str(record.mode)
                 values[7] = f"0x{record.status & 0xFFFF:04x}"
                 if reading is not None:
-                    values[4] = _deg(reading.angle_rad)
+                    fault = reading.fault
+                    values[4] = (FAULT_MARK if fault else "") + _deg(reading.angle_rad)
                     values[5] = f"{reading.speed_rad_s:+.3f}"
                     values[6] = f"{reading.current_a:.2f}"
                     values[8] = _deg(reading.target_angle_rad)
@@ -74,3 +81,8 @@ class TelemetryTable(QTableWidget):
                 item = self.item(row, column)
                 if item is not None and item.text() != text:
                     item.setText(text)
+            angle = self.item(row, COLUMNS.index("angle °"))
+            if angle is not None and angle.toolTip() != (fault or ""):
+                # Implausible: the reading is shown, marked, and says why it is not believed.
+                angle.setToolTip(f"implausible: {fault}" if fault else "")
+                angle.setBackground(QBrush(FAULT_BACKGROUND) if fault else QBrush())

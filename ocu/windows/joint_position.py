@@ -24,6 +24,7 @@ from ocu.widgets.telemetry_table import TelemetryTable
 from ocu.windows.velocity import ERROR_TEXT_STYLE, channel_title
 
 CONTROLLED_STYLE = "color: #1565c0; font-weight: bold;"
+IMPLAUSIBLE_STYLE = "color: white; background: #c62828; font-weight: bold; padding: 0 3px;"
 
 
 class JointPositionPanel(QWidget):
@@ -154,11 +155,20 @@ class JointPositionPanel(QWidget):
     # ---- robot / model -> view -------------------------------------------------------------
 
     def on_telemetry(self, frame: TelemetryFrame) -> None:
-        """Show the measured angles, fill the table and the plots."""
+        """Show the measured angles (implausible ones marked), fill the table and the plots."""
         for name, label in self.angle_labels.items():
             reading = frame.readings.get(name)
-            if reading is not None and reading.angle_rad is not None:
+            if reading is None or reading.angle_rad is None:
+                continue
+            if reading.fault is not None:
+                label.setText("implausible")
+                label.setStyleSheet(IMPLAUSIBLE_STYLE)
+                label.setToolTip(f"not believed, position control refused: {reading.fault}")
+            else:
                 label.setText(format_number(math.degrees(reading.angle_rad), 1))
+                if label.toolTip():
+                    label.setStyleSheet("")
+                    label.setToolTip("")
         self.table.show_frame(frame)
         self.plots.add_frame(frame)
 

@@ -52,6 +52,9 @@ from ocu.windows.velocity import VelocityPanel
 log = logging.getLogger("ocu.console")
 
 CONTROL_PERIOD_MS = 50
+# Views take telemetry at most this often (about 30 Hz): a robot flooding the link with
+# telemetry must not keep the GUI thread from the operator's keys.
+VIEW_PERIOD_MS = 33
 LAYOUT_VERSION = 2  # 2: the Video dock
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
@@ -200,6 +203,12 @@ class MainWindow(QMainWindow):
         self._control_timer.setInterval(CONTROL_PERIOD_MS)
         self._control_timer.timeout.connect(self._control_tick)
         self._control_timer.start()
+        self._last_view_at = 0.0
+        self._last_telemetry_at: float | None = None
+        self._view_timer = QTimer(self)
+        self._view_timer.setInterval(VIEW_PERIOD_MS)
+        self._view_timer.timeout.connect(self._view_tick)
+        self._view_timer.start()
 
         # An explicit minimum keeps the layout from re-setting it whenever a label grows
         # (Qt's offscreen platform warns on every such change of a visible window).
@@ -313,7 +322,7 @@ class MainWindow(QMainWindow):
         # Not started yet: no other thread touches the limits.
         for channel in self.profile.channels:
             link.core.limits.set(channel, self.model.max_velocity(channel))
-        link.telemetry_received.connect(self._on_telemetry)
+        link.telemetry_ready.connect(self._on_telemetry_ready)
         link.link_state_changed.connect(self._on_link_state)
         link.stats_updated.connect(self.link_status.on_stats)
         link.safety_event.connect(self._on_safety_event)
@@ -382,13 +391,31 @@ class MainWindow(QMainWindow):
         # Queued signals of a link stopped meanwhile may still arrive; they are stale.
         return self.link is not None and self.sender() is self.link
 
-    def _on_telemetry(self, frame: TelemetryFrame) -> None:
+    def _on_telemetry_ready(self) -> None:
         if not self._is_current_link():
             return
-        self.model.on_telemetry(frame.readings, frame.received_at)
+        elapsed_ms = (time.monotonic() - self._last_view_at) * 1000.0
+        if elapsed_ms >= VIEW_PERIOD_MS:
+            self._view_tick()
+        # Otherwise the view timer takes the newest frame within one view period.
+
+    def _view_tick(self) -> None:
+        """Show the newest telemetry (if any came) and the predicted pose now."""
+        self._last_view_at = time.monotonic()
+        link = self.link
+        frame = link.take_telemetry() if link is not None else None
+        if frame is not None:
+            self._on_telemetry(frame)
+        if self._last_telemetry_at is not None:
+            predicted = self.model.predicted_angles(self._last_view_at)
+            self.model_view.set_joint_angles(predicted, fresh_at=self._last_telemetry_at)
+
+    def _on_telemetry(self, frame: TelemetryFrame) -> None:
+        self._last_telemetry_at = frame.received_at
+        self.model.on_telemetry(frame.readings, frame.received_at, frame.delay_s)
         self.joint_panel.on_telemetry(frame)
         self.link_status.on_telemetry(frame)
-        self.model_view.on_telemetry(frame)
+        self.model_view.show_reading(frame)
 
     def _on_link_state(self, state: LinkState, reason: str) -> None:
         if not self._is_current_link():
@@ -456,6 +483,7 @@ class MainWindow(QMainWindow):
         self.model.halt("console closed")
         self.save_layout()
         self._control_timer.stop()
+        self._view_timer.stop()
         app = QApplication.instance()
         if isinstance(app, QApplication):
             if self.key_filter is not None:
