@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from ocu.control.commands import read_telemetry, rad_to_ticks
+from ocu.control.commands import rad_to_ticks, read_telemetry
 from ocu.control.plausibility import PlausibilityChecker
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket
