@@ -104,6 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def refuse_file(message: str) -> int:
+    """Report a bad profile or key map in one line (the usage is not the problem); exit 2."""
+    print(f"ocu: error: {message}", file=sys.stderr)
+    return 2
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `ocu` console script."""
     args_list = list(sys.argv[1:] if argv is None else argv)
@@ -127,7 +133,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         profile = load_profile(args.profile)
     except ProfileError as err:
-        parser.error(str(err))
+        return refuse_file(str(err))
     robot = None
     if args.robot:
         try:
@@ -143,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         key_map = load_key_map(profile, override)
     except KeyMapError as err:
-        parser.error(str(err))
+        return refuse_file(str(err))
     if args.replay is not None:
         return run_replay(
             profile, args.replay, args.quit_after, config_dir=config_dir, key_map=key_map

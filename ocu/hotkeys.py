@@ -16,11 +16,13 @@ from pathlib import Path
 from typing import Any
 
 from ocu.control.teleop import DEFAULT_FINE_FACTOR, TeleopModel
-from ocu.profile import RobotProfile
+from ocu.profile import RobotProfile, did_you_mean
 
 USER_KEY_MAP_NAME = "hotkeys.toml"
 ESTOP_KEY = "Space"
 CLOSE_HELP_KEY = "Escape"
+TABLES = ("options", "hold", "commands")
+OPTIONS = ("fine_factor",)
 
 # Linux evdev key codes (the PC set-1 scan codes of the main block) of the US positions.
 # X11 and Wayland report evdev + 8 as the native scan code; Windows reports the set-1 code.
@@ -139,6 +141,8 @@ def _read_toml(path: Path) -> dict[str, Any]:
         text = path.read_text(encoding="utf-8")
     except OSError as err:
         raise KeyMapError(f"cannot read key map {path}: {err.strerror}") from err
+    except UnicodeDecodeError as err:
+        raise KeyMapError(f"{path}: not UTF-8 text: {err}") from err
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -147,7 +151,7 @@ def _read_toml(path: Path) -> dict[str, Any]:
 
 def _check_key(key: str, where: str) -> None:
     if key not in KEY_POSITIONS:
-        raise KeyMapError(f"{where}: unknown key {key!r}; use one of {', '.join(KEY_POSITIONS)}")
+        raise KeyMapError(f"{where}: unknown key {key!r}; {did_you_mean(key, KEY_POSITIONS)}")
 
 
 def _table(data: dict[str, Any], name: str, source: str) -> dict[str, Any]:
@@ -161,14 +165,19 @@ def parse_key_map(
     data: dict[str, Any], profile: RobotProfile, base: KeyMap | None = None, source: str = "?"
 ) -> KeyMap:
     """Validate a decoded key map and merge it over `base`."""
-    unknown = set(data) - {"options", "hold", "commands"}
-    if unknown:
-        raise KeyMapError(f"{source}: unknown tables {sorted(unknown)}")
+    for name in data:
+        if name not in TABLES:
+            raise KeyMapError(f"{source}: {name}: unknown table; {did_you_mean(name, TABLES)}")
     hold = dict(base.hold) if base else {}
     commands = dict(base.commands) if base else {}
     fine_factor = base.fine_factor if base else DEFAULT_FINE_FACTOR
 
     options = _table(data, "options", source)
+    for name in options:
+        if name not in OPTIONS:
+            raise KeyMapError(
+                f"{source}: options.{name}: unknown option; {did_you_mean(name, OPTIONS)}"
+            )
     if "fine_factor" in options:
         value = options["fine_factor"]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -191,7 +200,7 @@ def parse_key_map(
             raise KeyMapError(f'{where}: {text!r} must be "CHANNEL +" or "CHANNEL -"')
         if parts[0] not in profile.channels:
             raise KeyMapError(
-                f"{where}: unknown channel {parts[0]!r}; channels: {', '.join(profile.channels)}"
+                f"{where}: unknown channel {parts[0]!r}; {did_you_mean(parts[0], profile.channels)}"
             )
         hold[key] = HoldBinding(parts[0], 1 if parts[1] == "+" else -1)
 
@@ -205,7 +214,7 @@ def parse_key_map(
             commands.pop(key, None)
             continue
         if name not in COMMANDS:
-            raise KeyMapError(f"{where}: unknown command {name!r}; use one of {sorted(COMMANDS)}")
+            raise KeyMapError(f"{where}: unknown command {name!r}; {did_you_mean(name, COMMANDS)}")
         commands[key] = name
     if ESTOP_KEY in hold:
         raise KeyMapError(f"{source}: {ESTOP_KEY} is the emergency stop and cannot move a joint")

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -25,6 +27,81 @@ CHANNEL_NAMES = (
 )
 
 
+# The keys each table of the profile may hold; any other key is refused by name, so a
+# misspelt optional key is not silently ignored and a misspelt required one is named as
+# what it is rather than reported as its correct spelling "missing".
+TOP_KEYS = (
+    "name",
+    "assumptions",
+    "link",
+    "extension",
+    "video",
+    "cameras",
+    "si",
+    "chassis",
+    "buttons",
+    "channels",
+    "motors",
+)
+LINK_KEYS = (
+    "address",
+    "port",
+    "send_rate_hz",
+    "send_rate_min_hz",
+    "send_rate_max_hz",
+    "robot_watchdog_s",
+    "telemetry_rate_hz",
+    "telemetry_tick_hz",
+    "link_lost_after_s",
+    "gui_alive_timeout_s",
+    "estop_repeats",
+    "estop_window_s",
+    "default_video_bitrate",
+    "camera_names",
+    "frame_types",
+)
+FRAME_TYPE_KEYS = ("rcp", "telemetry", "video")
+EXTENSION_KEYS = (
+    "probe",
+    "frame_types",
+    "max_datagram_bytes",
+    "stream_width_px",
+    "stream_height_px",
+    "stream_fps",
+)
+EXTENSION_FRAME_TYPE_KEYS = ("hello", "video_fragment", "status")
+VIDEO_KEYS = (
+    "no_signal_after_s",
+    "battery_warning_percent",
+    "reassembly_max_frames",
+    "reassembly_max_bytes",
+    "reassembly_timeout_s",
+)
+CAMERA_KEYS = (
+    "model",
+    "calibration_size_px",
+    "focal_px",
+    "centre_px",
+    "distortion",
+    "balance",
+    "undistort",
+    "colour",
+    "fixed_gains_rgb",
+)
+SI_KEYS = (
+    "linear_axis_per_m_s",
+    "rotation_axis_per_rad_s",
+    "joint_axis_per_rad_s",
+    "telemetry_speed_per_rad_s",
+    "telemetry_current_per_amp",
+)
+CHASSIS_KEYS = ("track_width_m",)
+BUTTON_KEYS = ("torch", "camera_select")
+CHANNEL_KEYS = ("axis", "scale", "unit", "min_speed", "default_max", "hard_max")
+# A motor's position keys only mean something with ticks_per_rad.
+MOTOR_POSITION_KEYS = ("zero_offset_ticks", "limits_deg")
+MOTOR_KEYS = ("device_id", "channel", "track", "ticks_per_rad", *MOTOR_POSITION_KEYS)
+
 CAMERA_MODELS = ("fisheye", "standard")
 COLOUR_MODES = ("off", "gray_world", "fixed")
 # Distortion coefficients per model: cv2.fisheye takes k1..k4; the standard (Brown-Conrady)
@@ -34,6 +111,17 @@ DISTORTION_LENGTHS = {"fisheye": (4,), "standard": (4, 5)}
 
 class ProfileError(ValueError):
     """The robot profile is missing a value or holds a bad one."""
+
+
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    """A "did you mean 'x'?" hint for a misspelt word, else the list of choices."""
+    names = list(choices)
+    # Case-blind: "space" is a misspelling of "Space", not an unrelated word.
+    by_folded = {name.casefold(): name for name in names}
+    close = difflib.get_close_matches(word.casefold(), by_folded, n=1)
+    if close:
+        return f"did you mean {by_folded[close[0]]!r}?"
+    return f"known: {', '.join(names)}" if names else "nothing is expected here"
 
 
 @dataclass(frozen=True)
@@ -219,22 +307,39 @@ def load_profile(path: str | Path | None = None) -> RobotProfile:
 
 
 class _Reader:
-    """Typed access to a TOML table with error messages that name the key."""
+    """Typed access to a TOML table with error messages that name the key.
 
-    def __init__(self, table: dict[str, Any], where: str) -> None:
+    With `keys`, a key outside them is refused at once, before any value is read.
+    """
+
+    def __init__(
+        self,
+        table: dict[str, Any],
+        where: str,
+        keys: Collection[str] | None,
+        unknown: str = "unknown key",
+    ) -> None:
         self.table = table
         self.where = where
+        if keys is not None:
+            errors = [
+                f"{where}.{key}: {unknown}; {did_you_mean(key, keys)}"
+                for key in table
+                if key not in keys
+            ]
+            if errors:
+                raise ProfileError("; ".join(errors))
 
     def _get(self, key: str) -> Any:
         if key not in self.table:
             raise ProfileError(f"{self.where}.{key}: missing")
         return self.table[key]
 
-    def sub(self, key: str) -> _Reader:
+    def sub(self, key: str, keys: Collection[str] | None, unknown: str = "unknown key") -> _Reader:
         value = self._get(key)
         if not isinstance(value, dict):
             raise ProfileError(f"{self.where}.{key}: must be a table")
-        return _Reader(value, f"{self.where}.{key}")
+        return _Reader(value, f"{self.where}.{key}", keys, unknown)
 
     def number(self, key: str, *, low: float | None = None, high: float | None = None) -> float:
         value = self._get(key)
@@ -356,6 +461,13 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
             )
         limits_deg = (float(raw_limits[0]), float(raw_limits[1]))
         limits = (math.radians(limits_deg[0]), math.radians(limits_deg[1]))
+    else:
+        for key in MOTOR_POSITION_KEYS:
+            if reader.optional(key):
+                raise ProfileError(
+                    f"{reader.where}.{key}: needs ticks_per_rad (without it the motor "
+                    "reports no position)"
+                )
     return Motor(
         name=name,
         device_id=device_id,
@@ -369,7 +481,7 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
 
 
 def _parse_extension(reader: _Reader, vendor: FrameTypes) -> ExtensionSettings:
-    types_reader = reader.sub("frame_types")
+    types_reader = reader.sub("frame_types", EXTENSION_FRAME_TYPE_KEYS)
     types = ExtensionFrameTypes(
         hello=types_reader.integer("hello", low=0, high=255),
         video_fragment=types_reader.integer("video_fragment", low=0, high=255),
@@ -434,14 +546,13 @@ def _parse_camera(name: str, index: int, reader: _Reader) -> CameraSettings:
 
 def _parse_cameras(root: _Reader, names: tuple[str, ...]) -> tuple[CameraSettings, ...]:
     # A camera without a table has no calibration and no correction by default.
-    tables = root.sub("cameras") if root.optional("cameras") else _Reader({}, "profile.cameras")
-    unknown = set(tables.table) - set(names)
-    if unknown:
-        raise ProfileError(
-            f"profile.cameras: {sorted(unknown)} not in link.camera_names {list(names)}"
-        )
+    tables = (
+        root.sub("cameras", names, unknown="not in link.camera_names")
+        if root.optional("cameras")
+        else _Reader({}, "profile.cameras", None)
+    )
     return tuple(
-        _parse_camera(name, index, tables.sub(name))
+        _parse_camera(name, index, tables.sub(name, CAMERA_KEYS))
         if tables.optional(name)
         else CameraSettings(name=name, index=index)
         for index, name in enumerate(names)
@@ -450,9 +561,9 @@ def _parse_cameras(root: _Reader, names: tuple[str, ...]) -> tuple[CameraSetting
 
 def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfile:
     """Validate a decoded TOML document and build the profile."""
-    root = _Reader(data, "profile")
-    link = root.sub("link")
-    frame_reader = link.sub("frame_types")
+    root = _Reader(data, "profile", TOP_KEYS)
+    link = root.sub("link", LINK_KEYS)
+    frame_reader = link.sub("frame_types", FRAME_TYPE_KEYS)
     frame_types = FrameTypes(
         rcp=frame_reader.integer("rcp", low=0, high=255),
         telemetry=frame_reader.integer("telemetry", low=0, high=255),
@@ -485,34 +596,32 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
         frame_types=frame_types,
     )
 
-    si = root.sub("si")
+    si = root.sub("si", SI_KEYS)
     scales = {
         "linear": si.number("linear_axis_per_m_s", low=1e-9),
         "rotation": si.number("rotation_axis_per_rad_s", low=1e-9),
         "joint": si.number("joint_axis_per_rad_s", low=1e-9),
     }
-    channels_reader = root.sub("channels")
+    channels_reader = root.sub("channels", CHANNEL_NAMES, unknown="unknown channel")
     channels: dict[str, Channel] = {}
     for name in CHANNEL_NAMES:
-        channels[name] = _parse_channel(name, channels_reader.sub(name), scales)
-    unknown = set(channels_reader.table) - set(CHANNEL_NAMES)
-    if unknown:
-        raise ProfileError(f"profile.channels: unknown channels {sorted(unknown)}")
+        channels[name] = _parse_channel(name, channels_reader.sub(name, CHANNEL_KEYS), scales)
     axes = [c.axis for c in channels.values()]
     if len(set(axes)) != len(axes):
         raise ProfileError("profile.channels: two channels share one axis")
 
-    motors_reader = root.sub("motors")
+    # Motors are named by the profile: any name, each a table of known keys.
+    motors_reader = root.sub("motors", None)
     motors: dict[str, Motor] = {}
     for name in motors_reader.table:
-        motors[name] = _parse_motor(name, motors_reader.sub(name), channels)
+        motors[name] = _parse_motor(name, motors_reader.sub(name, MOTOR_KEYS), channels)
     ids = [m.device_id for m in motors.values()]
     if len(set(ids)) != len(ids):
         raise ProfileError("profile.motors: two motors share one device_id")
     if len(motors) > 10:
         raise ProfileError("profile.motors: the telemetry packet carries at most 10 motors")
 
-    buttons = root.sub("buttons")
+    buttons = root.sub("buttons", BUTTON_KEYS)
     torch = buttons.integer("torch", low=0, high=BUTTON_COUNT - 1)
     camera = buttons.integer("camera_select", low=0, high=BUTTON_COUNT - 1)
     if torch == camera:
@@ -529,17 +638,21 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
         motors=motors,
         torch_button=torch,
         camera_button=camera,
-        track_width_m=root.sub("chassis").number("track_width_m", low=0.01),
+        track_width_m=root.sub("chassis", CHASSIS_KEYS).number("track_width_m", low=0.01),
         telemetry_speed_per_rad_s=si.number("telemetry_speed_per_rad_s", low=1e-9),
         telemetry_current_per_amp=si.number("telemetry_current_per_amp", low=1e-9),
         linear_axis_per_m_s=scales["linear"],
         rotation_axis_per_rad_s=scales["rotation"],
         assumptions=tuple(assumptions),
         extension=(
-            _parse_extension(root.sub("extension"), frame_types)
+            _parse_extension(root.sub("extension", EXTENSION_KEYS), frame_types)
             if root.optional("extension")
             else None
         ),
-        video=_parse_video(root.sub("video")) if root.optional("video") else VideoSettings(),
+        video=(
+            _parse_video(root.sub("video", VIDEO_KEYS))
+            if root.optional("video")
+            else VideoSettings()
+        ),
         cameras=_parse_cameras(root, tuple(cameras)),
     )

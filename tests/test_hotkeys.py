@@ -87,15 +87,31 @@ def test_missing_user_file_means_the_default(profile: RobotProfile, tmp_path: Pa
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ('[hold]\n"Ä" = "waist +"\n', "unknown key"),
-        ('[hold]\nK = "tail +"\n', "unknown channel 'tail'"),
+        ('[hold]\n"Ä" = "waist +"\n', "unknown key 'Ä'; known: Escape, 1, 2, "),
+        ('[hold]\nw = "waist +"\n', r"hold\.w: unknown key 'w'; did you mean 'W'\?$"),
+        (
+            '[commands]\nSpcae = "help"\n',
+            r"commands\.Spcae: unknown key 'Spcae'; did you mean 'Space'\?$",
+        ),
+        ('[hold]\nK = "tail +"\n', "unknown channel 'tail'; known: drive_linear, drive_turn, "),
+        ('[hold]\nK = "wasit +"\n', r"hold\.K: unknown channel 'wasit'; did you mean 'waist'\?$"),
         ('[hold]\nK = "waist up"\n', "must be"),
         ("[hold]\nK = 3\n", "must be a string"),
         ('[hold]\nSpace = "waist +"\n', "emergency stop"),
-        ('[commands]\nK = "dance"\n', "unknown command"),
+        ('[commands]\nK = "dance"\n', "unknown command 'dance'; known: emergency_stop, help$"),
+        (
+            '[commands]\nK = "halp"\n',
+            r"commands\.K: unknown command 'halp'; did you mean 'help'\?$",
+        ),
+        (
+            "[options]\nfine_factr = 0.5\n",
+            r"options\.fine_factr: unknown option; .* 'fine_factor'\?$",
+        ),
+        ("[options]\nspeed = 0.5\n", r"options\.speed: unknown option; known: fine_factor$"),
         ("[options]\nfine_factor = 0\n", r"\(0, 1\]"),
         ('[options]\nfine_factor = "x"\n', "must be a number"),
-        ("[keys]\n", "unknown tables"),
+        ("[keys]\n", r"toml: keys: unknown table; known: options, hold, commands$"),
+        ('[holds]\nK = "waist +"\n', r"toml: holds: unknown table; did you mean 'hold'\?$"),
         ("hold = 3\n", "must be a table"),
         ("[hold\n", "not valid TOML"),
     ],
@@ -106,6 +122,13 @@ def test_bad_user_files_are_refused_with_the_reason(
     override = tmp_path / "hotkeys.toml"
     override.write_text(text, encoding="utf-8")
     with pytest.raises(KeyMapError, match=message):
+        load_key_map(profile, override)
+
+
+def test_non_utf8_file_is_refused_with_the_reason(profile: RobotProfile, tmp_path: Path) -> None:
+    override = tmp_path / "hotkeys.toml"
+    override.write_bytes(b'[hold]\nK = "waist \xff"\n')
+    with pytest.raises(KeyMapError, match=r"hotkeys\.toml: not UTF-8 text: .*byte 0xff"):
         load_key_map(profile, override)
 
 

@@ -325,7 +325,7 @@ _LIMITS = r"must be \[low, high\] with low < high$"
             ("channels", "tail"),
             {"axis": 9, "scale": "joint", "unit": "rad/s", "min_speed": 0.0}
             | {"default_max": 0.1, "hard_max": 0.2},
-            r"^profile\.channels: unknown channels \['tail'\]$",
+            r"^profile\.channels\.tail: unknown channel; known: drive_linear, drive_turn, ",
         ),
         # motor limits
         (
@@ -369,6 +369,138 @@ def test_validation_error_names_the_key(path: tuple[str, ...], value: object, me
         parse_profile(_edited(path, value))
 
 
+def _renamed(path: tuple[str, ...], new_name: str) -> dict[str, Any]:
+    """A deep copy of the shipped profile with one key renamed (a misspelling)."""
+    data = copy.deepcopy(SHIPPED_DATA)
+    table = data
+    for key in path[:-1]:
+        table = table[key]
+    table[new_name] = table.pop(path[-1])
+    return data
+
+
+@pytest.mark.parametrize(
+    ("path", "misspelt", "message"),
+    [
+        (("chassis",), "chasis", r"^profile\.chasis: unknown key; did you mean 'chassis'\?$"),
+        (("name",), "Name", r"^profile\.Name: unknown key; did you mean 'name'\?$"),
+        (
+            ("assumptions",),
+            "assumption",
+            r"^profile\.assumption: unknown key; did you mean 'assumptions'\?$",
+        ),
+        (
+            ("link", "send_rate_hz"),
+            "sned_rate_hz",
+            r"^profile\.link\.sned_rate_hz: unknown key; did you mean 'send_rate_hz'\?$",
+        ),
+        (
+            ("link", "frame_types", "telemetry"),
+            "telemetery",
+            r"^profile\.link\.frame_types\.telemetery: unknown key; did you mean 'telemetry'\?$",
+        ),
+        (("extension", "probe"), "prob", r"^profile\.extension\.prob: .*did you mean 'probe'\?$"),
+        (
+            ("extension", "frame_types", "video_fragment"),
+            "video_fragments",
+            r"^profile\.extension\.frame_types\.video_fragments: .* 'video_fragment'\?$",
+        ),
+        (
+            ("video", "no_signal_after_s"),
+            "no_signal_after",
+            r"^profile\.video\.no_signal_after: unknown key; did you mean 'no_signal_after_s'\?$",
+        ),
+        (
+            ("cameras", "front"),
+            "frnt",
+            r"^profile\.cameras\.frnt: not in link\.camera_names; did you mean 'front'\?$",
+        ),
+        (
+            ("cameras", "front", "undistort"),
+            "undistrot",
+            r"^profile\.cameras\.front\.undistrot: unknown key; did you mean 'undistort'\?$",
+        ),
+        (
+            ("si", "joint_axis_per_rad_s"),
+            "joint_axis_per_rad",
+            r"^profile\.si\.joint_axis_per_rad: .*did you mean 'joint_axis_per_rad_s'\?$",
+        ),
+        (
+            ("chassis", "track_width_m"),
+            "track_width",
+            r"^profile\.chassis\.track_width: unknown key; did you mean 'track_width_m'\?$",
+        ),
+        (
+            ("buttons", "camera_select"),
+            "camera",
+            r"^profile\.buttons\.camera: unknown key; did you mean 'camera_select'\?$",
+        ),
+        (
+            ("channels", "waist"),
+            "wasit",
+            r"^profile\.channels\.wasit: unknown channel; did you mean 'waist'\?$",
+        ),
+        (
+            ("channels", "waist", "min_speed"),
+            "minspeed",
+            r"^profile\.channels\.waist\.minspeed: unknown key; did you mean 'min_speed'\?$",
+        ),
+        (
+            ("motors", "waist", "limits_deg"),
+            "limit_deg",
+            r"^profile\.motors\.waist\.limit_deg: unknown key; did you mean 'limits_deg'\?$",
+        ),
+        # Not "zero_offset_ticks: needs ticks_per_rad": the misspelling is what is wrong.
+        (
+            ("motors", "waist", "ticks_per_rad"),
+            "ticks_per_rads",
+            r"^profile\.motors\.waist\.ticks_per_rads: .*did you mean 'ticks_per_rad'\?$",
+        ),
+        (
+            ("link", "address"),
+            "host",
+            r"^profile\.link\.host: unknown key; known: address, port, send_rate_hz, ",
+        ),
+    ],
+)
+def test_unknown_key_is_named_with_a_suggestion(
+    path: tuple[str, ...], misspelt: str, message: str
+) -> None:
+    with pytest.raises(ProfileError, match=message):
+        parse_profile(_renamed(path, misspelt))
+
+
+def test_every_unknown_key_of_a_table_is_named() -> None:
+    data = _edited(("buttons", "torhc"), 0)
+    data["buttons"]["camera_selcet"] = 1
+    with pytest.raises(ProfileError) as error:
+        parse_profile(data)
+    assert str(error.value) == (
+        "profile.buttons.torhc: unknown key; did you mean 'torch'?; "
+        "profile.buttons.camera_selcet: unknown key; did you mean 'camera_select'?"
+    )
+
+
+def test_optional_keys_stay_optional() -> None:
+    data = copy.deepcopy(SHIPPED_DATA)
+    for key in ("assumptions", "extension", "video", "cameras"):
+        del data[key]
+    del data["motors"]["waist"]["channel"]
+    profile = parse_profile(data)
+    assert profile.assumptions == ()
+    assert profile.motors["waist"].channel is None
+    assert not profile.motors["left_track"].has_position  # a motor without ticks_per_rad
+
+
+@pytest.mark.parametrize("key", ["zero_offset_ticks", "limits_deg"])
+def test_position_keys_need_ticks_per_rad(key: str) -> None:
+    data = _edited(("motors", "left_track", key), SHIPPED_DATA["motors"]["waist"][key])
+    with pytest.raises(
+        ProfileError, match=rf"^profile\.motors\.left_track\.{key}: needs ticks_per_rad "
+    ):
+        parse_profile(data)
+
+
 def test_profile_error_is_a_value_error() -> None:
     assert issubclass(ProfileError, ValueError)
 
@@ -406,8 +538,13 @@ def test_infinite_limits_are_refused(limits: list[float]) -> None:
         ("torch = 0 ", "torch = 1 ", r"^profile\.buttons: torch and camera_select must differ$"),
         ("video = 0x03", "video = 0x02", r"^profile\.link\.frame_types: the three IDs must differ"),
         ("device_id = 8\n", "device_id = 7\n", r"^profile\.motors: two motors share one device_id"),
+        (
+            "send_rate_hz = 5.0",
+            "sned_rate_hz = 5.0",
+            r"^profile\.link\.sned_rate_hz: unknown key; did you mean 'send_rate_hz'\?$",
+        ),
     ],
-    ids=["inf", "nan", "port-string", "torch-camera", "frame-types", "device-id"],
+    ids=["inf", "nan", "port-string", "torch-camera", "frame-types", "device-id", "misspelt"],
 )
 def test_edited_file(tmp_path: Path, old: str, new: str, message: str) -> None:
     path = _write(tmp_path, _replace_once(SHIPPED_TEXT, old, new))
@@ -446,5 +583,5 @@ def test_directory_instead_of_file(tmp_path: Path) -> None:
 def test_not_utf8(tmp_path: Path) -> None:
     path = tmp_path / "robot.toml"
     path.write_bytes(b"name = '\xff'\n")
-    with pytest.raises(ProfileError, match=r"robot\.toml: "):
+    with pytest.raises(ProfileError, match=r"robot\.toml: not UTF-8 text: .*byte 0xff"):
         load_profile(path)

@@ -24,7 +24,7 @@ from typing import Any, BinaryIO
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Attachment, Channel, Chunk, Message, Metadata, Schema
+from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 
@@ -35,6 +35,8 @@ from ocu.record.errors import RecordingError
 log = logging.getLogger("ocu.record")
 
 MAGIC = b"\x89MCAP0\r\n"
+# How many topics the refusal of a foreign file names.
+FOREIGN_TOPICS_SHOWN = 8
 _RECORD_HEAD = struct.Struct("<BQ")
 _CHUNK_TIMES = struct.Struct("<QQ")
 
@@ -71,6 +73,7 @@ class Recording:
             raise RecordingError(f"cannot open {self.path}: {err.strerror or err}") from err
         try:
             self.size_bytes = self.path.stat().st_size
+            self.library = ""
             self.truncated = True
             self.metadata: dict[str, str] = {}
             self.profile_toml: bytes | None = None
@@ -84,6 +87,7 @@ class Recording:
             if self.chunks and not self.channels:
                 # A file cut short has no summary: its channels sit in the first chunk.
                 self.read_chunk(0)
+            self._check_ours()
         except BaseException:
             self._file.close()
             raise
@@ -105,7 +109,13 @@ class Recording:
             if opcode == Opcode.CHUNK:
                 start_ns, end_ns = _CHUNK_TIMES.unpack(f.read(_CHUNK_TIMES.size))
                 self.chunks.append(ChunkInfo(offset, length, start_ns, end_ns))
-            elif opcode in (Opcode.METADATA, Opcode.ATTACHMENT, Opcode.CHANNEL, Opcode.SCHEMA):
+            elif opcode in (
+                Opcode.HEADER,
+                Opcode.METADATA,
+                Opcode.ATTACHMENT,
+                Opcode.CHANNEL,
+                Opcode.SCHEMA,
+            ):
                 self._top_level(opcode, self._body(body_at, length))
             elif opcode == Opcode.FOOTER:
                 self.truncated = False
@@ -118,7 +128,9 @@ class Recording:
 
     def _top_level(self, opcode: int, body: ReadDataStream) -> None:
         try:
-            if opcode == Opcode.METADATA:
+            if opcode == Opcode.HEADER:
+                self.library = Header.read(body).library
+            elif opcode == Opcode.METADATA:
                 metadata = Metadata.read(body)
                 if metadata.name == s.METADATA_NAME:
                     self.metadata = dict(metadata.metadata)
@@ -134,6 +146,23 @@ class Recording:
                 self.schemas[schema.id] = schema
         except (McapError, struct.error, UnicodeDecodeError) as err:
             log.warning("%s: skipped a damaged record: %s", self.path, err)
+
+    def _check_ours(self) -> None:
+        # Every ocu recording starts with its metadata record (written, and flushed, before
+        # any message); without it the topics and encodings are another tool's, and reading
+        # them as ocu's would replay nothing and count their messages as the robot's.
+        if self.metadata:
+            return
+        topics = sorted(
+            {f"{c.topic} ({c.message_encoding or 'no encoding'})" for c in self.channels.values()}
+        )
+        shown = ", ".join(topics[:FOREIGN_TOPICS_SHOWN]) or "none"
+        if len(topics) > FOREIGN_TOPICS_SHOWN:
+            shown += f" and {len(topics) - FOREIGN_TOPICS_SHOWN} more"
+        raise RecordingError(
+            f"{self.path} is not an ocu recording (no {s.METADATA_NAME!r} metadata): "
+            f"written by {self.library or 'an unnamed library'!r}, channels: {shown}"
+        )
 
     def close(self) -> None:
         """Close the file."""

@@ -1,6 +1,7 @@
 """Command line of the simulator: `ocu-sim` and `python -m ocu.sim`.
 
 Signals: SIGUSR1 cuts the link, SIGUSR2 restores it, SIGINT and SIGTERM stop cleanly (exit 0).
+With --exit-with-parent, the end of standard input stops it the same way (see launcher.py).
 """
 
 from __future__ import annotations
@@ -8,8 +9,10 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import signal
 import sys
+import threading
 from collections.abc import Sequence
 
 from ocu.profile import ProfileError, load_profile
@@ -23,6 +26,7 @@ log = logging.getLogger("ocu.sim")
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _HANDLED_SIGNALS = (*_STOP_SIGNALS, signal.SIGUSR1, signal.SIGUSR2)
+STDIN_FD = 0
 
 
 def _number(text: str) -> float:
@@ -142,9 +146,27 @@ def build_parser() -> argparse.ArgumentParser:
         help="battery drain at rest, in percent per second (default %(default)s)",
     )
     parser.add_argument(
+        "--exit-with-parent",
+        action="store_true",
+        help="stop cleanly when standard input reaches its end: started with stdin a pipe "
+        "from the parent, the simulator then exits when the parent dies, even by SIGKILL "
+        "(ocu and ocu-ros start their built-in simulator this way)",
+    )
+    parser.add_argument(
         "--log-level", type=str.upper, choices=LOG_LEVELS, default="INFO", help="logging level"
     )
     return parser
+
+
+def _stop_at_end_of_stdin() -> None:
+    """Read stdin to its end, then SIGTERM ourselves so main's sigwait runs the shutdown."""
+    try:
+        while os.read(STDIN_FD, 4096):
+            pass
+    except OSError:
+        pass  # no usable stdin: as good as closed
+    log.info("standard input closed (parent gone)")
+    os.kill(os.getpid(), signal.SIGTERM)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -169,6 +191,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     # main thread alone takes them, synchronously, with sigwait.
     previous_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _HANDLED_SIGNALS)
     try:
+        if args.exit_with_parent:
+            # Started under the mask too: its SIGTERM must reach sigwait, not the default action.
+            threading.Thread(
+                target=_stop_at_end_of_stdin, name="ocu-sim-stdin", daemon=True
+            ).start()
         try:
             simulator = RobotSimulator(
                 profile,

@@ -1,13 +1,21 @@
-"""Start `ocu-sim` as a child process and learn the port it listens on."""
+"""Start `ocu-sim` as a child process and learn the port it listens on.
+
+The child is started with `--exit-with-parent` and its standard input a pipe that only this
+process writes to: when this process ends in any way, SIGKILL included, the kernel closes
+the pipe and the simulator stops itself instead of running on, orphaned.
+"""
 
 from __future__ import annotations
 
+import logging
 import re
 import selectors
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+log = logging.getLogger("ocu.sim")
 
 LISTENING_LINE = re.compile(r"ocu-sim listening on (?P<host>[^:\s]+):(?P<port>\d+)")
 
@@ -26,14 +34,22 @@ class SimulatorProcess:
         start_timeout_s: float = 15.0,
     ) -> None:
         command = [sys.executable, "-m", "ocu.sim", "--host", "127.0.0.1", "--port", "0"]
+        command.append("--exit-with-parent")
         if profile_path is not None:
             command += ["--profile", str(profile_path)]
         command += extra_args or []
+        # Nothing is ever written to stdin: the pipe is there to be closed when we die.
         self.process = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1
+            command,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=None,
+            text=True,
+            bufsize=1,
         )
         try:
             self.address = self._read_address(start_timeout_s)
+            log.info("simulator pid %d listening on %s:%d", self.process.pid, *self.address)
         except BaseException:
             self.stop()
             raise
@@ -65,8 +81,9 @@ class SimulatorProcess:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
-        if self.process.stdout is not None:
-            self.process.stdout.close()
+        for pipe in (self.process.stdin, self.process.stdout):
+            if pipe is not None:
+                pipe.close()
 
     def __enter__(self) -> SimulatorProcess:
         return self

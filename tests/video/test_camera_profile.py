@@ -86,7 +86,11 @@ def test_profile_without_extension_or_cameras_is_vendor_only() -> None:
         (("cameras", "stereo", "colour"), "auto", r"stereo\.colour: must be one of"),
         (("cameras", "stereo", "balance"), 2.0, r"stereo\.balance: must be <= 1\.0"),
         (("cameras", "stereo", "fixed_gains_rgb"), [1.0, -1.0, 1.0], r"every value must be >= 0"),
-        (("cameras", "nose"), {}, r"^profile\.cameras: \['nose'\] not in link\.camera_names"),
+        (
+            ("cameras", "nose"),
+            {},
+            r"^profile\.cameras\.nose: not in link\.camera_names; known: front, zoom",
+        ),
         (("link", "camera_names"), ["a", "a"], r"names must be distinct"),
     ],
 )
