@@ -43,6 +43,8 @@ DEFAULT_MAX_GAIN_PER_S = 10.0
 # then still leaves the delayed correction loop a phase margin above 30°.
 DEFAULT_GAIN_DELAY_PRODUCT = 1.5
 DEFAULT_TOLERANCE_RAD = math.radians(0.3)
+# A moving joint stops when its predicted error is within this share of the tolerance.
+STOP_FRACTION = 0.5
 # A target counts as reached when the estimate, widened by twice its uncertainty, lies in
 # this band (the settle band the benchmarks measure against).
 REACHED_BAND_RAD = math.radians(0.5)
@@ -440,10 +442,16 @@ class PositionController:
         estimate = predictor.eventual(now)
         error = track.target_rad - estimate
         sigma = predictor.sigma_rad
-        # Holding still near the target, only a clearly wrong estimate starts a correction:
-        # noisy readings must not make the joint twitch back and forth.
-        threshold = self.tolerance_rad + (2.0 * sigma if track.holding else 0.0)
-        if abs(error) <= threshold:
+        # Moving, the joint stops in the middle of the tolerance, leaving room for the small
+        # errors of the model. Holding still near the target, a correction starts only when
+        # the estimate is out of the tolerance by more than its own uncertainty: noisy
+        # readings must not make the joint twitch back and forth, and a confident estimate
+        # just outside must not leave it waiting for a confirmation that cannot come.
+        if track.holding:
+            correct = abs(error) > self.tolerance_rad and abs(error) > 2.0 * sigma
+        else:
+            correct = abs(error) > STOP_FRACTION * self.tolerance_rad
+        if not correct:
             track.holding = True
             if track.near_since is None:
                 track.near_since = now
@@ -455,7 +463,7 @@ class PositionController:
                     f"{name}: stopped near {math.degrees(track.target_rad):.1f}° without "
                     f"confirming ±{math.degrees(self.tolerance_rad):.1f}°: readings scatter "
                     f"±{math.degrees(predictor.noise_rad):.1f}° (σ), estimate "
-                    f"{math.degrees(estimate):.1f}° ± {math.degrees(sigma):.1f}°",
+                    f"{math.degrees(estimate):.2f}° ± {math.degrees(sigma):.2f}°",
                 )
             return 0.0
         track.holding = False

@@ -9,9 +9,30 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from ocu.control.commands import JointReading
-from ocu.control.position import PositionController
 
 CONTROL_PERIOD_S = 0.02
+
+
+class Controller(Protocol):
+    """What the runner drives: PositionController, or a benchmark's baseline."""
+
+    @property
+    def targets(self) -> dict[str, float]: ...
+
+    def channel_of(self, joint: str) -> str: ...
+
+    def on_telemetry(
+        self,
+        readings: Mapping[str, JointReading],
+        received_at: float,
+        delay_s: float | None = None,
+    ) -> None: ...
+
+    def note_sent(self, now: float, velocities: Mapping[str, float]) -> None: ...
+
+    def update(self, now: float) -> dict[str, float]: ...
+
+    def pop_messages(self) -> list[str]: ...
 
 
 class CommandSink(Protocol):
@@ -27,6 +48,8 @@ class RunResult:
     """What happened during one run: messages and the measured angle trace."""
 
     messages: list[str] = field(default_factory=list)
+    # (clock time, message) of each message, for judging it against ground truth.
+    events: list[tuple[float, str]] = field(default_factory=list)
     trace: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     finished: bool = False
     elapsed_s: float = 0.0
@@ -39,7 +62,7 @@ class PositionRunner:
     thread, so the controller itself needs no locking.
     """
 
-    def __init__(self, controller: PositionController, sink: CommandSink) -> None:
+    def __init__(self, controller: Controller, sink: CommandSink) -> None:
         self.controller = controller
         self.sink = sink
         self._telemetry: queue.Queue[tuple[Mapping[str, JointReading], float, float | None]] = (
@@ -87,7 +110,9 @@ class PositionRunner:
             self.sink.heartbeat()
             self.sink.set_velocities(**velocities)
             self.controller.note_sent(now, velocities)
-            result.messages.extend(self.controller.pop_messages())
+            for message in self.controller.pop_messages():
+                result.messages.append(message)
+                result.events.append((now, message))
             if not self.controller.targets:
                 idle_since = now if idle_since is None else idle_since
                 if now - idle_since >= settle_s:
