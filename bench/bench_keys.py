@@ -3,7 +3,9 @@
 A W key press goes through Qt's event delivery, the console's application event filter,
 ocu.hotkeys, the operator model and the link, onto a UDP socket; the simulator stamps the
 RCP when it reads it. Baseline from the same run: a link that sends only on its periodic
-5 Hz tick, as the paper's client does.
+5 Hz tick, as the paper's client does. Then the same presses (and their releases) while the
+robot floods the link with telemetry (`--flood-hz`, 1000 packets/s): the views take telemetry
+at most 30 times a second, so the flood must not delay the keys.
 
     .venv/bin/python bench/bench_keys.py [--presses 500] [--baseline-presses 60]
 """
@@ -60,12 +62,22 @@ def first_rcp_after(
 
 
 def measure(
-    app: QApplication, profile: RobotProfile, presses: int, at_once: bool, max_gap_s: float
+    app: QApplication,
+    profile: RobotProfile,
+    presses: int,
+    at_once: bool,
+    max_gap_s: float,
+    *,
+    telemetry_hz: float = 10.0,
+    releases: list[float] | None = None,
 ) -> list[float]:
-    """Press-to-wire latencies (ms) of W presses on a console against the simulator."""
+    """Press-to-wire latencies (ms) of W presses on a console against the simulator.
+
+    With `releases`, the release-to-zero latencies are appended to it.
+    """
     with (
         tempfile.TemporaryDirectory() as config,
-        RobotSimulator(profile, telemetry_hz=10.0, video_fps=0.0) as sim,
+        RobotSimulator(profile, telemetry_hz=telemetry_hz, video_fps=0.0) as sim,
     ):
         settings = QSettings(os.path.join(config, "ocu.ini"), QSettings.Format.IniFormat)
 
@@ -88,8 +100,11 @@ def measure(
             rcp = first_rcp_after(sim, profile, count, moving=True)
             latencies.append((rcp.time_s - pressed_at) * 1000.0)
             count = len(sim.received_commands())
+            released_at = time.monotonic()
             QTest.keyRelease(window, Qt.Key.Key_W)
-            first_rcp_after(sim, profile, count, moving=False)
+            stop = first_rcp_after(sim, profile, count, moving=False)
+            if releases is not None:
+                releases.append((stop.time_s - released_at) * 1000.0)
         window.close()
         app.processEvents()
         return latencies
@@ -99,6 +114,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--presses", type=int, default=500)
     parser.add_argument("--baseline-presses", type=int, default=60)
+    parser.add_argument("--flood-hz", type=float, default=1000.0, help="0: no flood run")
     args = parser.parse_args()
     app = QApplication.instance() or QApplication([])
     assert isinstance(app, QApplication)
@@ -118,6 +134,20 @@ def main() -> None:
         f"  ({len(base)} presses, the paper's client)"
     )
     print(f"  tick-only median / console p99 = {percentile(base, 50) / percentile(ours, 99):.0f}x")
+    if args.flood_hz > 0:
+        releases: list[float] = []
+        flood = measure(
+            app, profile, args.presses, True, 0.02, telemetry_hz=args.flood_hz, releases=releases
+        )
+        print(f"the same under a telemetry flood of {args.flood_hz:.0f} packets/s")
+        print(
+            f"  press -> RCP  : p50 {percentile(flood, 50):.2f} ms  "
+            f"p99 {percentile(flood, 99):.2f} ms  max {max(flood):.2f} ms  (target p99 < 10 ms)"
+        )
+        print(
+            f"  release -> zero: p50 {percentile(releases, 50):.2f} ms  "
+            f"p99 {percentile(releases, 99):.2f} ms  max {max(releases):.2f} ms"
+        )
 
 
 if __name__ == "__main__":

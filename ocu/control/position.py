@@ -60,10 +60,15 @@ DEFAULT_PERIOD_S = 0.05
 MODEL_SPEED_ERROR = 0.05
 DRIFT_RAD_PER_S = math.radians(0.01)
 NOISE_FLOOR_RAD = math.radians(0.01)
+# A reading taken while the joint moves at v is off by v times the error of its delay.
+DELAY_SIGMA_S = 0.03
 NOISE_PRIOR_RAD = math.radians(0.2)
-NOISE_ALPHA = 0.2
-# Consecutive readings closer than this in commanded travel show the reading noise.
-NOISE_PAIR_TRAVEL_RAD = math.radians(1.0)
+NOISE_ALPHA = 0.1
+# The first samples of the reading noise are averaged, later ones smoothed with NOISE_ALPHA.
+NOISE_AVERAGE_SAMPLES = 8
+# Consecutive readings closer than this in commanded travel show the reading noise (less
+# the model's own error over that travel).
+NOISE_PAIR_TRAVEL_RAD = math.radians(5.0)
 # Give up confirming after this many telemetry periods (plus two delays), 4 s at least.
 SETTLE_PERIODS = 8.0
 MIN_SETTLE_TIMEOUT_S = 4.0
@@ -94,6 +99,7 @@ class JointPredictor:
         self.last_received_at: float | None = None
         self.last_taken_at: float | None = None
         self._last_observation: tuple[float, float] | None = None  # (b_obs, A at taken)
+        self._last_delay_var = 0.0
 
     # ---- commands --------------------------------------------------------------------------
 
@@ -153,25 +159,32 @@ class JointPredictor:
         taken_at = received_at - delay_s
         integral, travel = self._integrals(taken_at)
         observed = angle_rad - integral
+        # A reading of a moving joint is also off by its speed times the delay's error.
+        delay_var = (self.velocity(taken_at) * DELAY_SIGMA_S) ** 2
         if self.offset_rad is None or self.last_taken_at is None:
             self.offset_rad = observed
-            self.variance = self.noise_var
+            self.variance = self.noise_var + delay_var
         else:
             moved = abs(travel - self._last_travel())
             elapsed = max(taken_at - self.last_taken_at, 0.0)
             self.variance += (MODEL_SPEED_ERROR * moved) ** 2 + (DRIFT_RAD_PER_S * elapsed) ** 2
-            gain = self.variance / (self.variance + self.noise_var)
+            gain = self.variance / (self.variance + self.noise_var + delay_var)
             self.offset_rad += gain * (observed - self.offset_rad)
             self.variance *= 1.0 - gain
             if self._last_observation is not None and moved <= NOISE_PAIR_TRAVEL_RAD:
-                # Two readings with (almost) no travel between them differ by noise alone.
+                # Two observations of the offset differ by the noise of two readings and the
+                # model's errors over the travel between them.
                 difference = observed - self._last_observation[0]
-                sample = max(difference * difference / 2.0, NOISE_FLOOR_RAD**2)
-                if self.noise_samples == 0:
+                model_var = (MODEL_SPEED_ERROR * moved) ** 2 + delay_var + self._last_delay_var
+                sample = max((difference * difference - model_var) / 2.0, NOISE_FLOOR_RAD**2)
+                self.noise_samples += 1
+                if self.noise_samples == 1:
                     self.noise_var = sample
+                elif self.noise_samples <= NOISE_AVERAGE_SAMPLES:
+                    self.noise_var += (sample - self.noise_var) / self.noise_samples
                 else:
                     self.noise_var += NOISE_ALPHA * (sample - self.noise_var)
-                self.noise_samples += 1
+        self._last_delay_var = delay_var
         self._last_observation = (observed, travel)
         self.last_angle_rad = angle_rad
         self.last_received_at = received_at

@@ -382,3 +382,91 @@ def test_reaches_targets_over_a_slow_noisy_link(profile: RobotProfile) -> None:
         check_arrived(sim, truth, targets_deg, messages)
     finally:
         sim.stop()
+
+
+class InjectWhenMoving(LinkListener):
+    """Forwards telemetry; once the shoulder reads past an angle, its encoder breaks."""
+
+    def __init__(self, runner: PositionRunner, sim: RobotSimulator, past_rad: float) -> None:
+        self.runner = runner
+        self.sim = sim
+        self.past_rad = past_rad
+        self.broken = False
+
+    def telemetry_received(self, frame: TelemetryFrame) -> None:
+        shoulder = frame.readings.get("shoulder")
+        if not self.broken and shoulder is not None and (shoulder.angle_rad or 0) > self.past_rad:
+            self.broken = True
+            self.sim.set_raw_position("shoulder", 0)
+        self.runner.on_readings(frame.readings, frame.received_at, frame.delay_s)
+
+
+@pytest.mark.slow
+def test_a_broken_encoder_never_drives_the_joint_the_wrong_way(profile: RobotProfile) -> None:
+    # Today's main drove the shoulder from 30° toward -2.9° on a raw reading of 0.
+    sim = RobotSimulator(profile, telemetry_hz=10.0, video_fps=0.0,
+                         initial_joints={"shoulder": math.radians(30)})  # fmt: skip
+    sim.start()
+    controller = PositionController(profile, VelocityLimits(profile))
+    link = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+    runner = PositionRunner(controller, link)
+    listener = InjectWhenMoving(runner, sim, math.radians(40))
+    link.listener = listener
+    link.start()
+    truth = StateRecorder(sim)
+    try:
+        assert sim.wait_until(lambda s: s.telemetry_sent >= 2, 5.0)
+        controller.set_target("shoulder", math.radians(100))
+        result = runner.run(timeout_s=10.0)
+        lowest = min(math.degrees(s.joints_rad["shoulder"]) for s in truth.samples)
+        with pytest.raises(PositionError, match=r"implausible .*0x00000000"):
+            controller.set_target("shoulder", math.radians(60))
+    finally:
+        truth.stop()
+        link.shutdown()
+        sim.stop()
+    assert listener.broken
+    assert result.finished
+    assert len(result.messages) == 1
+    assert "reading implausible" in result.messages[0]
+    assert "zero_offset_ticks" in result.messages[0]
+    assert lowest >= 29.9
+    assert math.degrees(sim.state().joints_rad["shoulder"]) < 60  # stopped soon after
+
+
+@pytest.mark.slow
+def test_reordered_telemetry_does_not_pull_the_estimate_back(profile: RobotProfile) -> None:
+    # 150 ms of jitter at 10 Hz telemetry reorders packets; main peaked at 67.4° for 60°.
+    faults = FaultConfig(latency_ms=50.0, jitter_ms=150.0)
+    sim = RobotSimulator(profile, telemetry_hz=10.0, video_fps=0.0, faults=faults, seed=3,
+                         initial_joints={"shoulder": math.radians(10)})  # fmt: skip
+    sim.start()
+    try:
+        messages, truth = control_in_sim(profile, sim, {"shoulder": 60.0}, 20.0)
+        check_arrived(sim, truth, {"shoulder": 60.0}, messages)
+    finally:
+        sim.stop()
+
+
+@pytest.mark.slow
+def test_readings_too_noisy_to_confirm_end_the_target(profile: RobotProfile) -> None:
+    # ±3.3° of reading noise: main hunted until the console closed.
+    sim = RobotSimulator(profile, telemetry_hz=10.0, video_fps=0.0, noise_deg=3.3, seed=4)
+    sim.start()
+    try:
+        controller = PositionController(profile, VelocityLimits(profile))
+        link = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+        runner = PositionRunner(controller, link)
+        link.listener = Forward(runner)
+        link.start()
+        try:
+            assert sim.wait_until(lambda s: s.telemetry_sent >= 2, 5.0)
+            controller.set_target("elbow", math.radians(40))
+            result = runner.run(timeout_s=30.0)
+        finally:
+            link.shutdown()
+        assert result.finished, "the target never ended"
+        assert len(result.messages) == 1
+        assert math.degrees(sim.state().joints_rad["elbow"]) == pytest.approx(40, abs=2.0)
+    finally:
+        sim.stop()
