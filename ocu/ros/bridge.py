@@ -487,9 +487,11 @@ class BridgeCore:
                 if self._in_control:
                     self._release()
                     self._update_state()
-                log.warning(
-                    "link %s%s: ROS commands refused, zeros sent%s",
-                    state.value,
+                # A closed link is the normal end of a run: worth a line, not a warning.
+                log.log(
+                    logging.WARNING if state is LinkState.LOST else logging.INFO,
+                    "%s%s: ROS commands refused, zeros sent%s",
+                    "LINK LOST" if state is LinkState.LOST else "link closed",
                     f" ({reason})" if reason else "",
                     f" (stopped {', '.join(stopped)})" if stopped else "",
                 )
