@@ -4,8 +4,10 @@
     .venv/bin/python bench/bench_ros.py --count 1000
 
 Starts a private roscore on a free port and `python -m ocu.ros.node` against a bare UDP socket
-on 127.0.0.1 that plays the robot. Each message carries a new linear speed, so the node's link
-sends it at once; its arrival is matched by the drive axis value. The baseline, measured in
+on 127.0.0.1 that plays the robot: it answers with an empty telemetry packet twice a second,
+so the link stays connected (the node refuses cmd_vel while the link is LOST). Each message
+carries a new linear speed, so the node's link sends it at once; its arrival is matched by
+the drive axis value. The baseline, measured in
 the same run against the same socket, is LinkCore.set_velocities called directly.
 """
 
@@ -30,7 +32,7 @@ import numpy as np
 from ocu.control.commands import make_codec
 from ocu.link.core import LinkCore
 from ocu.profile import RobotProfile, load_profile
-from ocu.protocol import ProtocolError, RemoteControlPacket
+from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket
 from ocu.ros.environment import missing_ros
 from ocu.ros.master import RosMaster
 
@@ -38,6 +40,8 @@ WARMUP = 20
 PAUSE_S = 0.01
 ARRIVAL_TIMEOUT_S = 2.0
 NODE_NAME = "ocu_ros_bench"
+# Well within the link's 3 s LINK LOST, and light next to the cmd_vel stream measured.
+TELEMETRY_PERIOD_S = 0.5
 MAX_LINEAR_M_S = 0.45
 
 
@@ -47,7 +51,8 @@ def percentile(values: list[float], q: float) -> float:
 
 
 class Robot:
-    """A bare socket on 127.0.0.1: timestamps the first RCP carrying each drive axis value."""
+    """A bare socket on 127.0.0.1: timestamps the first RCP carrying each drive axis value
+    and keeps its sender's link connected with empty telemetry packets."""
 
     def __init__(self, profile: RobotProfile) -> None:
         self.codec = make_codec(profile)
@@ -57,6 +62,8 @@ class Robot:
         self.sock.settimeout(0.2)
         self.address: tuple[str, int] = self.sock.getsockname()
         self.first_seen: dict[int, float] = {}
+        self._telemetry_due: dict[tuple[str, int], float] = {}
+        self._tick = 0
         self.cond = threading.Condition()
         self._stop = False
         self.thread = threading.Thread(target=self._run, name="bench-robot")
@@ -65,7 +72,7 @@ class Robot:
     def _run(self) -> None:
         while not self._stop:
             try:
-                data = self.sock.recv(65536)
+                data, sender = self.sock.recvfrom(65536)
             except TimeoutError:
                 continue
             arrived = time.perf_counter()
@@ -77,6 +84,14 @@ class Robot:
                 with self.cond:
                     self.first_seen.setdefault(packet.axes[self.axis], arrived)
                     self.cond.notify_all()
+                self._answer(sender, arrived)
+
+    def _answer(self, sender: tuple[str, int], now: float) -> None:
+        if now < self._telemetry_due.get(sender, 0.0):
+            return
+        self._telemetry_due[sender] = now + TELEMETRY_PERIOD_S
+        self._tick += 1
+        self.sock.sendto(self.codec.encode(TelemetryPacket(tick=self._tick)), sender)
 
     def wait_for(self, axis_value: int) -> float:
         with self.cond:

@@ -1,13 +1,21 @@
-"""What the ROS bridge decides, without ROS or Qt: the 0.2 rule, cmd_vel timeout, joint goals.
+"""What the ROS bridge decides, without ROS or Qt: drive scaling, timeouts, link loss, goals.
 
 `BridgeCore` turns velocity commands (cmd_vel) and joint position goals into channel
 velocities for a command sink (a `LinkCore`), and stops what it started when cmd_vel stops
-coming. The rospy wrapper (`ocu.ros.rosbridge`) only converts messages and calls it; the
-console can host the same core and take control back from ROS at once (`override`).
+coming or the link is lost. The rospy wrapper (`ocu.ros.rosbridge`) only converts messages
+and calls it; the console can host the same core and take control back from ROS at once
+(`override`).
 
 cmd_vel mapping: `linear.x` drives `drive_linear` (m/s, forward positive) and `angular.z`
 drives `drive_turn` (rad/s, counter-clockwise positive). A crawler cannot move sideways, up,
-or roll: the other four Twist components are ignored.
+or roll: the other four Twist components are ignored. Both speeds are bounded and lifted to
+the servos' starting speed with one common factor, so the turn radius is kept
+(`ocu.control.drive.scale_drive`, seed 002 eq. 5.1-5.4).
+
+Link loss: while the link is LOST the bridge sends zeros whatever cmd_vel says; once it is
+CONNECTED again, cmd_vel must have been zero or silent for the cmd_vel timeout before a
+non-zero one drives again, so a planner still streaming its old command does not restart
+the robot the moment the link comes back (the console's rule: nothing resumes by itself).
 """
 
 from __future__ import annotations
@@ -22,6 +30,7 @@ from enum import Enum, IntEnum
 from typing import Protocol
 
 from ocu.control.commands import JointReading, VelocityLimits
+from ocu.control.drive import DriveBounds, DriveError, scale_drive
 from ocu.control.position import PositionController, PositionError
 from ocu.link.core import LinkState
 from ocu.link.stats import LinkStats
@@ -33,6 +42,10 @@ DRIVE_LINEAR = "drive_linear"
 DRIVE_TURN = "drive_turn"
 DRIVE_CHANNELS = (DRIVE_LINEAR, DRIVE_TURN)
 DEFAULT_CMD_VEL_TIMEOUT_S = 0.5
+# A longer silence would let a dead planner's last command run on for too long: the robot's
+# own watchdog is 1 s, and the timeout also sets how long cmd_vel must be quiet after a
+# link loss before ROS may drive again.
+MAX_CMD_VEL_TIMEOUT_S = 2.0
 DEFAULT_RATE_HZ = 50.0
 RATE_RANGE_HZ = (5.0, 500.0)
 # Telemetry loss above this fraction makes the link diagnostics a warning.
@@ -42,21 +55,6 @@ UNKNOWN_CAMERA = "unknown"
 
 class BridgeError(ValueError):
     """A bridge setting or a velocity command that cannot be used."""
-
-
-def raise_to_minimum(value: float, minimum: float) -> float:
-    """The paper's rule: a speed with 0 < |value| < minimum becomes ±minimum, sign kept.
-
-    Zero stays zero (stop), and speeds at or above the minimum pass unchanged: below it the
-    Engineer's servos do not start moving.
-    """
-    if not math.isfinite(value):
-        raise BridgeError(f"speed must be a finite number, got {value!r}")
-    if not (math.isfinite(minimum) and minimum >= 0.0):
-        raise BridgeError(f"minimum speed must be finite and >= 0, got {minimum!r}")
-    if value == 0.0 or abs(value) >= minimum:
-        return value
-    return math.copysign(minimum, value)
 
 
 @dataclass(frozen=True)
@@ -77,8 +75,12 @@ class BridgeSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise BridgeError(f"{name} must be finite and >= 0, got {value!r}")
-        if not (math.isfinite(self.cmd_vel_timeout_s) and self.cmd_vel_timeout_s > 0.0):
-            raise BridgeError(f"cmd_vel_timeout_s must be > 0, got {self.cmd_vel_timeout_s!r}")
+        timeout_s = self.cmd_vel_timeout_s
+        if not (math.isfinite(timeout_s) and 0.0 < timeout_s <= MAX_CMD_VEL_TIMEOUT_S):
+            raise BridgeError(
+                f"cmd_vel_timeout_s must be > 0 and at most {MAX_CMD_VEL_TIMEOUT_S:g} s, "
+                f"got {timeout_s!r}"
+            )
         low, high = RATE_RANGE_HZ
         if not (math.isfinite(self.rate_hz) and low <= self.rate_hz <= high):
             raise BridgeError(f"rate_hz must be within {low:g}-{high:g}, got {self.rate_hz!r}")
@@ -94,16 +96,28 @@ class BridgeSettings:
         return cls(**values)  # type: ignore[arg-type]
 
 
+def drive_bounds(settings: BridgeSettings, limits: VelocityLimits) -> DriveBounds:
+    """The chassis bounds now: maxima from the link's limits, minima from the settings."""
+    return DriveBounds(
+        max_linear_m_s=limits.get(DRIVE_LINEAR),
+        max_angular_rad_s=limits.get(DRIVE_TURN),
+        min_linear_m_s=settings.min_linear_m_s,
+        min_angular_rad_s=settings.min_angular_rad_s,
+    )
+
+
 def twist_to_drive(
     linear_x: float, angular_z: float, settings: BridgeSettings, limits: VelocityLimits
 ) -> dict[str, float]:
-    """Drive channel velocities for a Twist: the minimum rule, then the channel maxima."""
-    linear = raise_to_minimum(linear_x, settings.min_linear_m_s)
-    angular = raise_to_minimum(angular_z, settings.min_angular_rad_s)
-    return {
-        DRIVE_LINEAR: limits.clamp(DRIVE_LINEAR, linear),
-        DRIVE_TURN: limits.clamp(DRIVE_TURN, angular),
-    }
+    """Drive channel velocities for a Twist, scaled by one factor (the turn radius kept).
+
+    Speeds below `ocu.control.drive.ZERO_EPSILON` are zero; a non-finite one is a BridgeError.
+    """
+    try:
+        linear, angular = scale_drive(linear_x, angular_z, drive_bounds(settings, limits))
+    except DriveError as err:
+        raise BridgeError(str(err)) from err
+    return {DRIVE_LINEAR: linear, DRIVE_TURN: angular}
 
 
 class CmdVelTimeout:
@@ -272,6 +286,26 @@ class CommandSink(Protocol):
 StateCallback = Callable[[BridgeState, str], None]
 
 
+class LinkGate(Enum):
+    """Whether the link lets ROS move the robot (LinkCore's state, seen by the bridge)."""
+
+    OPEN = "open"
+    # LOST or CLOSED: zeros whatever cmd_vel says; joint goals cancelled and refused.
+    LOST = "link lost"
+    # CONNECTED again: a non-zero cmd_vel is refused until cmd_vel has been zero or silent
+    # for the cmd_vel timeout, so recovery never resumes motion by itself.
+    RECOVERING = "recovering"
+
+
+def gate_text(gate: LinkGate, timeout_s: float) -> str:
+    """What the gate means for cmd_vel, for logs and diagnostics."""
+    if gate is LinkGate.LOST:
+        return "LINK LOST: cmd_vel refused, zeros sent"
+    if gate is LinkGate.RECOVERING:
+        return f"link back: cmd_vel refused until it has been zero or silent for {timeout_s:.2f} s"
+    return "link up: cmd_vel obeyed"
+
+
 @dataclass(frozen=True)
 class BridgeStatus:
     """A snapshot of the bridge for diagnostics and the console."""
@@ -283,25 +317,35 @@ class BridgeStatus:
     cmd_vel_count: int
     rejected_count: int
     timeouts: int
+    link_gate: LinkGate = LinkGate.OPEN
+    link_refused_count: int = 0
+    cmd_vel_timeout_s: float = DEFAULT_CMD_VEL_TIMEOUT_S
 
 
 def bridge_report(status: BridgeStatus, hardware_id: str) -> DiagnosticReport:
-    """Bridge health: who commands, the last cmd_vel's age, goals, rejections, timeouts."""
+    """Bridge health: who commands, the link gate, cmd_vel age, goals, rejections, timeouts."""
     level = DiagnosticLevel.OK
+    message = STATE_TEXT[status.state]
     if status.state in (BridgeState.OFF, BridgeState.OVERRIDDEN):
         level = DiagnosticLevel.WARN
+    if status.link_gate is not LinkGate.OPEN:
+        level = DiagnosticLevel.ERROR if status.link_gate is LinkGate.LOST else DiagnosticLevel.WARN
+        message = f"{message}; {gate_text(status.link_gate, status.cmd_vel_timeout_s)}"
     goals = ", ".join(f"{j}={math.degrees(a):.1f}°" for j, a in status.goals_rad.items())
     values = (
         ("state", status.state.value),
+        ("link gate", status.link_gate.value),
         ("drive_linear (m/s)", f"{status.drive.get(DRIVE_LINEAR, 0.0):.3f}"),
         ("drive_turn (rad/s)", f"{status.drive.get(DRIVE_TURN, 0.0):.3f}"),
         ("last cmd_vel age (s)", _optional(status.cmd_vel_age_s, ".2f")),
+        ("cmd_vel timeout (s)", f"{status.cmd_vel_timeout_s:g}"),
         ("cmd_vel received", str(status.cmd_vel_count)),
         ("cmd_vel timeouts", str(status.timeouts)),
+        ("cmd_vel refused (link)", str(status.link_refused_count)),
         ("joint goals", goals or "none"),
         ("rejected commands", str(status.rejected_count)),
     )
-    return DiagnosticReport("ocu: ROS bridge", level, STATE_TEXT[status.state], hardware_id, values)
+    return DiagnosticReport("ocu: ROS bridge", level, message, hardware_id, values)
 
 
 class BridgeCore:
@@ -309,7 +353,8 @@ class BridgeCore:
 
     Every entry point takes one lock, and velocities are sent while holding it: once
     `override()` or `detach()` has returned, the bridge sends nothing more, so an operator
-    command sent afterwards is never replaced by a late ROS command.
+    command sent afterwards is never replaced by a late ROS command. The link's state
+    arrives through `on_link_state` (the link thread): see `LinkGate`.
     """
 
     def __init__(
@@ -337,12 +382,25 @@ class BridgeCore:
         self._rejected = 0
         self._timeouts = 0
         self._ignored_logged = False
+        # The link as last reported; a new link starts CONNECTING, which lets ROS drive.
+        self._link_state = LinkState.CONNECTING
+        self._gate = LinkGate.OPEN
+        self._link_refused = 0
+        # When the last cmd_vel asking for motion arrived (obeyed or not): the recovery
+        # rule measures the quiet time from it.
+        self._last_motion_at: float | None = None
 
     # ---- life --------------------------------------------------------------------------
 
-    def attach(self, sink: CommandSink, limits: VelocityLimits | None = None) -> None:
+    def attach(
+        self,
+        sink: CommandSink,
+        limits: VelocityLimits | None = None,
+        *,
+        link_state: Callable[[], LinkState] | None = None,
+    ) -> None:
         """Start commanding `sink`, bounded by `limits` (the link's; the profile's defaults
-        if None)."""
+        if None); `link_state` reads the link's state now (else the last one reported)."""
         with self._lock:
             self._sink = sink
             self._limits = limits if limits is not None else VelocityLimits(self.profile)
@@ -350,6 +408,16 @@ class BridgeCore:
             self._goal_channels = set()
             self._drive = dict.fromkeys(DRIVE_CHANNELS, 0.0)
             self._timeout = CmdVelTimeout(self.settings.cmd_vel_timeout_s)
+            # Read under the bridge's lock: a change the link makes meanwhile is reported
+            # to on_link_state afterwards, which waits for this lock, so none is missed.
+            if link_state is not None:
+                self._link_state = link_state()
+            if _is_lost(self._link_state):
+                self._gate = LinkGate.LOST
+            elif self._gate is not LinkGate.OPEN:
+                # Off and on again while the link recovers: the recovery rule still holds.
+                self._gate = LinkGate.RECOVERING
+                self._open_if_quiet(self.clock())
             self._set_state(BridgeState.LISTENING)
 
     def detach(self, *, stop: bool = True) -> None:
@@ -380,7 +448,7 @@ class BridgeCore:
         return True
 
     def enable(self) -> None:
-        """ROS may command again after an override."""
+        """ROS may command again after an override (the link gate still applies)."""
         with self._lock:
             if self._state is BridgeState.OVERRIDDEN and self._sink is not None:
                 self._timeout = CmdVelTimeout(self.settings.cmd_vel_timeout_s)
@@ -395,20 +463,73 @@ class BridgeCore:
         owned = [name for name, value in self._drive.items() if value != 0.0]
         return owned + sorted(self._goal_channels)
 
+    @property
+    def _in_control(self) -> bool:
+        return self._sink is not None and self._state in (
+            BridgeState.LISTENING,
+            BridgeState.COMMANDING,
+        )
+
+    # ---- the link (link thread) --------------------------------------------------------
+
+    def on_link_state(self, state: LinkState, reason: str = "") -> None:
+        """The link changed state: LOST or CLOSED stops what ROS moves and closes the gate."""
+        with self._lock:
+            self._link_state = state
+            if _is_lost(state):
+                if self._gate is LinkGate.LOST:
+                    return
+                self._gate = LinkGate.LOST
+                stopped = self._owned_channels() if self._in_control else []
+                if stopped:
+                    assert self._sink is not None
+                    self._sink.set_velocities(**dict.fromkeys(stopped, 0.0))
+                if self._in_control:
+                    self._release()
+                    self._update_state()
+                # A closed link is the normal end of a run: worth a line, not a warning.
+                log.log(
+                    logging.WARNING if state is LinkState.LOST else logging.INFO,
+                    "%s%s: ROS commands refused, zeros sent%s",
+                    "LINK LOST" if state is LinkState.LOST else "link closed",
+                    f" ({reason})" if reason else "",
+                    f" (stopped {', '.join(stopped)})" if stopped else "",
+                )
+            elif state is LinkState.CONNECTED and self._gate is LinkGate.LOST:
+                self._gate = LinkGate.RECOVERING
+                log.warning("%s", gate_text(LinkGate.RECOVERING, self.settings.cmd_vel_timeout_s))
+                self._open_if_quiet(self.clock())
+
+    def _open_if_quiet(self, now: float) -> None:
+        """RECOVERING -> OPEN once cmd_vel has been zero or silent for the timeout."""
+        if self._gate is not LinkGate.RECOVERING or self._link_state is not LinkState.CONNECTED:
+            return
+        quiet_s = None if self._last_motion_at is None else now - self._last_motion_at
+        if quiet_s is not None and quiet_s < self.settings.cmd_vel_timeout_s:
+            return
+        self._gate = LinkGate.OPEN
+        log.info(
+            "cmd_vel zero or silent for %.2f s since the link came back: ROS may drive again",
+            self.settings.cmd_vel_timeout_s,
+        )
+
     # ---- inputs (any thread) -----------------------------------------------------------
 
     def on_cmd_vel(
         self, linear_x: float, angular_z: float, ignored: Sequence[float] = ()
     ) -> dict[str, float] | None:
-        """A Twist arrived: returns the drive velocities sent, or None if not in control.
+        """A Twist arrived: returns the drive velocities sent, or None if not obeyed.
 
-        `ignored` are the other four Twist components, only to warn once that they do
-        nothing. A non-finite component stops the tracks and raises BridgeError.
+        Not obeyed: ROS is not in control (see `refusal()`), or the link gate is closed and
+        the Twist asks for motion (zeros are sent instead). `ignored` are the other four
+        Twist components, only to warn once that they do nothing. A non-finite component
+        stops the tracks and raises BridgeError.
         """
         with self._lock:
-            if self._sink is None or self._state is BridgeState.OVERRIDDEN:
+            if not self._in_control:
                 self._rejected += 1
                 return None
+            assert self._sink is not None
             now = self.clock()
             self._timeout.feed(now)
             self._cmd_vel_count += 1
@@ -421,27 +542,52 @@ class BridgeCore:
             try:
                 drive = twist_to_drive(linear_x, angular_z, self.settings, self._limits)
             except BridgeError:
+                # A broken publisher is no quiet one: it does not open the gate.
+                self._last_motion_at = now
                 self._rejected += 1
                 self._send_drive(dict.fromkeys(DRIVE_CHANNELS, 0.0))
                 self._update_state()
                 raise
+            motion = any(v != 0.0 for v in drive.values())
+            if motion:
+                # Checked before this Twist counts: it may be the first after a quiet spell.
+                self._open_if_quiet(now)
+                self._last_motion_at = now
+            if motion and self._gate is not LinkGate.OPEN:
+                self._link_refused += 1
+                self._send_drive(dict.fromkeys(DRIVE_CHANNELS, 0.0))
+                self._update_state()
+                return None
             self._send_drive(drive)
             self._update_state()
             return drive
 
+    def refusal(self) -> str:
+        """Why cmd_vel is not obeyed now ('' when it is)."""
+        with self._lock:
+            if not self._in_control:
+                return f"ROS control {self._state.value}"
+            if self._gate is not LinkGate.OPEN:
+                return gate_text(self._gate, self.settings.cmd_vel_timeout_s)
+            return ""
+
     def set_goals(self, names: Sequence[str], positions: Sequence[float]) -> dict[str, float]:
         """Joint position goals (rad); all or none apply. PositionError if one is bad.
 
-        An empty goal cancels every joint goal (their joints stop).
+        An empty goal cancels every joint goal (their joints stop). While the link is lost,
+        goals are refused: no telemetry, and recovery must not start motion by itself.
         """
         with self._lock:
-            if self._sink is None or self._state is BridgeState.OVERRIDDEN:
+            if not self._in_control:
                 self._rejected += 1
                 raise PositionError("joint goal ignored: ROS is not in control")
             if not names and not positions:
                 self._stop_goals()
                 self._update_state()
                 return {}
+            if self._gate is LinkGate.LOST:
+                self._rejected += 1
+                raise PositionError(f"joint goal ignored: link {self._link_state.value}")
             try:
                 goals = parse_joint_goal(self.profile, self._limits, names, positions)
             except PositionError:
@@ -471,8 +617,10 @@ class BridgeCore:
         """cmd_vel timeout and one position-control step; returns the controller's messages."""
         with self._lock:
             now = self.clock() if now is None else now
-            if self._sink is None or self._state is BridgeState.OVERRIDDEN:
+            self._open_if_quiet(now)
+            if not self._in_control:
                 return []
+            assert self._sink is not None
             if self._timeout.expired(now):
                 moving = any(v != 0.0 for v in self._drive.values())
                 self._timeouts += 1
@@ -508,6 +656,12 @@ class BridgeCore:
             return self._state
 
     @property
+    def link_gate(self) -> LinkGate:
+        """Whether the link lets ROS drive now."""
+        with self._lock:
+            return self._gate
+
+    @property
     def commanding(self) -> bool:
         """Whether ROS moves something now (tracks or a joint goal)."""
         return self.state is BridgeState.COMMANDING
@@ -523,6 +677,9 @@ class BridgeCore:
                 cmd_vel_count=self._cmd_vel_count,
                 rejected_count=self._rejected,
                 timeouts=self._timeouts,
+                link_gate=self._gate,
+                link_refused_count=self._link_refused,
+                cmd_vel_timeout_s=self.settings.cmd_vel_timeout_s,
             )
 
     def _update_state(self) -> None:
@@ -540,3 +697,7 @@ class BridgeCore:
                 self.on_state_changed(state, STATE_TEXT[state])
             except Exception:
                 log.exception("bridge state callback failed")
+
+
+def _is_lost(state: LinkState) -> bool:
+    return state in (LinkState.LOST, LinkState.CLOSED)

@@ -13,14 +13,15 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import re
 import shlex
 import signal
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from types import FrameType
-from typing import Any
+from typing import Any, Protocol
 
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.ros.bridge import (
@@ -28,6 +29,7 @@ from ocu.ros.bridge import (
     DEFAULT_RATE_HZ,
     DRIVE_LINEAR,
     DRIVE_TURN,
+    MAX_CMD_VEL_TIMEOUT_S,
     BridgeError,
     BridgeSettings,
 )
@@ -48,7 +50,7 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~min_angular      rad/s; the same for angular.z (default: profile, 0.2)
   ~max_linear       m/s; linear speeds are clamped to it (default: profile default_max)
   ~max_angular      rad/s; the same for angular.z (default: profile default_max)
-  ~cmd_vel_timeout  s without cmd_vel before the tracks stop (default 0.5)
+  ~cmd_vel_timeout  s without cmd_vel before the tracks stop (default 0.5, at most 2)
   ~twist_stamped    subscribe to geometry_msgs/TwistStamped instead of Twist (default false)
   ~rate             Hz of the control loop: timeout, position control, heartbeat (default 50)
   ~camera           camera to select at start (a name in the profile's link.camera_names)
@@ -56,6 +58,9 @@ private parameters (set with _name:=value, a launch file or rosparam):
 
 topics: cmd_vel, joint_goals in; joint_states, camera/compressed,
 camera/<name>/image/compressed, /diagnostics out (see docs/ros.md)
+
+_name:=value arguments hold for this run only: the node puts back (or deletes) what they
+replaced on the parameter server when it exits.
 """
 
 
@@ -85,6 +90,15 @@ def _number(get: ParamGetter, name: str, default: float) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ConfigError(f"~{name} must be a finite number, got {value!r}")
     return float(value)
+
+
+def _timeout(get: ParamGetter) -> float:
+    value = _number(get, "cmd_vel_timeout", DEFAULT_CMD_VEL_TIMEOUT_S)
+    if not 0.0 < value <= MAX_CMD_VEL_TIMEOUT_S:
+        raise ConfigError(
+            f"~cmd_vel_timeout must be > 0 and at most {MAX_CMD_VEL_TIMEOUT_S:g} s, got {value!r}"
+        )
+    return value
 
 
 def _flag(get: ParamGetter, name: str, default: bool) -> bool:
@@ -133,7 +147,7 @@ def read_config(get: ParamGetter, profile: RobotProfile, profile_path: str | Non
         bridge = BridgeSettings(
             min_linear_m_s=_number(get, "min_linear", linear.min_speed),
             min_angular_rad_s=_number(get, "min_angular", turn.min_speed),
-            cmd_vel_timeout_s=_number(get, "cmd_vel_timeout", DEFAULT_CMD_VEL_TIMEOUT_S),
+            cmd_vel_timeout_s=_timeout(get),
             rate_hz=_number(get, "rate", DEFAULT_RATE_HZ),
             twist_stamped=_flag(get, "twist_stamped", False),
         )
@@ -157,6 +171,73 @@ def read_config(get: ParamGetter, profile: RobotProfile, profile_path: str | Non
         extension=_flag(get, "extension", False),
         camera=names.index(camera_text) if camera_text else None,
     )
+
+
+# rospy's rule for a private parameter argument (rospy.client.load_command_line_node_params):
+# one leading underscore, then a name; "__name:=" and the like are special keys.
+_PRIVATE_ARG = re.compile(r"_(?!_)[\w/]+:=.*")
+
+
+def is_private_arg(arg: str) -> bool:
+    """Whether a command-line argument sets a private parameter (`_name:=value`)."""
+    return _PRIVATE_ARG.fullmatch(arg) is not None
+
+
+class ParamServer(Protocol):
+    """The parts of rospy's parameter API the node uses (the rospy module itself)."""
+
+    def resolve_name(self, name: str) -> str: ...
+
+    def has_param(self, param_name: str) -> bool: ...
+
+    def get_param(self, param_name: str, default: Any = ...) -> Any: ...
+
+    def set_param(self, param_name: str, param_value: Any) -> None: ...
+
+    def delete_param(self, param_name: str) -> None: ...
+
+
+class CommandLineParams:
+    """This run's `_name:=value` arguments on the parameter server, taken back at exit.
+
+    Left there (as rospy leaves them), a value would silently hold for every later run of
+    the node without the argument. `upload` remembers what each one replaced in the node's
+    private namespace and `undo` puts that back, or deletes the parameter if there was none;
+    nothing outside the private namespace, and no parameter the command line did not set,
+    is touched.
+    """
+
+    def __init__(self, server: ParamServer) -> None:
+        self.server = server
+        # (resolved name, whether it existed, its value before) in upload order.
+        self._replaced: list[tuple[str, bool, Any]] = []
+
+    def upload(self, values: Mapping[str, Any]) -> None:
+        """Put each value on the server as a private parameter (~name)."""
+        for name, value in values.items():
+            key = self.server.resolve_name("~" + name)
+            existed = bool(self.server.has_param(key))
+            previous = self.server.get_param(key) if existed else None
+            self._replaced.append((key, existed, previous))
+            self.server.set_param(key, value)
+
+    def get(self, name: str, default: Any) -> Any:
+        """A private parameter's value (a ParamGetter)."""
+        return self.server.get_param("~" + name, default)
+
+    def undo(self) -> None:
+        """Restore what upload replaced; idempotent, never raises."""
+        replaced, self._replaced = self._replaced, []
+        for key, existed, previous in reversed(replaced):
+            try:
+                if existed:
+                    self.server.set_param(key, previous)
+                else:
+                    self.server.delete_param(key)
+            except KeyError:
+                pass  # already deleted by someone else: nothing left behind
+            except Exception as err:  # the master may be gone; the exit code must survive
+                log.warning("could not take %s back from the parameter server: %s", key, err)
 
 
 class _ToRosout(logging.Handler):
@@ -226,26 +307,42 @@ def _wait_for_master(stop: threading.Event) -> bool:
 def _run(args: list[str], stop: threading.Event) -> int:
     import rospy
 
-    from ocu.link.core import LinkCore, LinkError, LinkListener
-    from ocu.ros.rosbridge import RosBridge, init_node
-    from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
+    from ocu.ros.rosbridge import init_node
 
     if not _wait_for_master(stop):
         return 0
-    init_node(NODE_NAME, argv=["ocu-ros", *args], keep_logging=False)
+    # rospy would upload the _name:=value arguments itself and leave them on the parameter
+    # server after the run; CommandLineParams uploads them and takes them back at exit.
+    init_node(
+        NODE_NAME,
+        argv=["ocu-ros", *(a for a in args if not is_private_arg(a))],
+        keep_logging=False,
+    )
     _route_logging_to_ros()
     rospy.on_shutdown(stop.set)
-
-    def private_param(name: str, default: Any) -> Any:
-        return rospy.get_param("~" + name, default)
-
+    params = CommandLineParams(rospy)
     try:
-        profile, profile_path = read_profile(private_param)
-        config = read_config(private_param, profile, profile_path)
-    except ConfigError as err:
-        log.error("bad parameter: %s", err)
-        rospy.signal_shutdown("bad parameter")
-        return 2
+        try:
+            try:
+                values = rospy.client.load_command_line_node_params(args)
+            except rospy.ROSInitException as err:
+                raise ConfigError(str(err)) from err
+            params.upload(values)
+            profile, profile_path = read_profile(params.get)
+            config = read_config(params.get, profile, profile_path)
+        except ConfigError as err:
+            log.error("bad parameter: %s", err)
+            return 2
+        return _command_robot(profile, config, stop)
+    finally:
+        params.undo()
+        rospy.signal_shutdown("ocu-ros exiting")
+
+
+def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Event) -> int:
+    from ocu.link.core import LinkCore, LinkError, LinkListener
+    from ocu.ros.rosbridge import RosBridge
+    from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
 
     simulator: SimulatorProcess | None = None
     link: LinkCore | None = None
@@ -279,7 +376,8 @@ def _run(args: list[str], stop: threading.Event) -> int:
         bridge = RosBridge(
             profile, config.bridge, hardware_id=f"{robot[0]}:{robot[1]}", heartbeat=True
         )
-        # LinkCore logs its state changes and safety events itself (forwarded to rosout).
+        # LinkCore logs its state changes and safety events itself (forwarded to rosout);
+        # the bridge hears them through the tee: LINK LOST stops what ROS moves.
         link.listener = bridge.wrap_listener(LinkListener())
         link.start()
         bridge.start(link)
@@ -296,7 +394,6 @@ def _run(args: list[str], stop: threading.Event) -> int:
             log.info("link shut down, zeros sent last")
         if simulator is not None:
             simulator.stop()
-        rospy.signal_shutdown("ocu-ros exiting")
 
 
 if __name__ == "__main__":

@@ -187,7 +187,7 @@ class RosBridge:
                 raise RuntimeError("the ROS bridge is already started")
             self._link = link
             self._publishers = _Publishers(self.profile)
-            self.core.attach(link, link.limits)
+            self.core.attach(link, link.limits, link_state=lambda: link.state)
             if self.settings.twist_stamped:
                 twist = rospy.Subscriber(
                     CMD_VEL_TOPIC, TwistStamped, self._on_twist_stamped, queue_size=1
@@ -287,9 +287,13 @@ class RosBridge:
         for publisher in targets:
             self._publish(publisher, message)
 
+    def on_link_state(self, state: LinkState, reason: str) -> None:
+        """The link's state: LINK LOST stops ROS's motion and refuses cmd_vel until recovery."""
+        self.core.on_link_state(state, reason)
+
     def wrap_listener(self, listener: LinkListener) -> LinkListener:
-        """A listener that passes every event to `listener` and telemetry and video to the
-        bridge too (the console wraps its LinkThread's listener with it)."""
+        """A listener that passes every event to `listener` and telemetry, video and link
+        state to the bridge too (the node and the console wrap their link's listener)."""
         return _TeeListener(listener, self)
 
     def publish_diagnostics(self) -> None:
@@ -330,7 +334,7 @@ class RosBridge:
                 log.warning("cmd_vel rejected, tracks stopped: %s", err)
             return
         if drive is None and self._throttle.allow("cmd_vel ignored"):
-            log.info("cmd_vel ignored: %s", self.core.state.value)
+            log.info("cmd_vel ignored: %s", self.core.refusal() or "ROS control changed")
 
     def _on_joint_goal(self, message: Any) -> None:
         try:
@@ -380,7 +384,7 @@ class RosBridge:
 
 
 class _TeeListener(LinkListener):
-    """Every event to the primary listener; telemetry and video to the bridge as well."""
+    """Every event to the primary listener; telemetry, video and link state to the bridge."""
 
     def __init__(self, primary: LinkListener, bridge: RosBridge) -> None:
         self.primary = primary
@@ -407,6 +411,11 @@ class _TeeListener(LinkListener):
         self.primary.extension_changed(active, reason)
 
     def link_state_changed(self, state: LinkState, reason: str) -> None:
+        # The bridge first: it must stop ROS's motion before anything else reacts.
+        try:
+            self.bridge.on_link_state(state, reason)
+        except Exception:
+            log.exception("ROS bridge link state failed")
         self.primary.link_state_changed(state, reason)
 
     def stats_updated(self, stats: LinkStats) -> None:

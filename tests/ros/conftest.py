@@ -92,9 +92,11 @@ def wait_for(predicate: Callable[[], bool], timeout_s: float) -> bool:
 class NodeProcess:
     """`python -m ocu.ros.node` as a child with a unique node name; output kept in a file."""
 
-    def __init__(self, work_dir: Path, robot: tuple[str, int], *args: str) -> None:
-        self.name = f"ocu_ros_test_{next(_names)}"
-        self.log_path = work_dir / f"{self.name}.log"
+    def __init__(
+        self, work_dir: Path, robot: tuple[str, int], *args: str, name: str | None = None
+    ) -> None:
+        self.name = name or f"ocu_ros_test_{next(_names)}"
+        self.log_path = work_dir / f"{self.name}_{next(_names)}.log"
         command = [
             sys.executable,
             "-m",
@@ -127,6 +129,18 @@ class NodeProcess:
         if self.process.poll() is not None:
             raise AssertionError(f"{self.name} exited {self.process.returncode}:\n{self.output()}")
 
+    def wait_exit(self, timeout_s: float = NODE_START_TIMEOUT_S) -> int:
+        """The exit code of a node that stops by itself (AssertionError if it does not)."""
+        try:
+            return self.process.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            code = self.stop()
+            raise AssertionError(
+                f"{self.name} still ran after {timeout_s} s (then exited {code}):\n" + self.output()
+            ) from None
+        finally:
+            self._log.close()
+
     def stop(self, sig: int = signal.SIGTERM) -> int:
         """Send a signal and wait for the exit code (kill after the deadline)."""
         if self.process.poll() is None:
@@ -155,12 +169,20 @@ class Collector:
             self.messages.append(message)
             self._cond.notify_all()
 
-    def wait(self, predicate: Callable[[Any], bool], timeout_s: float = 10.0) -> Any:
-        """The first message (old or new) that satisfies predicate; AssertionError if none."""
+    def count(self) -> int:
+        """How many messages arrived so far (for `wait(after=...)`)."""
+        with self._cond:
+            return len(self.messages)
+
+    def wait(
+        self, predicate: Callable[[Any], bool], timeout_s: float = 10.0, *, after: int = 0
+    ) -> Any:
+        """The first message (old or new, from index `after` on) that satisfies predicate;
+        AssertionError if none."""
         found: list[Any] = []
 
         def check() -> bool:
-            found[:] = [m for m in self.messages if predicate(m)][:1]
+            found[:] = [m for m in self.messages[after:] if predicate(m)][:1]
             return bool(found)
 
         with self._cond:

@@ -23,11 +23,11 @@ from ocu.ros.bridge import (
     BridgeState,
     CmdVelTimeout,
     DiagnosticLevel,
+    LinkGate,
     bridge_report,
     camera_name,
     joint_state,
     link_report,
-    raise_to_minimum,
     twist_to_drive,
 )
 
@@ -59,6 +59,11 @@ def state_of(core: BridgeCore) -> BridgeState:
     return core.state
 
 
+def gate_of(core: BridgeCore) -> LinkGate:
+    """The link gate, read through a call for the same reason."""
+    return core.link_gate
+
+
 def reading(name: str, angle_rad: float | None) -> JointReading:
     return JointReading(name, 0, 1, 2, angle_rad, 0.5, 1.25, 0, angle_rad, 0.0, 0.0)
 
@@ -87,55 +92,83 @@ def sink(core: BridgeCore) -> Sink:
     return sink
 
 
-# ---- the 0.2 rule -----------------------------------------------------------------------
-
-
-@pytest.mark.parametrize(
-    ("value", "expected"),
-    [
-        (0.1, 0.2),
-        (-0.1, -0.2),
-        (1e-9, 0.2),
-        (0.2, 0.2),
-        (-0.2, -0.2),
-        (0.5, 0.5),
-        (-0.35, -0.35),
-        (0.0, 0.0),
-    ],
-)
-def test_paper_rule_examples(value: float, expected: float) -> None:
-    assert raise_to_minimum(value, 0.2) == expected
-
-
-finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6)
-
-
-@given(value=finite, minimum=st.floats(min_value=0.0, max_value=10.0))
-def test_paper_rule_keeps_sign_and_lifts_to_the_minimum(value: float, minimum: float) -> None:
-    result = raise_to_minimum(value, minimum)
-    if value == 0.0:
-        assert result == 0.0
-    else:
-        assert math.copysign(1.0, result) == math.copysign(1.0, value)
-        assert abs(result) == max(abs(value), minimum)
-
-
-@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
-def test_paper_rule_refuses_non_finite_speeds(value: float) -> None:
-    with pytest.raises(BridgeError, match="finite"):
-        raise_to_minimum(value, 0.2)
+# ---- drive scaling: the 0.2 rule with the turn radius kept ------------------------------
 
 
 def test_twist_mapping_lifts_then_clamps_to_the_channel_maximum(profile: RobotProfile) -> None:
     limits = VelocityLimits(profile)
     settings = BridgeSettings.from_profile(profile)
-    assert twist_to_drive(0.1, -0.05, settings, limits) == {DRIVE_LINEAR: 0.2, DRIVE_TURN: -0.2}
+    assert twist_to_drive(0.1, -0.1, settings, limits) == {DRIVE_LINEAR: 0.2, DRIVE_TURN: -0.2}
     default_max = profile.channels[DRIVE_LINEAR].default_max
     assert twist_to_drive(0.5, 0.0, settings, limits)[DRIVE_LINEAR] == default_max
     limits.set(DRIVE_LINEAR, 0.45)
     assert twist_to_drive(0.45, 0.0, settings, limits)[DRIVE_LINEAR] == 0.45
     limits.set(DRIVE_LINEAR, 0.1)  # a maximum below the minimum wins: never faster than it
     assert twist_to_drive(0.05, 0.0, settings, limits)[DRIVE_LINEAR] == 0.1
+
+
+@pytest.mark.parametrize(
+    ("twist", "expected"),
+    [
+        ((0.1, 0.05), (0.2, 0.1)),  # lifted by one factor: the 2 m arc stays a 2 m arc
+        ((0.1, -0.05), (0.2, -0.1)),
+        ((-0.05, 0.1), (-0.1, 0.2)),
+        ((0.6, 0.4), (0.3, 0.2)),  # clamped by one factor: linear at its maximum 0.3
+        ((0.15, 1.6), (0.075, 0.8)),  # turn at its maximum 0.8
+        ((0.25, 0.5), (0.25, 0.5)),  # within the bounds: unchanged
+    ],
+)
+def test_twist_mapping_keeps_the_turn_radius(
+    profile: RobotProfile, twist: tuple[float, float], expected: tuple[float, float]
+) -> None:
+    drive = twist_to_drive(*twist, BridgeSettings.from_profile(profile), VelocityLimits(profile))
+    assert (drive[DRIVE_LINEAR], drive[DRIVE_TURN]) == pytest.approx(expected)
+    assert drive[DRIVE_LINEAR] / drive[DRIVE_TURN] == pytest.approx(twist[0] / twist[1])
+
+
+def test_maxima_are_the_links_current_limits(profile: RobotProfile) -> None:
+    limits = VelocityLimits(profile)
+    limits.set(DRIVE_TURN, 0.4)  # the operator lowered the turn maximum at run time
+    drive = twist_to_drive(0.2, 0.8, BridgeSettings.from_profile(profile), limits)
+    assert drive == pytest.approx({DRIVE_LINEAR: 0.1, DRIVE_TURN: 0.4})
+
+
+@pytest.mark.parametrize("tiny", [1e-300, -1e-300, 5e-324, 9.9e-4])
+def test_speeds_below_epsilon_are_zero_before_the_minimum_rule(
+    profile: RobotProfile, tiny: float
+) -> None:
+    settings, limits = BridgeSettings.from_profile(profile), VelocityLimits(profile)
+    assert twist_to_drive(tiny, 0.0, settings, limits) == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.0}
+    assert twist_to_drive(0.0, tiny, settings, limits) == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.0}
+    assert twist_to_drive(tiny, 0.1, settings, limits) == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.2}
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6)
+
+
+@given(linear=finite, angular=finite)
+def test_twist_mapping_keeps_signs_and_bounds(
+    profile: RobotProfile, linear: float, angular: float
+) -> None:
+    drive = twist_to_drive(
+        linear, angular, BridgeSettings.from_profile(profile), VelocityLimits(profile)
+    )
+    for requested, sent, channel in (
+        (linear, drive[DRIVE_LINEAR], DRIVE_LINEAR),
+        (angular, drive[DRIVE_TURN], DRIVE_TURN),
+    ):
+        assert abs(sent) <= profile.channels[channel].default_max + 1e-12
+        if sent != 0.0:
+            assert math.copysign(1.0, sent) == math.copysign(1.0, requested)
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+def test_twist_mapping_refuses_non_finite_speeds(profile: RobotProfile, value: float) -> None:
+    settings, limits = BridgeSettings.from_profile(profile), VelocityLimits(profile)
+    with pytest.raises(BridgeError, match="finite"):
+        twist_to_drive(value, 0.0, settings, limits)
+    with pytest.raises(BridgeError, match="finite"):
+        twist_to_drive(0.1, value, settings, limits)
 
 
 def test_thresholds_default_to_the_profile_and_are_parameters(profile: RobotProfile) -> None:
@@ -152,6 +185,8 @@ def test_thresholds_default_to_the_profile_and_are_parameters(profile: RobotProf
         ("min_linear_m_s", -0.1, "min_linear_m_s"),
         ("min_angular_rad_s", math.nan, "min_angular_rad_s"),
         ("cmd_vel_timeout_s", 0.0, "cmd_vel_timeout_s"),
+        ("cmd_vel_timeout_s", 86400.0, "cmd_vel_timeout_s must be > 0 and at most 2 s"),
+        ("cmd_vel_timeout_s", math.inf, "cmd_vel_timeout_s"),
         ("rate_hz", 1.0, "rate_hz"),
     ],
 )
@@ -287,6 +322,136 @@ def test_detach_zeroes_only_what_ros_was_moving(core: BridgeCore, sink: Sink) ->
 def test_detach_without_motion_sends_nothing(core: BridgeCore, sink: Sink) -> None:
     core.detach()
     assert sink.sent == []
+
+
+# ---- link loss: zeros while LOST, no resuming by itself after it -------------------------
+
+
+def stream(
+    core: BridgeCore, clock: Clock, duration_s: float, twist: tuple[float, float]
+) -> list[dict[str, float] | None]:
+    """A planner publishing `twist` at 20 Hz for `duration_s`; what on_cmd_vel returned."""
+    results: list[dict[str, float] | None] = []
+    for _ in range(round(duration_s / 0.05)):
+        clock.now += 0.05
+        results.append(core.on_cmd_vel(*twist))
+        core.step()
+    return results
+
+
+def test_link_lost_zeroes_ros_motion_and_refuses_cmd_vel(
+    core: BridgeCore, sink: Sink, clock: Clock, caplog: pytest.LogCaptureFixture
+) -> None:
+    core.on_telemetry({"elbow": reading("elbow", 0.0)}, clock.now)
+    core.set_goals(["elbow"], [0.4])
+    core.on_cmd_vel(0.3, 0.2)
+    core.step()
+    assert sink.current["elbow"] > 0.0
+    caplog.set_level(logging.WARNING, logger="ocu.ros")
+    core.on_link_state(LinkState.LOST, "no valid packet from the robot for 3.0 s")
+    lost_at = len(sink.sent) - 1
+    assert sink.sent[-1] == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.0, "elbow": 0.0}
+    assert core.status().goals_rad == {}
+    assert state_of(core) is BridgeState.LISTENING
+    assert gate_of(core) is LinkGate.LOST
+    assert "LINK LOST" in caplog.records[-1].message
+    assert "ROS commands refused" in caplog.records[-1].message
+
+    assert all(result is None for result in stream(core, clock, 2.0, (0.3, 0.2)))
+    assert all(not any(sent.values()) for sent in sink.sent[lost_at:])  # only zeros since
+    status = core.status()
+    assert status.link_refused_count == 40
+    assert status.drive == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.0}
+    assert core.refusal() == "LINK LOST: cmd_vel refused, zeros sent"
+    with pytest.raises(PositionError, match="LINK LOST"):
+        core.set_goals(["elbow"], [0.4])
+    assert core.set_goals([], []) == {}  # cancelling is always allowed
+    report = bridge_report(core.status(), "sim")
+    assert report.level is DiagnosticLevel.ERROR
+    assert "LINK LOST" in report.message
+    assert dict(report.values)["link gate"] == "link lost"
+    assert dict(report.values)["cmd_vel refused (link)"] == "40"
+
+
+def test_recovery_waits_until_cmd_vel_was_zero_or_silent_for_the_timeout(
+    core: BridgeCore, sink: Sink, clock: Clock
+) -> None:
+    core.on_cmd_vel(0.3, 0.0)
+    core.on_link_state(LinkState.LOST)
+    stream(core, clock, 1.0, (0.3, 0.0))
+    sends = len(sink.sent)
+    core.on_link_state(LinkState.CONNECTED, "packets from 127.0.0.1:10000")
+    assert gate_of(core) is LinkGate.RECOVERING
+    # The planner still streams its old command: recovery must not resume it.
+    assert all(result is None for result in stream(core, clock, 3.0, (0.3, 0.0)))
+    assert all(not any(sent.values()) for sent in sink.sent[sends:])
+    assert bridge_report(core.status(), "sim").level is DiagnosticLevel.WARN
+    assert "zero or silent for 0.50 s" in core.refusal()
+    # Silent for less than the timeout: still refused, and the silence starts over.
+    clock.now += 0.45
+    core.step()
+    assert core.on_cmd_vel(0.3, 0.0) is None
+    clock.now += 0.45
+    core.step()
+    assert gate_of(core) is LinkGate.RECOVERING
+    # Zeros count as quiet: 0.5 s of them, then a new command drives.
+    stream(core, clock, 0.1, (0.0, 0.0))
+    assert gate_of(core) is LinkGate.OPEN
+    assert core.on_cmd_vel(0.25, 0.0) == {DRIVE_LINEAR: 0.25, DRIVE_TURN: 0.0}
+    assert sink.current[DRIVE_LINEAR] == 0.25
+
+
+def test_a_quiet_planner_drives_at_once_after_recovery(
+    core: BridgeCore, sink: Sink, clock: Clock
+) -> None:
+    core.on_cmd_vel(0.3, 0.0)
+    core.on_link_state(LinkState.LOST)
+    clock.now += 0.6  # the planner stopped publishing before the link came back
+    core.on_link_state(LinkState.CONNECTED)
+    assert gate_of(core) is LinkGate.OPEN
+    assert core.on_cmd_vel(0.25, 0.0) == {DRIVE_LINEAR: 0.25, DRIVE_TURN: 0.0}
+
+
+def test_a_non_zero_cmd_vel_after_silence_drives_and_is_not_refused(
+    core: BridgeCore, sink: Sink, clock: Clock
+) -> None:
+    core.on_link_state(LinkState.LOST)
+    stream(core, clock, 0.5, (0.3, 0.0))
+    core.on_link_state(LinkState.CONNECTED)
+    clock.now += 0.51
+    # The first cmd_vel after the quiet spell opens the gate itself (before step() runs).
+    assert core.on_cmd_vel(0.3, 0.0) == {DRIVE_LINEAR: 0.3, DRIVE_TURN: 0.0}
+
+
+def test_link_state_while_overridden_or_before_attach(
+    profile: RobotProfile, core: BridgeCore, sink: Sink, clock: Clock
+) -> None:
+    core.on_cmd_vel(0.3, 0.0)
+    core.override("W")
+    sends = len(sink.sent)
+    core.on_link_state(LinkState.LOST)
+    assert len(sink.sent) == sends  # the operator owns the robot: the bridge sends nothing
+    core.enable()
+    assert core.on_cmd_vel(0.3, 0.0) is None
+    assert core.status().link_refused_count == 1
+
+    # A bridge started on a link that is already lost (the console's toggle) learns it.
+    late = BridgeCore(profile, clock=clock)
+    late.attach(Sink(), link_state=lambda: LinkState.LOST)
+    assert gate_of(late) is LinkGate.LOST
+    assert late.on_cmd_vel(0.3, 0.0) is None
+    # Reported before attach (the node's tee runs before the bridge starts).
+    early = BridgeCore(profile, clock=clock)
+    early.on_link_state(LinkState.LOST)
+    early.attach(Sink())
+    assert early.on_cmd_vel(0.3, 0.0) is None
+
+
+def test_link_closed_counts_as_lost(core: BridgeCore, sink: Sink) -> None:
+    core.on_cmd_vel(0.3, 0.0)
+    core.on_link_state(LinkState.CLOSED, "shut down")
+    assert sink.current == {DRIVE_LINEAR: 0.0, DRIVE_TURN: 0.0}
+    assert core.on_cmd_vel(0.3, 0.0) is None
 
 
 # ---- joint goals ------------------------------------------------------------------------

@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 import math
 import signal
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,7 +20,7 @@ import pytest
 from ocu.profile import RobotProfile
 from ocu.ros.master import RosMaster
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator, SimState
-from tests.ros.conftest import ROSPY_WARNINGS, Collector, NodeProcess, needs_ros
+from tests.ros.conftest import ROSPY_WARNINGS, Collector, NodeProcess, needs_ros, wait_for
 
 pytestmark = [pytest.mark.slow, *ROSPY_WARNINGS]
 
@@ -124,6 +125,43 @@ def last_drive_rcp(profile: RobotProfile, sim: RobotSimulator) -> ReceivedRcp:
     )
 
 
+class Planner:
+    """A planner streaming one Twist at 20 Hz on its own thread until stop()."""
+
+    PERIOD_S = 0.05
+
+    def __init__(self, publisher: Any, message: Any) -> None:
+        self.publisher = publisher
+        self.message = message
+        self.last_published_at = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="planner", daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.publisher.publish(self.message)
+            self.last_published_at = time.monotonic()
+            self._stop.wait(self.PERIOD_S)  # the planner's pace, not a synchronisation
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> float:
+        """Stop publishing; returns when the last message was published."""
+        self._stop.set()
+        self._thread.join(5.0)
+        return self.last_published_at
+
+
+def status_values(message: Any, index: int) -> dict[str, str]:
+    """The key/values of /diagnostics entry `index` (0: the link, 1: the bridge)."""
+    return {kv.key: kv.value for kv in message.status[index].values}
+
+
+def drive_axes(profile: RobotProfile, rcp: ReceivedRcp) -> tuple[int, int]:
+    return axis(profile, rcp, "drive_linear"), axis(profile, rcp, "drive_turn")
+
+
 # ---- cmd_vel ------------------------------------------------------------------------------
 
 
@@ -160,6 +198,77 @@ def test_cmd_vel_timeout_stops_the_tracks(
     assert axis(profile, zero, "drive_linear") == 0
     # Default timeout 0.5 s, checked at the node's 50 Hz loop.
     assert 0.45 <= zero.time_s - published_at <= 0.8
+
+
+def test_turn_radius_is_kept_when_lifted_to_the_minimum(
+    profile: RobotProfile, still: RobotSimulator, cmd_vel: Any
+) -> None:
+    publish_and_wait(still, cmd_vel, twist(0.1, 0.05))
+    rcp = last_drive_rcp(profile, still)
+    # Both lifted by one factor (2): a 2 m arc stays a 2 m arc, not (0.2, 0.2), a 1 m one.
+    assert drive_axes(profile, rcp) == (
+        axis_for(profile, "drive_linear", 0.2),
+        axis_for(profile, "drive_turn", 0.1),
+    )
+    commanded = still.state().commanded_velocities
+    assert commanded["drive_linear"] / commanded["drive_turn"] == pytest.approx(2.0, rel=1e-3)
+
+
+def test_link_loss_stops_ros_and_recovery_does_not_resume_it(
+    profile: RobotProfile, still: RobotSimulator, cmd_vel: Any, node: NodeProcess
+) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    diagnostics = Collector("/diagnostics", DiagnosticArray)
+    planner = Planner(cmd_vel, twist(0.25, 0.0))
+    try:
+        diagnostics.wait_connected(node.name)
+        planner.start()
+        assert still.wait_until(lambda s: not drive_stopped(s), 5.0)
+        still.cut_link()
+        try:
+            # LINK LOST after 3 s without packets; the planner streams on all along.
+            diagnostics.wait(lambda m: status_values(m, 0)["state"] == "LINK LOST", 10.0)
+            seen = diagnostics.count()
+        finally:
+            restored_at = time.monotonic()
+            still.restore_link()
+        diagnostics.wait(lambda m: status_values(m, 0)["state"] == "connected", 5.0, after=seen)
+        # The planner still streams 0.25 m/s: the node's first RCPs after the cut (sent
+        # while it still saw the link lost) and every one since it reconnected are zeros.
+        assert still.wait_until(lambda s: s.time_s > restored_at + 1.5, 5.0)
+        held = [r for r in still.received_commands() if r.time_s >= restored_at]
+        assert len(held) >= 5
+        assert [drive_axes(profile, r) for r in held] == [(0, 0)] * len(held)
+        assert drive_stopped(still.state())
+        # The diagnostics say why: refused while lost, and still while cmd_vel is not quiet.
+        lost = next(m for m in diagnostics.messages if status_values(m, 0)["state"] == "LINK LOST")
+        assert status_values(lost, 1)["link gate"] == "link lost"
+        assert "LINK LOST" in lost.status[1].message
+        recovering = diagnostics.wait(
+            lambda m: (
+                status_values(m, 0)["state"] == "connected"
+                and status_values(m, 1)["link gate"] == "recovering"
+            ),
+            after=seen,
+        )
+        assert int(status_values(recovering, 1)["cmd_vel refused (link)"]) > 0
+    finally:
+        quiet_from = planner.stop()
+        seen = diagnostics.count()
+    try:
+        # cmd_vel silent for the timeout (0.5 s): the next cmd_vel drives again.
+        diagnostics.wait(lambda m: status_values(m, 1)["link gate"] == "open", 5.0, after=seen)
+    finally:
+        diagnostics.close()
+    publish_and_wait(still, cmd_vel, twist(0.25, 0.0))
+    moving = [
+        r
+        for r in still.received_commands()
+        if r.time_s >= restored_at and any(drive_axes(profile, r))
+    ]
+    assert moving[0].time_s - quiet_from >= 0.5
+    assert drive_axes(profile, moving[0]) == (axis_for(profile, "drive_linear", 0.25), 0)
 
 
 # ---- joint states, goals, images, diagnostics ----------------------------------------------
@@ -289,12 +398,16 @@ def test_signal_stops_the_node_with_zeros_last(
     tmp_path: Path,
     sig: int,
 ) -> None:
-    process = NodeProcess(tmp_path, own_sim.address, "_cmd_vel_timeout:=30.0")
+    process = NodeProcess(tmp_path, own_sim.address)
+    # A planner streaming: the robot is still moving when the signal comes.
+    planner = Planner(cmd_vel, twist(0.3, 0.4))
     try:
         process.wait_connected(cmd_vel)
-        publish_and_wait(own_sim, cmd_vel, twist(0.3, 0.4))
+        planner.start()
+        assert own_sim.wait_until(lambda s: not drive_stopped(s), 5.0)
     finally:
         code = process.stop(sig)
+        planner.stop()
     assert code == 0, process.output()
     received = own_sim.received_commands()
     moving = [i for i, r in enumerate(received) if any(r.packet.axes)]
@@ -350,3 +463,47 @@ def test_extended_robot_gives_a_topic_per_camera(
     assert code == 0, process.output()
     assert image.header.frame_id == "rear"
     assert bytes(image.data[:2]) == b"\xff\xd8"
+
+
+def test_command_line_parameters_hold_for_one_run_and_are_checked(
+    own_sim: RobotSimulator, ros_client: None, tmp_path: Path
+) -> None:
+    import rospy
+
+    name = "ocu_ros_params"
+    private = f"/{name}"
+    # Set by someone else: a launch file (~rate, ~min_linear) and another node (/other).
+    rospy.set_param(f"{private}/rate", 40)
+    rospy.set_param(f"{private}/min_linear", 0.15)
+    rospy.set_param("/other/cmd_vel_timeout", 7.0)
+    try:
+        refused = NodeProcess(
+            tmp_path, own_sim.address, "_cmd_vel_timeout:=86400", "_min_linear:=0.1", name=name
+        )
+        assert refused.wait_exit() == 2, refused.output()
+        assert "~cmd_vel_timeout must be > 0 and at most 2 s, got 86400" in refused.output()
+        # What the command line set is gone, what it replaced is back, the rest untouched.
+        assert not rospy.has_param(f"{private}/cmd_vel_timeout")
+        assert not rospy.has_param(f"{private}/robot")
+        assert rospy.get_param(f"{private}/min_linear") == 0.15
+        assert rospy.get_param(f"{private}/rate") == 40
+        assert rospy.get_param("/other/cmd_vel_timeout") == 7.0
+
+        # The next run without the argument has the default timeout, not the last run's.
+        again = NodeProcess(tmp_path, own_sim.address, name=name)
+        try:
+            assert wait_for(lambda: "ROS bridge started" in again.output(), 20.0), again.output()
+            started = next(
+                line for line in again.output().splitlines() if "ROS bridge started" in line
+            )
+            assert "min 0.15 m/s" in started  # the launch file's value, restored
+            assert "timeout 0.50 s" in started
+            assert rospy.get_param(f"{private}/robot") == "{}:{}".format(*own_sim.address)
+        finally:
+            assert again.stop() == 0, again.output()
+        assert not rospy.has_param(f"{private}/robot")
+        assert rospy.get_param(f"{private}/rate") == 40
+    finally:
+        for param in (private, "/other"):
+            if rospy.has_param(param):
+                rospy.delete_param(param)

@@ -7,7 +7,14 @@ from typing import Any
 import pytest
 
 from ocu.profile import RobotProfile
-from ocu.ros.node import ConfigError, main, read_config, read_profile
+from ocu.ros.node import (
+    CommandLineParams,
+    ConfigError,
+    is_private_arg,
+    main,
+    read_config,
+    read_profile,
+)
 
 
 def getter(params: dict[str, Any]) -> Any:
@@ -51,6 +58,7 @@ def test_parameters_are_read(profile: RobotProfile) -> None:
     assert config.bridge.min_linear_m_s == 0.1
     assert config.bridge.min_angular_rad_s == 0.0
     assert config.bridge.cmd_vel_timeout_s == 1.0
+    assert read_config(getter({"cmd_vel_timeout": 2}), profile, None).bridge.cmd_vel_timeout_s == 2
     assert config.bridge.twist_stamped is True
     assert config.bridge.rate_hz == 20.0
     assert config.max_linear_m_s == 0.45
@@ -69,7 +77,10 @@ def test_parameters_are_read(profile: RobotProfile) -> None:
         ({"min_linear": "fast"}, "~min_linear must be a finite number"),
         ({"min_linear": True}, "~min_linear must be a finite number"),
         ({"min_angular": -0.1}, "min_angular_rad_s"),
-        ({"cmd_vel_timeout": 0}, "cmd_vel_timeout_s"),
+        ({"cmd_vel_timeout": 0}, r"~cmd_vel_timeout must be > 0 and at most 2 s, got 0\.0"),
+        ({"cmd_vel_timeout": -1.0}, "~cmd_vel_timeout must be > 0"),
+        ({"cmd_vel_timeout": 86400}, "~cmd_vel_timeout must be > 0 and at most 2 s, got 86400"),
+        ({"cmd_vel_timeout": 2.01}, "at most 2 s"),
         ({"rate": 1000}, "rate_hz"),
         ({"twist_stamped": "yes"}, "~twist_stamped must be true or false"),
         ({"max_angular": -1.0}, "must be >= 0"),
@@ -97,3 +108,55 @@ def test_help_lists_the_parameters(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     for name in ("~robot", "~min_linear", "~cmd_vel_timeout", "~twist_stamped", "~rate"):
         assert name in out
+
+
+@pytest.mark.parametrize(
+    ("arg", "private"),
+    [
+        ("_cmd_vel_timeout:=1.0", True),
+        ("_robot:=10.0.0.5:10000", True),
+        ("_a/b:=1", True),
+        ("__name:=ocu", False),  # rospy's special keys
+        ("__ns:=/robot1", False),
+        ("cmd_vel:=/planner/cmd_vel", False),  # a remapping
+        ("_:=1", False),
+        ("--help", False),
+    ],
+)
+def test_private_parameter_arguments(arg: str, private: bool) -> None:
+    assert is_private_arg(arg) is private
+
+
+class ParamServer:
+    """A parameter server in a dict, with rospy's names and errors (rospy's is tested in
+    tests/ros/test_node.py against a real roscore)."""
+
+    def __init__(self, params: dict[str, Any]) -> None:
+        self.params = params
+
+    def resolve_name(self, name: str) -> str:
+        return name if name.startswith("/") else "/ocu_ros/" + name.removeprefix("~")
+
+    def has_param(self, param_name: str) -> bool:
+        return param_name in self.params
+
+    def get_param(self, param_name: str, default: Any = None) -> Any:
+        return self.params.get(self.resolve_name(param_name), default)
+
+    def set_param(self, param_name: str, param_value: Any) -> None:
+        self.params[param_name] = param_value
+
+    def delete_param(self, param_name: str) -> None:
+        del self.params[param_name]
+
+
+def test_command_line_parameters_are_taken_back() -> None:
+    server = ParamServer({"/ocu_ros/rate": 40, "/ocu_ros/min_linear": 0.15, "/other": 1})
+    params = CommandLineParams(server)
+    params.upload({"cmd_vel_timeout": 1.5, "min_linear": 0.1})
+    assert params.get("cmd_vel_timeout", 0.5) == 1.5
+    assert params.get("min_linear", 0.2) == 0.1
+    del server.params["/ocu_ros/cmd_vel_timeout"]  # deleted by someone else meanwhile
+    params.undo()
+    assert server.params == {"/ocu_ros/rate": 40, "/ocu_ros/min_linear": 0.15, "/other": 1}
+    params.undo()  # idempotent

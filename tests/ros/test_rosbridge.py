@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
 import pytest
 
 from ocu.control.commands import Command
-from ocu.link.core import LinkCore, LinkListener
+from ocu.link.core import LinkCore, LinkListener, LinkState
 from ocu.profile import RobotProfile
 from ocu.ros.bridge import BridgeState
 from ocu.sim.simulator import RobotSimulator, SimState
@@ -152,3 +153,53 @@ def test_a_failing_bridge_loop_stops_ros_control(
         assert "ROS bridge loop failed" in caplog.text
     finally:
         bridge.stop()
+
+
+def test_hosted_bridge_learns_link_loss_and_recovery_through_the_tee(
+    profile: RobotProfile, sim: RobotSimulator, ros_client: None
+) -> None:
+    from ocu.ros.bridge import LinkGate
+    from ocu.ros.rosbridge import RosBridge
+
+    def gate() -> LinkGate:
+        return bridge.core.link_gate
+
+    # LINK LOST after 0.5 s instead of 3 s, to keep the test short.
+    link = LinkCore(profile, sim.address, gui_alive_timeout_s=None, link_lost_after_s=0.5)
+    bridge = RosBridge(profile)
+    link.start()
+    try:
+        assert wait_for(lambda: link.state is LinkState.CONNECTED, 5.0)
+        sim.cut_link()
+        assert wait_for(lambda: link.state is LinkState.LOST, 5.0)
+        # The console turns ROS control on while the link is already lost: it wraps the
+        # running link's listener, then starts the bridge, which never saw the LOST event.
+        link.listener = bridge.wrap_listener(link.listener)
+        bridge.start(link)
+        assert gate() is LinkGate.LOST
+        assert bridge.core.on_cmd_vel(0.3, 0.0) is None
+        assert link.command.velocity("drive_linear") == 0.0
+
+        restored_at = time.monotonic()
+        sim.restore_link()
+        assert wait_for(lambda: gate() is LinkGate.RECOVERING, 5.0)  # CONNECTED via the tee
+        assert bridge.core.on_cmd_vel(0.3, 0.0) is None  # the planner's old command
+        assert wait_for(lambda: gate() is LinkGate.OPEN, 5.0)  # quiet for 0.5 s
+        assert bridge.core.on_cmd_vel(0.3, 0.0) == {"drive_linear": 0.3, "drive_turn": 0.0}
+        assert sim.wait_until(lambda s: not drive_stopped(s), 5.0)
+        received = [r for r in sim.received_commands() if r.time_s >= restored_at]
+        axis = profile.channels["drive_linear"].axis
+        first_motion = next(k for k, r in enumerate(received) if r.packet.axes[axis])
+        assert first_motion >= 1  # zeros went out before ROS drove again
+        assert not any(r.packet.axes[axis] for r in received[:first_motion])
+
+        # LINK LOST while ROS drives: the tee stops it at once.
+        sim.cut_link()
+        assert wait_for(lambda: gate() is LinkGate.LOST, 5.0)
+        assert link.command.velocity("drive_linear") == 0.0
+        assert bridge.core.on_cmd_vel(0.3, 0.0) is None
+        assert link.command.velocity("drive_linear") == 0.0
+        sim.restore_link()
+    finally:
+        bridge.stop()
+        link.shutdown()
