@@ -605,11 +605,17 @@ class BridgeCore:
         self._goal_channels = set()
         if channels and self._sink is not None:
             self._sink.set_velocities(**dict.fromkeys(channels, 0.0))
+            self._controller.note_sent(self.clock(), self._drive)
 
-    def on_telemetry(self, readings: Mapping[str, JointReading], received_at: float) -> None:
-        """Measured joint angles for the position controller (any thread)."""
+    def on_telemetry(
+        self,
+        readings: Mapping[str, JointReading],
+        received_at: float,
+        delay_s: float | None = None,
+    ) -> None:
+        """Measured joint angles (and the round trip they took) for the position controller."""
         with self._lock:
-            self._controller.on_telemetry(readings, received_at)
+            self._controller.on_telemetry(readings, received_at, delay_s)
 
     # ---- periodic work -----------------------------------------------------------------
 
@@ -635,6 +641,8 @@ class BridgeCore:
                 for channel in self._goal_channels:
                     velocities.setdefault(channel, 0.0)
                 self._sink.set_velocities(**velocities)
+                # The controller's prediction integrates what the bridge sent (delay-aware).
+                self._controller.note_sent(now, {**self._drive, **velocities})
                 self._goal_channels = {
                     self._controller.channel_of(j) for j in self._controller.targets
                 }

@@ -257,7 +257,7 @@ class RosBridge:
         publishers = self._publishers
         if publishers is None:
             return
-        self.core.on_telemetry(frame.readings, frame.received_at)
+        self.core.on_telemetry(frame.readings, frame.received_at, frame.delay_s)
         data = joint_state(self.profile, frame.readings)
         message = JointState()
         message.header.stamp = _stamp(frame.wall_time)

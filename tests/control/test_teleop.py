@@ -351,3 +351,42 @@ def test_event_runs_every_callback_before_raising() -> None:
     event.disconnect(broken)
     event.emit(4)
     assert seen == [3, 4]
+
+
+def test_the_drive_pair_keeps_its_turn_radius(model: TeleopModel, profile: RobotProfile) -> None:
+    # Typed below the servos' starting speed: both lifted by one factor (seed 002 eq. 5.4).
+    kept = model.set_velocities({"drive_linear": 0.1, "drive_turn": 0.05})
+    assert kept == pytest.approx({"drive_linear": 0.2, "drive_turn": 0.1})
+    assert model.velocities() == pytest.approx({"drive_linear": 0.2, "drive_turn": 0.1})
+    # Above the maxima: both brought down by one factor (eq. 5.2).
+    model.set_velocities({"drive_linear": 0.6, "drive_turn": 0.4})
+    v, w = model.velocities()["drive_linear"], model.velocities()["drive_turn"]
+    assert v == pytest.approx(model.max_velocity("drive_linear"))
+    assert v / w == pytest.approx(0.6 / 0.4)
+    # A lower maximum rescales the standing request, ratio kept.
+    model.set_max_velocity("drive_linear", 0.25)
+    v, w = model.velocities()["drive_linear"], model.velocities()["drive_turn"]
+    assert v == pytest.approx(0.25)
+    assert v / w == pytest.approx(0.6 / 0.4)
+
+
+def test_fine_drive_keys_keep_the_ratio_of_their_speeds(model: TeleopModel) -> None:
+    model.set_fine(True)
+    model.hotkey_down("W", "drive_linear", 1)
+    model.hotkey_down("A", "drive_turn", 1)
+    v, w = model.velocities()["drive_linear"], model.velocities()["drive_turn"]
+    ratio = model.hotkey_speed("drive_linear") / model.hotkey_speed("drive_turn")
+    assert v / w == pytest.approx(ratio)
+    model.hotkey_up("A")
+    assert model.velocities() == {"drive_linear": pytest.approx(0.2)}  # lifted alone
+
+
+def test_what_is_sent_feeds_the_prediction(model: TeleopModel) -> None:
+    from ocu.control.commands import JointReading
+
+    reading = JointReading("shoulder", 5, 1, 2, 0.1, 0.0, 0.0, 0, 0.1, 0.0, 0.0)
+    model.on_telemetry({"shoulder": reading}, model.clock(), delay_s=0.0)
+    start = model.clock()
+    model.set_velocity("shoulder", 0.2)
+    predicted = model.predicted_angles(start + 1.0)["shoulder"]
+    assert predicted == pytest.approx(0.1 + 0.2 * 1.0, abs=0.02)
