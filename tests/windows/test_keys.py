@@ -19,6 +19,9 @@ from tests.windows.console_fixtures import DEADLINE_MS, drive_axis, is_zero, wai
 
 NO_MOD = Qt.KeyboardModifier.NoModifier
 XCB_W = 17 + 8  # X11 key code of the W position: evdev code + 8
+T0 = 1_000_000  # an X server time (ms) for synthetic events
+X_DELAY_MS = 660  # X11's default auto-repeat delay and interval (25 Hz)
+X_INTERVAL_MS = 40
 
 
 class Telemetry:
@@ -49,8 +52,10 @@ def send_key(
     auto: bool = False,
     scan_code: int = 0,
     modifiers: Qt.KeyboardModifier = NO_MOD,
+    timestamp: int = 0,
 ) -> None:
     event = QKeyEvent(kind, key, modifiers, scan_code, 0, 0, text, auto)
+    event.setTimestamp(timestamp)  # the X server's milliseconds; 0 as QTest's events
     target = QApplication.focusWidget() or window
     QApplication.sendEvent(target, event)
 
@@ -112,12 +117,13 @@ def test_two_keys_at_once(console: MainWindow, sim: RobotSimulator, qtbot: QtBot
 def test_auto_repeat_pairs_are_ignored(
     console: MainWindow, sim: RobotSimulator, profile: RobotProfile, qtbot: QtBot
 ) -> None:
-    QTest.keyPress(console, Qt.Key.Key_W)
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=T0)
     wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving forward")
     mark = len(sim.received_commands())
-    for _ in range(20):  # what a held key produces on X11: release+press pairs, auto-repeat
-        send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", auto=True)
-        send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", auto=True)
+    for n in range(20):  # what a held key produces on X11: release+press pairs, auto-repeat
+        at = T0 + X_DELAY_MS + n * X_INTERVAL_MS  # the pair shares the server's time
+        send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", auto=True, timestamp=at)
+        send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", auto=True, timestamp=at)
     assert console.model.held_keys == frozenset({"W"})
     # Let periodic RCPs arrive: none of them may stop the drive.
     wait_sim(qtbot, sim, lambda s: s.rcp_count >= mark + 2, "two more RCPs")
