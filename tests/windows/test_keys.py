@@ -132,6 +132,70 @@ def test_auto_repeat_pairs_are_ignored(
     wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped on the real release")
 
 
+def x_repeat_pairs(window: MainWindow, first_ms: int, count: int) -> int:
+    """What X11 sends for a held W: release+press pairs sharing a server time, not flagged
+    (Qt 6.11 under Xvfb flags hardly any). Returns the time of the last pair."""
+    at = first_ms
+    for n in range(count):
+        at = first_ms + n * X_INTERVAL_MS
+        send_key(window, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=at)
+        send_key(window, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=at)
+    return at
+
+
+def motion_since(sim: RobotSimulator, index: int) -> list[int]:
+    return [i for i, r in enumerate(sim.received_commands()[index:]) if not is_zero(r)]
+
+
+def no_motion_for_two_rcps(sim: RobotSimulator, qtbot: QtBot, since: int, what: str) -> None:
+    wait_sim(qtbot, sim, lambda s: s.rcp_count >= since + 2, "two more RCPs")
+    assert not motion_since(sim, since), what
+
+
+def test_repeats_of_a_key_never_seen_going_down_do_not_move_the_robot(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    # W was pressed in another window; the console gets only its auto-repeats.
+    last = x_repeat_pairs(console, T0, 10)
+    no_motion_for_two_rcps(sim, qtbot, 0, "W held before the console had the keyboard")
+    assert console.model.held_keys == frozenset()
+    # Released and pressed again: a real press drives.
+    send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=last + 15)
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=last + 300)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving on a new press")
+    # Space while W is held: the key's auto-repeat must not start the robot again.
+    QTest.keyClick(console, Qt.Key.Key_Space)
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped by Space")
+    mark = len(sim.received_commands())
+    last = x_repeat_pairs(console, last + 300 + X_DELAY_MS, 10)
+    no_motion_for_two_rcps(sim, qtbot, mark, "W's auto-repeat after Space")
+    assert console.model.estopped
+    send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=last + 15)
+
+
+def test_a_press_repeated_sooner_than_any_auto_repeat_is_stopped_at_once(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    # A key held elsewhere, repeated as presses only (XKB detectable auto-repeat, other
+    # platforms): the first press looks real, the second comes 40 ms later -- no keyboard
+    # repeats that soon, so the first one was a repeat as well.
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=T0)
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=T0 + X_INTERVAL_MS)
+    assert console.model.held_keys == frozenset()
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped")
+    mark = len(sim.received_commands())
+    for n in range(2, 12):
+        at = T0 + n * X_INTERVAL_MS
+        send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=at)
+    no_motion_for_two_rcps(sim, qtbot, mark, "further repeats")
+    assert console.model.held_keys == frozenset()
+    send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=T0 + 500)
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=T0 + 800)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving on a new press")
+    send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=T0 + 900)
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped on release")
+
+
 def test_keys_work_by_position_on_a_russian_layout(
     console: MainWindow, sim: RobotSimulator, qtbot: QtBot
 ) -> None:
