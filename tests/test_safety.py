@@ -30,6 +30,7 @@ from ocu.link.core import LinkState
 from ocu.profile import RobotProfile
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator
 from ocu.widgets.value_slider import STEPS
+from ocu.windows.held_keys import XKeymapProbe
 from ocu.windows.main_window import MainWindow
 from tests.windows.console_fixtures import (
     DEADLINE_MS,
@@ -256,6 +257,28 @@ def start_ocu(env: dict[str, str], sim: RobotSimulator, log_path: Path) -> subpr
             stdout=subprocess.DEVNULL,
             stderr=log,
         )
+
+
+def test_the_x_server_tells_which_keys_are_down(xvfb: str, tmp_path: Path) -> None:
+    env = x_env(xvfb, tmp_path)
+    probe = XKeymapProbe.open(xvfb)
+    assert probe is not None
+    try:
+        assert probe.pressed() == frozenset()
+        xdotool(env, "keydown", "w", "keydown", "space", "keydown", "shift")
+        assert probe.pressed() == frozenset({"W", "Space"})  # Shift has no key name
+        xdotool(env, "keyup", "w", "keyup", "space", "keyup", "shift")
+        assert probe.pressed() == frozenset()
+    finally:
+        subprocess.run(
+            [XDOTOOL or "", "keyup", "w", "keyup", "space", "keyup", "shift"],
+            env=env,
+            timeout=30,
+            check=False,
+        )
+        probe.close()
+    assert probe.pressed() is None
+    assert XKeymapProbe.open(f"{xvfb}9") is None  # no such display: no probe, no error
 
 
 def test_sigterm_while_driving_on_a_russian_layout_sends_zeros_last(
