@@ -1,12 +1,15 @@
 """The robot never keeps moving because of the OCU: each case reads what the simulator received.
 
 Focus lost, minimised, hidden, GUI thread stalled, link dropped, program closed (in process
-and, under Xvfb with a Russian keyboard layout and real X11 key presses, by SIGTERM).
+and, under Xvfb with a Russian keyboard layout and real X11 key presses, by SIGTERM); and it
+never starts because of a key held in another window when the console gets the keyboard
+(under Xvfb, X's own auto-repeat).
 """
 
 from __future__ import annotations
 
 import os
+import selectors
 import shutil
 import signal
 import subprocess
@@ -14,6 +17,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import IO
 
 import pytest
 from PySide6.QtCore import Qt, QTimer
@@ -225,16 +229,18 @@ def xdotool(env: dict[str, str], *args: str) -> str:
     return result.stdout
 
 
-def test_sigterm_while_driving_on_a_russian_layout_sends_zeros_last(
-    xvfb: str, sim: RobotSimulator, profile: RobotProfile, tmp_path: Path
-) -> None:
-    env = {**os.environ, "DISPLAY": xvfb, "QT_QPA_PLATFORM": "xcb", "OCU_CONFIG_DIR": str(tmp_path)}
+def x_env(display: str, tmp_path: Path) -> dict[str, str]:
+    env = {**os.environ, "DISPLAY": display, "QT_QPA_PLATFORM": "xcb"}
+    env["OCU_CONFIG_DIR"] = str(tmp_path)
     env.pop("WAYLAND_DISPLAY", None)
-    subprocess.run([SETXKBMAP or "", "-display", xvfb, "ru"], check=True, env=env, timeout=30)
+    return env
+
+
+def start_ocu(env: dict[str, str], sim: RobotSimulator, log_path: Path) -> subprocess.Popen[bytes]:
+    """The real program on the X display of `env`, connected to `sim`; its log in log_path."""
     host, port = sim.address
-    log_path = tmp_path / "ocu.log"
     with log_path.open("w") as log:
-        program = subprocess.Popen(
+        return subprocess.Popen(
             [
                 sys.executable,
                 "-X",
@@ -250,6 +256,40 @@ def test_sigterm_while_driving_on_a_russian_layout_sends_zeros_last(
             stdout=subprocess.DEVNULL,
             stderr=log,
         )
+
+
+def test_the_x_server_tells_which_keys_are_down(xvfb: str, tmp_path: Path) -> None:
+    # Imported here so that the rest of this file also runs on a tree without the probe.
+    from ocu.windows.held_keys import XKeymapProbe
+
+    env = x_env(xvfb, tmp_path)
+    probe = XKeymapProbe.open(xvfb)
+    assert probe is not None
+    try:
+        assert probe.pressed() == frozenset()
+        xdotool(env, "keydown", "w", "keydown", "space", "keydown", "shift")
+        assert probe.pressed() == frozenset({"W", "Space"})  # Shift has no key name
+        xdotool(env, "keyup", "w", "keyup", "space", "keyup", "shift")
+        assert probe.pressed() == frozenset()
+    finally:
+        subprocess.run(
+            [XDOTOOL or "", "keyup", "w", "keyup", "space", "keyup", "shift"],
+            env=env,
+            timeout=30,
+            check=False,
+        )
+        probe.close()
+    assert probe.pressed() is None
+    assert XKeymapProbe.open(f"{xvfb}9") is None  # no such display: no probe, no error
+
+
+def test_sigterm_while_driving_on_a_russian_layout_sends_zeros_last(
+    xvfb: str, sim: RobotSimulator, profile: RobotProfile, tmp_path: Path
+) -> None:
+    env = x_env(xvfb, tmp_path)
+    subprocess.run([SETXKBMAP or "", "-display", xvfb, "ru"], check=True, env=env, timeout=30)
+    log_path = tmp_path / "ocu.log"
+    program = start_ocu(env, sim, log_path)
     try:
         assert sim.wait_until(lambda s: s.client is not None, 30.0), "ocu never connected"
         window = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^ocu").split()[0]
@@ -286,3 +326,104 @@ def test_sigterm_while_driving_on_a_russian_layout_sends_zeros_last(
     assert not motion_after(sim, since + SIGNAL_POLL_MS / 1000 + PROMPT_S)
     assert not sim.state().watchdog_stopped  # zeros from the OCU, not the robot's watchdog
     assert "Traceback" not in stderr
+
+
+# Another application: a window that prints a line for every key press it gets.
+OTHER_APPLICATION = """
+import sys
+from PySide6.QtCore import QEvent, QObject
+from PySide6.QtWidgets import QApplication, QLabel
+
+class Presses(QObject):
+    def eventFilter(self, watched, event):
+        if event.type() == QEvent.Type.KeyPress and watched.isWindowType():
+            print("press", flush=True)
+        return False
+
+app = QApplication(sys.argv)
+presses = Presses()
+app.installEventFilter(presses)
+label = QLabel("another application")
+label.setWindowTitle("another application")
+label.resize(300, 100)
+label.show()
+app.exec()
+"""
+
+
+def read_lines(stream: IO[str], count: int, timeout_s: float) -> int:
+    """Read lines from a pipe until `count` arrived or the time is up; how many arrived."""
+    deadline = time.monotonic() + timeout_s
+    seen = 0
+    with selectors.DefaultSelector() as selector:
+        selector.register(stream, selectors.EVENT_READ)
+        while seen < count:
+            remaining_s = deadline - time.monotonic()
+            if remaining_s <= 0 or not selector.select(remaining_s):
+                break
+            if not stream.readline():
+                break
+            seen += 1
+    return seen
+
+
+def log_shows(path: Path, text: str, timeout_s: float) -> bool:
+    """Whether the program's log shows `text` within the time (polled: it is another process)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if text in path.read_text():
+            return True
+        time.sleep(0.05)
+    return text in path.read_text()
+
+
+def test_a_key_held_in_another_window_does_not_drive_when_the_console_gets_the_focus(
+    xvfb: str, sim: RobotSimulator, profile: RobotProfile, tmp_path: Path
+) -> None:
+    env = x_env(xvfb, tmp_path)
+    log_path = tmp_path / "ocu.log"
+    program = start_ocu(env, sim, log_path)
+    other = subprocess.Popen(
+        [sys.executable, "-c", OTHER_APPLICATION], env=env, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert sim.wait_until(lambda s: s.client is not None, 30.0), "ocu never connected"
+        console = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^ocu").split()[0]
+        window = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^another appl")
+        xdotool(env, "windowfocus", "--sync", window.split()[0])
+        xdotool(env, "keydown", "w")
+        # Xvfb auto-repeats like any X server (660 ms delay, 25 Hz): wait for the repeats.
+        assert other.stdout is not None
+        assert read_lines(other.stdout, 3, 5.0) == 3, "no auto-repeat in the other window"
+        since = time.monotonic()
+        xdotool(env, "windowfocus", "--sync", console)
+        mark = len(sim.received_commands())
+        assert sim.wait_until(lambda s: s.rcp_count >= mark + 3, 5.0)
+        assert not motion_after(sim, since), "W held in another window drove the robot"
+        # The console did get W's repeats (and says why it ignores them).
+        assert log_shows(log_path, "W was already down", 5.0), log_path.read_text()
+        assert not motion_after(sim, since)
+        # Released and pressed again in the console: it drives, and keeps driving steadily
+        # through X's auto-repeat (release+press pairs) until W goes up.
+        xdotool(env, "keyup", "w")
+        xdotool(env, "keydown", "w")
+        assert sim.wait_until(lambda s: s.velocities["drive_linear"] > 0, 3.0), "no drive"
+        started = motion_after(sim, since)[0].time_s
+        assert sim.wait_until(lambda s: s.time_s > started + 1.2, 3.0)
+        held = [r for r in sim.received_commands() if started <= r.time_s]
+        assert all(not is_zero(r) for r in held), "the drive stuttered while W was held"
+        xdotool(env, "keyup", "w")
+        assert sim.wait_until(lambda s: s.all_stopped, 3.0), "not stopped on W's release"
+    finally:
+        subprocess.run([XDOTOOL or "", "keyup", "w"], env=env, timeout=30, check=False)
+        other.kill()
+        other.wait()
+        if other.stdout is not None:
+            other.stdout.close()
+        program.terminate()
+        try:
+            program.wait(15)
+        except subprocess.TimeoutExpired:
+            program.kill()
+            program.wait()
+    assert "Traceback" not in log_path.read_text()

@@ -12,7 +12,9 @@ STEPS = 1000
 class ValueSlider(QSlider):
     """[-limit, limit] (symmetric) or [0, limit] in STEPS steps per side.
 
-    The wheel is ignored: scrolling the window over a slider must not move the robot.
+    The wheel is ignored: scrolling the window over a slider must not move the robot. The
+    slider takes no keyboard focus: a focused slider moves on Home, End, PageUp/Down and the
+    arrows (one Home tap would command the full reverse speed until the next stop).
     """
 
     value_moved = Signal(float)
@@ -28,6 +30,7 @@ class ValueSlider(QSlider):
         self.setTickPosition(QSlider.TickPosition.TicksBelow)
         self.setTickInterval(STEPS // 2 if symmetric else STEPS // 4)
         self.setMinimumWidth(160)
+        self.setFocusPolicy(Qt.FocusPolicy.NoFocus)
         self.valueChanged.connect(self._on_value_changed)
 
     def set_limit(self, limit: float) -> None:

@@ -18,6 +18,7 @@ from PySide6.QtWidgets import (
 from ocu.control.position import PositionError
 from ocu.control.teleop import TeleopModel
 from ocu.link.core import TelemetryFrame
+from ocu.profile import Motor
 from ocu.widgets.number_box import NumberBox, NumberError, format_number
 from ocu.widgets.telemetry_plots import TelemetryPlots
 from ocu.widgets.telemetry_table import TelemetryTable
@@ -25,6 +26,26 @@ from ocu.windows.velocity import ERROR_TEXT_STYLE, channel_title
 
 CONTROLLED_STYLE = "color: #1565c0; font-weight: bold;"
 IMPLAUSIBLE_STYLE = "color: white; background: #c62828; font-weight: bold; padding: 0 3px;"
+
+
+def limits_deg(motor: Motor) -> tuple[float, float]:
+    """A joint's limits in degrees as the profile writes them (what the operator types)."""
+    if motor.limits_deg is not None:
+        return motor.limits_deg
+    assert motor.limits_rad is not None, f"{motor.name} has no position limits"
+    low, high = motor.limits_rad
+    return math.degrees(low), math.degrees(high)
+
+
+def target_rad(motor: Motor, degrees: float) -> float:
+    """A target typed in degrees (checked against `limits_deg`) in radians within limits_rad.
+
+    The comparison is made in the unit typed: radians(120) may differ from the profile's
+    limit in radians in the last bit, and the controller checks radians.
+    """
+    assert motor.limits_rad is not None, f"{motor.name} has no position limits"
+    low, high = motor.limits_rad
+    return min(max(math.radians(degrees), low), high)
 
 
 class JointPositionPanel(QWidget):
@@ -48,9 +69,7 @@ class JointPositionPanel(QWidget):
             header.setStyleSheet("color: #666;")
             grid.addWidget(header, 0, column)
         for row, name in enumerate(self.joints, start=1):
-            motor = model.profile.motors[name]
-            assert motor.limits_rad is not None
-            low, high = (math.degrees(v) for v in motor.limits_rad)
+            low, high = limits_deg(model.profile.motors[name])
             title = QLabel(channel_title(name))
             title.setStyleSheet("font-weight: bold;")
             angle = QLabel("—")
@@ -118,7 +137,8 @@ class JointPositionPanel(QWidget):
         layout.addWidget(self.splitter)
 
         model.events.targets_changed.connect(self._on_targets)
-        model.events.estop_changed.connect(self._on_estop)
+        # Every e-stop, latched already or not (estop_changed fires only on a change).
+        model.events.estop_requested.connect(self._on_estop)
         model.events.position_message.connect(self.show_message)
 
     # ---- operator -> model -----------------------------------------------------------------
@@ -131,7 +151,7 @@ class JointPositionPanel(QWidget):
             if not box.isModified() or not box.text().strip():
                 continue
             try:
-                targets[name] = math.radians(box.value())
+                targets[name] = target_rad(self.model.profile.motors[name], box.value())
             except NumberError as err:
                 errors.append(f"{channel_title(name)}: {err}")
         if not errors and not targets:
@@ -186,9 +206,8 @@ class JointPositionPanel(QWidget):
                 status.setText("")
                 status.setStyleSheet("")
 
-    def _on_estop(self, active: bool, _reason: str) -> None:
-        if active:
-            for box in self.boxes.values():
-                box.clear()
-                box.setModified(False)
-                box.set_error("")
+    def _on_estop(self, _reason: str) -> None:
+        for box in self.boxes.values():
+            box.clear()
+            box.setModified(False)
+            box.set_error("")

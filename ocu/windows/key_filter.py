@@ -3,16 +3,29 @@
 An application-wide event filter sees every key event before the focused widget does, so
 Space stops the robot even while a text box has focus. Letters typed into a text box stay
 there; a key's release is always honoured, wherever the focus went meanwhile.
+
+A motion key acts only on a press the console saw happen. Auto-repeat is told apart here,
+not left to Qt: Qt flags a repeat only when it saw the key go down, and under X11 only when
+the repeat's release and press reach it together (Xvfb with Qt 6.11: hardly ever). A key
+held in another window therefore arrives as a stream of ordinary-looking presses when the
+console gets the keyboard; `KeyGuard` ignores such a key until it is released and pressed
+again, asking the X server which keys are down where it can (`ocu.windows.held_keys`).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from enum import Enum
 
 from PySide6.QtCore import QEvent, QObject, Qt
 from PySide6.QtGui import QGuiApplication, QKeyEvent
 from PySide6.QtWidgets import (
+    QAbstractButton,
+    QAbstractSlider,
     QAbstractSpinBox,
+    QApplication,
     QComboBox,
     QLineEdit,
     QPlainTextEdit,
@@ -23,6 +36,7 @@ from PySide6.QtWidgets import (
 from ocu import hotkeys
 from ocu.control.teleop import TeleopModel
 from ocu.hotkeys import KeyMap
+from ocu.windows.held_keys import XKeymapProbe
 
 # Native scan code minus this is the evdev position code, per Qt platform plugin.
 SCAN_CODE_OFFSETS = {"xcb": 8, "wayland": 8, "windows": 0}
@@ -53,6 +67,136 @@ _SHORTCUT_MODIFIERS = (
     | Qt.KeyboardModifier.AltModifier
     | Qt.KeyboardModifier.MetaModifier
 )
+
+# Keys a slider moves its handle with (QAbstractSlider::keyPressEvent): one Home tap on a
+# focused velocity slider would command the full reverse speed. The arrows also click the
+# neighbour of a checked button in an exclusive group (a switch: flippers up).
+ARROW_KEYS = frozenset(
+    key.value for key in (Qt.Key.Key_Left, Qt.Key.Key_Right, Qt.Key.Key_Up, Qt.Key.Key_Down)
+)
+SLIDER_KEYS = ARROW_KEYS | frozenset(
+    key.value
+    for key in (
+        Qt.Key.Key_PageUp,
+        Qt.Key.Key_PageDown,
+        Qt.Key.Key_Home,
+        Qt.Key.Key_End,
+    )
+)
+# No keyboard auto-repeats sooner than this after the press (X11's default delay is 660 ms,
+# desktop settings go down to about 200 ms). A repeat sooner than this is of a key that was
+# down before the console saw it: the press it followed was itself a repeat.
+REPEAT_DELAY_FLOOR_MS = 150
+
+
+class Verdict(Enum):
+    """What a press of a guarded key means."""
+
+    PRESS = "press"  # a real press: act on it
+    REPEAT = "repeat"  # auto-repeat of a press acted on: nothing new
+    BLOCKED = "blocked"  # held since before the console saw it go down: ignore until released
+    HELD_BEFORE = "held before"  # the press acted on was a repeat after all: stop the key now
+    RESUME = "resume"  # the release just acted on was an auto-repeat's: press again
+
+
+@dataclass(frozen=True)
+class _Release:
+    timestamp_ms: int
+    real: bool  # taken as the key going up
+    stopped: bool  # and it stopped a key the model held
+
+
+class KeyGuard:
+    """Tells real presses and releases of keys from auto-repeat and from keys held before.
+
+    Qt-free. `pressed_now` asks the window system which keys are down (None: cannot tell);
+    timestamps are the window system's milliseconds (0: unknown, `clock` is used).
+
+    - When the console gets the keyboard, every key down at that moment is blocked: its
+      presses are ignored until a real release.
+    - A press is an auto-repeat if Qt says so, if the key is already down, or if it carries
+      the timestamp of the key's release just before (X11 repeats as release+press pairs
+      with one server time; nobody releases and presses a key within one millisecond).
+    - A release is an auto-repeat's if Qt says so or the window system says the key is
+      still down (an X11 pair's press is generated with its release, before we ask).
+    - An auto-repeat of a key not seen going down blocks it. One that comes sooner than any
+      auto-repeat delay after the press acted on means that press was a repeat too: stop.
+    """
+
+    def __init__(
+        self,
+        pressed_now: Callable[[], frozenset[str] | None] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.pressed_now = pressed_now
+        self.clock = clock
+        self._down: set[str] = set()
+        self._blocked: set[str] = set()
+        self._pressed_at: dict[str, float] = {}
+        self._last_release: dict[str, _Release] = {}
+
+    @property
+    def blocked(self) -> frozenset[str]:
+        """Keys whose presses are ignored until they are released."""
+        return frozenset(self._blocked)
+
+    @property
+    def down(self) -> frozenset[str]:
+        """Keys seen going down and not yet up."""
+        return frozenset(self._down)
+
+    def activated(self) -> None:
+        """The console got the keyboard: whatever is down now was pressed elsewhere."""
+        self.deactivated()
+        held = self.pressed_now() if self.pressed_now is not None else None
+        self._blocked = set(held or ())
+
+    def deactivated(self) -> None:
+        """The console lost the keyboard: releases go elsewhere, forget every key."""
+        self._down.clear()
+        self._blocked.clear()
+        self._pressed_at.clear()
+        self._last_release.clear()
+
+    def press(self, key: str, timestamp_ms: int, qt_repeat: bool) -> Verdict:
+        """Classify a press of `key`."""
+        now_ms = float(timestamp_ms) if timestamp_ms else self.clock() * 1000.0
+        last = self._last_release.pop(key, None)
+        pair = bool(timestamp_ms) and last is not None and last.timestamp_ms == timestamp_ms
+        if key in self._blocked:
+            return Verdict.BLOCKED
+        if not (qt_repeat or pair or key in self._down):
+            self._down.add(key)
+            self._pressed_at[key] = now_ms
+            return Verdict.PRESS
+        if key in self._down:
+            elapsed = now_ms - self._pressed_at.get(key, -float("inf"))
+            if 0.0 <= elapsed < REPEAT_DELAY_FLOOR_MS:
+                self._down.discard(key)
+                self._blocked.add(key)
+                return Verdict.HELD_BEFORE
+            return Verdict.REPEAT
+        if pair and last is not None and last.real and last.stopped:
+            # Neither Qt nor the window system told that release from a repeat's: the key
+            # never went up, it was ours and moving; take it back as it was.
+            self._down.add(key)
+            return Verdict.RESUME
+        self._blocked.add(key)
+        return Verdict.BLOCKED
+
+    def release(self, key: str, timestamp_ms: int, qt_repeat: bool, held: bool) -> bool:
+        """Classify a release of `key` (`held`: the model holds it); True if it is real."""
+        still_down = False
+        if not qt_repeat and self.pressed_now is not None:
+            now = self.pressed_now()
+            still_down = now is not None and key in now
+        if qt_repeat or still_down:
+            self._last_release[key] = _Release(timestamp_ms, real=False, stopped=False)
+            return False
+        self._down.discard(key)
+        self._blocked.discard(key)
+        self._last_release[key] = _Release(timestamp_ms, real=True, stopped=held)
+        return True
 
 
 def key_from_qt(key: int) -> str | None:
@@ -86,6 +230,15 @@ def is_text_input(widget: QObject | None) -> bool:
     return isinstance(widget, _TEXT_INPUTS)
 
 
+def is_navigation(widget: QObject | None, key: int) -> bool:
+    """Whether this key would move this widget's value: keys at a slider, arrows at a switch."""
+    if isinstance(widget, QAbstractSlider):
+        return key in SLIDER_KEYS
+    if isinstance(widget, QAbstractButton) and widget.isCheckable():
+        return key in ARROW_KEYS
+    return False
+
+
 class KeyFilter(QObject):
     """Application event filter: key events of the console's windows to ocu.hotkeys."""
 
@@ -96,16 +249,29 @@ class KeyFilter(QObject):
         owns: Callable[[QWidget], bool],
         platform: str | None = None,
         parent: QObject | None = None,
+        *,
+        pressed_now: Callable[[], frozenset[str] | None] | None = None,
     ) -> None:
         super().__init__(parent)
         self.model = model
         self.key_map = key_map
         self.owns = owns
         self.platform = platform if platform is not None else QGuiApplication.platformName()
+        self._probe: XKeymapProbe | None = None
+        if pressed_now is None and self.platform == "xcb":
+            self._probe = XKeymapProbe.open()
+            if self._probe is not None:
+                pressed_now = self._probe.pressed
+        self.guard = KeyGuard(pressed_now)
+        self._active = False
+        self._told: set[str] = set()  # keys the operator was told are ignored until released
 
     def eventFilter(self, watched: QObject, event: QEvent) -> bool:
         """Handle key presses and releases aimed at a widget of the console."""
         kind = event.type()
+        if kind in _ACTIVATION_EVENTS:
+            self._check_activation()
+            return False
         if kind not in (QEvent.Type.KeyPress, QEvent.Type.KeyRelease):
             return False
         if not isinstance(watched, QWidget) or not self.owns(watched):
@@ -113,27 +279,73 @@ class KeyFilter(QObject):
         assert isinstance(event, QKeyEvent)
         return self.handle_key(watched, event, kind == QEvent.Type.KeyPress)
 
+    def _check_activation(self) -> None:
+        """Follow whether a console window has the keyboard (the guard's key state)."""
+        window = QApplication.activeWindow()
+        active = window is not None and self.owns(window)
+        if active and not self._active:
+            self.guard.activated()
+            self._told.clear()
+        elif self._active and not active:
+            self.guard.deactivated()
+            self._told.clear()
+        self._active = active
+
     def handle_key(self, receiver: QWidget, event: QKeyEvent, pressed: bool) -> bool:
         """Act on one key event; True when it is consumed (kept from the widget)."""
         modifiers = event.modifiers()
         hotkeys.set_fine(self.model, bool(modifiers & Qt.KeyboardModifier.ShiftModifier))
         if event.key() in (Qt.Key.Key_Shift, Qt.Key.Key_Control, Qt.Key.Key_Alt):
             return False
+        if is_navigation(receiver, event.key()):
+            # Belt and braces: sliders and switches take no focus, but one that has it
+            # anyway must not move the robot on Home, End, PageUp/Down or an arrow.
+            return True
         name = key_name(event, self.platform)
         if name is None:
             return False
         typing = is_text_input(receiver)
-        if event.isAutoRepeat():
-            # Auto-repeat press/release pairs carry no news; keep them from the widgets
-            # (a slider would move) but let a text box repeat its characters.
-            return name == hotkeys.ESTOP_KEY or (self.key_map.is_bound(name) and not typing)
-        if not pressed:
-            return hotkeys.release(self.model, self.key_map, name)
         if name == hotkeys.ESTOP_KEY:
-            hotkeys.emergency_stop(self.model, "Space")
+            # Space always stops, wherever it is aimed and however long it was held; only
+            # Qt's own auto-repeats are skipped (the e-stop is latched already).
+            if pressed and not event.isAutoRepeat():
+                hotkeys.emergency_stop(self.model, "Space")
             return True
+        guarded = self.key_map.is_bound(name)
+        timestamp_ms = int(event.timestamp())
+        if not pressed:
+            if guarded:
+                held = name in self.model.held_keys
+                if not self.guard.release(name, timestamp_ms, event.isAutoRepeat(), held):
+                    return not typing  # an auto-repeat's release carries no news
+                self._told.discard(name)
+            elif event.isAutoRepeat():
+                return False
+            return hotkeys.release(self.model, self.key_map, name)
+        if guarded:
+            verdict = self.guard.press(name, timestamp_ms, event.isAutoRepeat())
+            if verdict is Verdict.HELD_BEFORE:
+                hotkeys.release(self.model, self.key_map, name)
+            if verdict in (Verdict.HELD_BEFORE, Verdict.BLOCKED) and name not in self._told:
+                self._told.add(name)
+                self.model.events.message.emit(
+                    f"{name} was already down when the console got it: ignored until released"
+                )
+            if verdict not in (Verdict.PRESS, Verdict.RESUME):
+                # Keep repeats from the widgets (a button or slider would act) but let a
+                # text box repeat its characters.
+                return not typing
+        elif event.isAutoRepeat():
+            return False
         if modifiers & _SHORTCUT_MODIFIERS:
             return False
         if typing and (event.text().isprintable() and event.text()):
             return False
         return hotkeys.press(self.model, self.key_map, name)
+
+
+_ACTIVATION_EVENTS = (
+    QEvent.Type.WindowActivate,
+    QEvent.Type.WindowDeactivate,
+    QEvent.Type.ApplicationStateChange,
+)

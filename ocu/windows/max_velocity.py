@@ -78,6 +78,7 @@ class MaxVelocityPanel(QWidget):
 
         model.events.max_changed.connect(self._on_max)
         model.events.hotkey_speed_changed.connect(self._on_hotkey_speed)
+        model.events.estop_requested.connect(self._on_estop)
 
     def accept(self) -> None:
         """Apply the typed maxima first, then the typed hotkey speeds; all or nothing."""
@@ -120,3 +121,9 @@ class MaxVelocityPanel(QWidget):
 
     def _on_hotkey_speed(self, name: str, value: float) -> None:
         self.hotkey_boxes[name].show_value(value)
+
+    def _on_estop(self, _reason: str) -> None:
+        # A stop drops whatever was typed: Enter after it must not apply a half-typed limit.
+        for name in self.model.profile.channels:
+            self.boxes[name].reset_value(self.model.max_velocity(name))
+            self.hotkey_boxes[name].reset_value(self.model.hotkey_speed(name))

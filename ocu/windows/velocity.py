@@ -6,6 +6,7 @@ the robot reports; the console feeds it from the video panel's status (protocol 
 
 from __future__ import annotations
 
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
     QButtonGroup,
     QCheckBox,
@@ -56,6 +57,10 @@ class VelocityPanel(QWidget):
     def __init__(self, model: TeleopModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setObjectName("velocity_panel")
+        # The panel itself takes the keyboard first (it is first in the focus chain), so the
+        # console starts with the hotkeys live: not in a text box, where W would type, nor on
+        # a slider, where Home would move the robot. Clicking its background returns there.
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
         self.model = model
         self.sliders: dict[str, ValueSlider] = {}
         self.boxes: dict[str, NumberBox] = {}
@@ -126,6 +131,8 @@ class VelocityPanel(QWidget):
                 button = QPushButton(text)
                 button.setObjectName(f"switch_{name}_{direction:+d}")
                 button.setCheckable(True)
+                # No keyboard focus: the arrows would click the neighbouring switch.
+                button.setFocusPolicy(Qt.FocusPolicy.NoFocus)
                 button.clicked.connect(lambda _=False, n=name, d=direction: self._on_switch(n, d))
                 group.addButton(button)
                 switch_layout.addWidget(button, row, column + 1)
@@ -159,7 +166,9 @@ class VelocityPanel(QWidget):
         events = model.events
         events.channel_changed.connect(self._on_channel)
         events.max_changed.connect(self._on_max)
-        events.estop_changed.connect(self._on_estop)
+        # Every e-stop, latched already or not: a value typed after the first Space must not
+        # survive the second one (estop_changed fires only when the latch changes).
+        events.estop_requested.connect(self._on_estop)
         events.torch_changed.connect(self._on_torch)
         events.connection_changed.connect(self._on_connection)
         self._on_connection(model.connected)
@@ -222,11 +231,11 @@ class VelocityPanel(QWidget):
         unit = self.model.profile.channels[name].unit
         self.limit_labels[name].setText(f"{unit}  (±{format_number(value, 2)})")
 
-    def _on_estop(self, active: bool, _reason: str) -> None:
-        if active:
-            for name, box in self.boxes.items():
-                box.reset_value(self.model.channel(name).velocity)
-            self.show_message("")
+    def _on_estop(self, _reason: str) -> None:
+        # Before the model zeroes the channels: every one is about to be zero.
+        for box in self.boxes.values():
+            box.reset_value(0.0)
+        self.show_message("")
 
     def _on_torch(self, on: bool) -> None:
         self.torch_box.blockSignals(True)

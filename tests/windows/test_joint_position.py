@@ -29,6 +29,17 @@ def slow_sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
     simulator.stop()
 
 
+@pytest.fixture
+def sim_near_limit(profile: RobotProfile) -> Iterator[RobotSimulator]:
+    """The simulator with the shoulder a few degrees below its upper limit (120°)."""
+    simulator = RobotSimulator(
+        profile, telemetry_hz=10.0, video_fps=0.0, initial_joints={"shoulder": math.radians(112)}
+    )
+    simulator.start()
+    yield simulator
+    simulator.stop()
+
+
 def type_target(console: MainWindow, joint: str, text: str) -> None:
     box = console.joint_panel.boxes[joint]
     box.setFocus()
@@ -121,3 +132,33 @@ def test_every_motor_shown_in_the_table_and_the_plots(console: MainWindow, qtbot
     assert len(xs) >= 2
     assert ("position", "left_track") not in panel.plots.curves  # no position for tracks
     assert all(-panel.plots.window_s <= x <= 0 for x in xs)
+
+
+def test_the_limits_themselves_can_be_typed(
+    make_console: ConsoleFactory,
+    sim_near_limit: RobotSimulator,
+    profile: RobotProfile,
+    qtbot: QtBot,
+) -> None:
+    console = make_console(sim_near_limit)
+    shoulder = profile.motors["shoulder"]
+    assert shoulder.limits_deg == (-10.0, 120.0)
+    assert shoulder.limits_rad is not None
+    type_target(console, "shoulder", "120")  # radians(120) in degrees is 119.99999999999999
+    QTest.keyClick(console.joint_panel.boxes["shoulder"], Qt.Key.Key_Return)
+    message = console.joint_panel.message_label.text()
+    assert console.model.targets == {"shoulder": shoulder.limits_rad[1]}, message
+    state = wait_sim(
+        qtbot,
+        sim_near_limit,
+        lambda s: abs(math.degrees(s.joints_rad["shoulder"]) - 120.0) < 0.5 and s.all_stopped,
+        "the shoulder at 120°",
+        timeout_ms=REACH_DEADLINE_MS,
+    )
+    assert math.degrees(state.joints_rad["shoulder"]) <= 120.0
+    qtbot.waitUntil(lambda: not console.model.targets, timeout=DEADLINE_MS)
+    type_target(console, "shoulder", "-10")
+    QTest.keyClick(console.joint_panel.boxes["shoulder"], Qt.Key.Key_Return)
+    assert console.model.targets == {"shoulder": shoulder.limits_rad[0]}
+    assert console.joint_panel.status_labels["shoulder"].text() == "→ -10.0°"
+    QTest.mouseClick(console.joint_panel.cancel_button, Qt.MouseButton.LeftButton)

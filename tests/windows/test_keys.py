@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 from PySide6.QtCore import QEvent, Qt
 from PySide6.QtGui import QKeyEvent
 from PySide6.QtTest import QTest
@@ -19,6 +21,9 @@ from tests.windows.console_fixtures import DEADLINE_MS, drive_axis, is_zero, wai
 
 NO_MOD = Qt.KeyboardModifier.NoModifier
 XCB_W = 17 + 8  # X11 key code of the W position: evdev code + 8
+T0 = 1_000_000  # an X server time (ms) for synthetic events
+X_DELAY_MS = 660  # X11's default auto-repeat delay and interval (25 Hz)
+X_INTERVAL_MS = 40
 
 
 class Telemetry:
@@ -49,8 +54,10 @@ def send_key(
     auto: bool = False,
     scan_code: int = 0,
     modifiers: Qt.KeyboardModifier = NO_MOD,
+    timestamp: int = 0,
 ) -> None:
     event = QKeyEvent(kind, key, modifiers, scan_code, 0, 0, text, auto)
+    event.setTimestamp(timestamp)  # the X server's milliseconds; 0 as QTest's events
     target = QApplication.focusWidget() or window
     QApplication.sendEvent(target, event)
 
@@ -112,18 +119,90 @@ def test_two_keys_at_once(console: MainWindow, sim: RobotSimulator, qtbot: QtBot
 def test_auto_repeat_pairs_are_ignored(
     console: MainWindow, sim: RobotSimulator, profile: RobotProfile, qtbot: QtBot
 ) -> None:
-    QTest.keyPress(console, Qt.Key.Key_W)
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=T0)
     wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving forward")
     mark = len(sim.received_commands())
-    for _ in range(20):  # what a held key produces on X11: release+press pairs, auto-repeat
-        send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", auto=True)
-        send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", auto=True)
+    for n in range(20):  # what a held key produces on X11: release+press pairs, auto-repeat
+        at = T0 + X_DELAY_MS + n * X_INTERVAL_MS  # the pair shares the server's time
+        send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", auto=True, timestamp=at)
+        send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", auto=True, timestamp=at)
     assert console.model.held_keys == frozenset({"W"})
     # Let periodic RCPs arrive: none of them may stop the drive.
     wait_sim(qtbot, sim, lambda s: s.rcp_count >= mark + 2, "two more RCPs")
     assert all(drive_axis(profile, r, "drive_linear") > 0 for r in sim.received_commands()[mark:])
     QTest.keyRelease(console, Qt.Key.Key_W)
     wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped on the real release")
+
+
+def x_repeat_pairs(window: MainWindow, first_ms: int, count: int) -> int:
+    """What X11 sends for a held W: release+press pairs sharing a server time, not flagged
+    (Qt 6.11 under Xvfb flags hardly any). Returns the time of the last pair."""
+    at = first_ms
+    for n in range(count):
+        at = first_ms + n * X_INTERVAL_MS
+        send_key(window, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=at)
+        send_key(window, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=at)
+    return at
+
+
+def motion_since(sim: RobotSimulator, index: int) -> list[int]:
+    return [i for i, r in enumerate(sim.received_commands()[index:]) if not is_zero(r)]
+
+
+def no_motion_for_two_rcps(sim: RobotSimulator, qtbot: QtBot, since: int, what: str) -> None:
+    wait_sim(qtbot, sim, lambda s: s.rcp_count >= since + 2, "two more RCPs")
+    assert not motion_since(sim, since), what
+
+
+def test_repeats_of_a_key_never_seen_going_down_do_not_move_the_robot(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    # W was pressed in another window; the console gets only its auto-repeats.
+    last = x_repeat_pairs(console, T0, 10)
+    no_motion_for_two_rcps(sim, qtbot, 0, "W held before the console had the keyboard")
+    assert console.model.held_keys == frozenset()
+    # Released and pressed again: a real press drives.
+    send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=last + 15)
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=last + 300)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving on a new press")
+    # Space while W is held: the key's auto-repeat must not start the robot again.
+    QTest.keyClick(console, Qt.Key.Key_Space)
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped by Space")
+    mark = len(sim.received_commands())
+    last = x_repeat_pairs(console, last + 300 + X_DELAY_MS, 10)
+    no_motion_for_two_rcps(sim, qtbot, mark, "W's auto-repeat after Space")
+    assert console.model.estopped
+    send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=last + 15)
+
+
+def test_a_press_repeated_sooner_than_any_auto_repeat_is_stopped_at_once(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    # A key held elsewhere, repeated as presses only (XKB detectable auto-repeat, other
+    # platforms): the first press looks real, the second comes 40 ms later -- no keyboard
+    # repeats that soon, so the first one was a repeat as well.
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=T0)
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=T0 + X_INTERVAL_MS)
+    stop_at = time.monotonic()
+    # A zero received after the stop: any RCP the link sent before it has arrived too.
+    wait_sim(
+        qtbot,
+        sim,
+        lambda _s: any(r.time_s > stop_at and is_zero(r) for r in sim.received_commands()),
+        "stopped at the second press",
+    )
+    assert console.model.held_keys == frozenset()
+    mark = len(sim.received_commands())
+    for n in range(2, 12):
+        at = T0 + n * X_INTERVAL_MS
+        send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=at)
+    no_motion_for_two_rcps(sim, qtbot, mark, "further repeats")
+    assert console.model.held_keys == frozenset()
+    send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=T0 + 500)
+    send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_W, "w", timestamp=T0 + 800)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving on a new press")
+    send_key(console, QEvent.Type.KeyRelease, Qt.Key.Key_W, "w", timestamp=T0 + 900)
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped on release")
 
 
 def test_keys_work_by_position_on_a_russian_layout(

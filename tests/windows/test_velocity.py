@@ -189,3 +189,84 @@ def test_disconnect_sends_zeros_last_and_connect_comes_back(
     QTest.mouseClick(panel.connect_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: console.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS)
     assert console.model.velocities() == {}
+
+
+def assert_nothing_moves(sim: RobotSimulator, qtbot: QtBot, what: str) -> None:
+    """Two more periodic RCPs arrive and no RCP so far commanded motion."""
+    mark = len(sim.received_commands())
+    wait_sim(qtbot, sim, lambda s: s.rcp_count >= mark + 2, "two more RCPs")
+    moving = [r for r in sim.received_commands() if not is_zero(r)]
+    assert not moving, f"{what}: {len(moving)} RCPs commanded motion"
+
+
+def test_a_stop_when_latched_still_clears_every_typed_box(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    velocity, targets, maxima = console.velocity_panel, console.joint_panel, console.max_panel
+    QTest.keyClick(console, Qt.Key.Key_Space)
+    assert console.model.estopped  # latched: the stops below change nothing in the latch
+    for stop in ("Space", "StopAll"):
+        type_into(qtbot, velocity.boxes["drive_linear"], "0.25")
+        type_into(qtbot, targets.boxes["shoulder"], "30")
+        type_into(qtbot, maxima.boxes["waist"], "0.1")
+        type_into(qtbot, maxima.hotkey_boxes["neck"], "0.05")
+        if stop == "Space":
+            QTest.keyClick(maxima.hotkey_boxes["neck"], Qt.Key.Key_Space)
+        else:
+            QTest.mouseClick(velocity.stop_button, Qt.MouseButton.LeftButton)
+        for box in (
+            velocity.boxes["drive_linear"],
+            targets.boxes["shoulder"],
+            maxima.boxes["waist"],
+            maxima.hotkey_boxes["neck"],
+        ):
+            QTest.keyClick(box, Qt.Key.Key_Return)  # Enter applies whatever is still typed
+        assert_nothing_moves(sim, qtbot, f"Enter after {stop}")
+        assert velocity.boxes["drive_linear"].text() == "0.000", stop
+        assert targets.boxes["shoulder"].text() == "", stop
+        assert maxima.boxes["waist"].text() == f"{console.model.max_velocity('waist'):.3f}"
+        assert maxima.hotkey_boxes["neck"].text() == f"{console.model.hotkey_speed('neck'):.3f}"
+        assert console.model.targets == {}, stop
+        assert console.model.velocities() == {}, stop
+        assert console.model.max_velocity("waist") == console.profile.channels["waist"].default_max
+        assert console.model.hotkey_speed("neck") == console.model.max_velocity("neck")
+
+
+SLIDER_KEYS = (
+    Qt.Key.Key_Home,
+    Qt.Key.Key_End,
+    Qt.Key.Key_PageUp,
+    Qt.Key.Key_PageDown,
+    Qt.Key.Key_Left,
+    Qt.Key.Key_Right,
+    Qt.Key.Key_Up,
+    Qt.Key.Key_Down,
+)
+
+
+def test_sliders_and_switches_take_no_keys(
+    console: MainWindow, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    panel = console.velocity_panel
+    drive = panel.sliders["drive_linear"]
+    stop_switch = panel.switch_buttons["flippers"][0]
+    QTest.mouseClick(drive, Qt.MouseButton.LeftButton, pos=drive.rect().center())  # zero
+    QTest.mouseClick(stop_switch, Qt.MouseButton.LeftButton)
+    clicked_focus = drive.hasFocus() or stop_switch.hasFocus()
+    # Belt and braces: given the focus anyway, they still ignore the keys.
+    for widget, keys in (
+        (drive, SLIDER_KEYS),
+        (panel.sliders["waist"], SLIDER_KEYS),
+        (stop_switch, SLIDER_KEYS[4:]),  # the arrows would click its neighbour
+        (console.max_panel.sliders["drive_linear"], SLIDER_KEYS),  # End: the hard maximum
+    ):
+        widget.setFocus()
+        for key in keys:
+            QTest.keyClick(widget, key)
+    assert_nothing_moves(sim, qtbot, "keys at sliders and switches")
+    assert all(s.value() == 0 for s in panel.sliders.values())
+    default_max = console.profile.channels["drive_linear"].default_max
+    assert console.model.max_velocity("drive_linear") == default_max
+    assert stop_switch.isChecked()
+    assert not clicked_focus  # a click gives neither the focus
+    assert all(s.focusPolicy() == Qt.FocusPolicy.NoFocus for s in panel.sliders.values())
