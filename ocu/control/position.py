@@ -64,6 +64,8 @@ NOISE_FLOOR_RAD = math.radians(0.01)
 DELAY_SIGMA_S = 0.03
 NOISE_PRIOR_RAD = math.radians(0.2)
 NOISE_ALPHA = 0.1
+# An observation this many standard deviations off means the model, not the reading, failed.
+OUTLIER_SIGMAS = 4.0
 # The first samples of the reading noise are averaged, later ones smoothed with NOISE_ALPHA.
 NOISE_AVERAGE_SAMPLES = 8
 # Consecutive readings closer than this in commanded travel show the reading noise (less
@@ -168,15 +170,29 @@ class JointPredictor:
             moved = abs(travel - self._last_travel())
             elapsed = max(taken_at - self.last_taken_at, 0.0)
             self.variance += (MODEL_SPEED_ERROR * moved) ** 2 + (DRIFT_RAD_PER_S * elapsed) ** 2
-            gain = self.variance / (self.variance + self.noise_var + delay_var)
-            self.offset_rad += gain * (observed - self.offset_rad)
+            measurement_var = self.noise_var + delay_var
+            innovation = observed - self.offset_rad
+            model_failed = (
+                innovation * innovation > OUTLIER_SIGMAS**2 * (self.variance + measurement_var)
+            )
+            if model_failed:
+                # Far more than the filter expects: the model is wrong (a servo slower than
+                # commanded, a joint pushed by hand). Believe the reading, not the model.
+                self.variance = innovation * innovation
+            gain = self.variance / (self.variance + measurement_var)
+            self.offset_rad += gain * innovation
             self.variance *= 1.0 - gain
-            if self._last_observation is not None and moved <= NOISE_PAIR_TRAVEL_RAD:
+            if (
+                self._last_observation is not None
+                and moved <= NOISE_PAIR_TRAVEL_RAD
+                and not model_failed
+            ):
                 # Two observations of the offset differ by the noise of two readings and the
                 # model's errors over the travel between them.
                 difference = observed - self._last_observation[0]
                 model_var = (MODEL_SPEED_ERROR * moved) ** 2 + delay_var + self._last_delay_var
                 sample = max((difference * difference - model_var) / 2.0, NOISE_FLOOR_RAD**2)
+                previous = self.noise_var
                 self.noise_samples += 1
                 if self.noise_samples == 1:
                     self.noise_var = sample
@@ -184,6 +200,9 @@ class JointPredictor:
                     self.noise_var += (sample - self.noise_var) / self.noise_samples
                 else:
                     self.noise_var += NOISE_ALPHA * (sample - self.noise_var)
+                # The estimate leaned on readings believed as good as the old noise estimate
+                # said: its uncertainty scales with it.
+                self.variance *= self.noise_var / previous
         self._last_delay_var = delay_var
         self._last_observation = (observed, travel)
         self.last_angle_rad = angle_rad

@@ -709,7 +709,10 @@ class LinkCore:
             return self._mapper.to_packet(self._command, self.limits)
 
     def _send_current(self) -> None:
-        self._send_packet(self.current_packet())
+        # Built and sent under one lock: a tick that read the command just before the
+        # operator stopped must not put its stale motion on the wire after the stop.
+        with self._send_lock:
+            self._send_packet(self.current_packet())
 
     def _send_hello(self) -> None:
         if not self.extension_enabled or self._ext_codec is None:

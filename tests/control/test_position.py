@@ -170,12 +170,18 @@ def test_noisy_readings_of_a_still_joint_are_averaged() -> None:
     assert predictor.sigma_rad < math.radians(0.2)
 
 
-def test_a_moving_joint_follows_its_readings() -> None:
+def test_a_joint_that_ran_fast_is_found_where_it_stopped() -> None:
     predictor = JointPredictor()
     predictor.on_reading(0.0, 0.0, 0.0)
     predictor.command(0.0, 1.0)
-    predictor.on_reading(0.6, 0.5, 0.0)  # the servo ran 20 % fast: trust the reading
-    assert predictor.eventual(0.5) == pytest.approx(0.6, abs=0.01)
+    # The servo ran 20 % fast. A reading of the moving joint weighs less (its delay may be
+    # off), but pulls the estimate toward itself...
+    predictor.on_reading(0.6, 0.5, 0.0)
+    assert 0.5 < predictor.eventual(0.5) < 0.6
+    predictor.command(0.5, 0.0)
+    # ... and readings of the stopped joint settle it.
+    predictor.on_reading(0.6, 0.7, 0.0)
+    assert predictor.eventual(0.7) == pytest.approx(0.6, abs=0.005)
 
 
 # ---- reached, stale, stalled, limits -----------------------------------------------------
@@ -215,15 +221,21 @@ def test_no_overshoot_and_a_true_reached_under_delay(
     assert math.degrees(abs(plant.angle_rad - target)) <= 0.5
 
 
-def test_a_joint_too_noisy_to_confirm_gives_up_with_a_message(
-    controller: PositionController,
-) -> None:
-    plant = DelayedJoint("shoulder", 0.0, 0.2, noise_rad=math.radians(3.3))
-    messages = run(controller, plant, math.radians(30.0), 0.1, 60.0)
-    assert len(messages) == 1
-    assert "without confirming" in messages[0]
-    assert "readings scatter" in messages[0]
-    assert math.degrees(abs(plant.angle_rad - math.radians(30.0))) < 2.0
+def test_a_joint_too_noisy_to_confirm_gives_up_with_a_message(profile: RobotProfile) -> None:
+    # ±3.3° of noise: the target ends either confirmed (the average of many still readings
+    # puts it in the band) or with a message; never by hunting on until the console closes.
+    for seed in range(1, 5):
+        plant = DelayedJoint("shoulder", 0.0, 0.2, noise_rad=math.radians(3.3), seed=seed)
+        controller = PositionController(profile, VelocityLimits(profile))
+        messages = run(controller, plant, math.radians(30.0), 0.1, 60.0)
+        assert len(messages) == 1, messages
+        error_deg = math.degrees(abs(plant.angle_rad - math.radians(30.0)))
+        if "reached" in messages[0]:
+            assert error_deg <= 0.5
+        else:
+            assert "without confirming" in messages[0]
+            assert "readings scatter" in messages[0]
+            assert error_deg < 2.0
 
 
 def test_stale_telemetry_stops_with_message(

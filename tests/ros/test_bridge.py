@@ -467,8 +467,13 @@ def test_joint_goal_runs_through_the_position_controller(
     assert sink.current["waist"] > 0.0
     clock.now += 0.1
     core.on_telemetry({"waist": reading("waist", 0.5)}, clock.now)
+    # Predicted at the target: the joint stops, but the reading was taken while it moved.
+    assert core.step() == []
+    assert sink.current["waist"] == 0.0
+    clock.now += 0.1
+    core.on_telemetry({"waist": reading("waist", 0.5)}, clock.now)
     messages = core.step()
-    assert messages == ["waist: reached 28.6°"]
+    assert messages == ["waist: reached 28.6°"]  # a reading taken after the stop confirms
     assert sink.current["waist"] == 0.0
     assert state_of(core) is BridgeState.LISTENING
 
