@@ -172,8 +172,8 @@ class JointPredictor:
             self.variance += (MODEL_SPEED_ERROR * moved) ** 2 + (DRIFT_RAD_PER_S * elapsed) ** 2
             measurement_var = self.noise_var + delay_var
             innovation = observed - self.offset_rad
-            model_failed = (
-                innovation * innovation > OUTLIER_SIGMAS**2 * (self.variance + measurement_var)
+            model_failed = innovation * innovation > OUTLIER_SIGMAS**2 * (
+                self.variance + measurement_var
             )
             if model_failed:
                 # Far more than the filter expects: the model is wrong (a servo slower than
