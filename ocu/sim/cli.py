@@ -90,6 +90,19 @@ def _frame_size(text: str) -> tuple[int, int]:
     return width_px, height_px
 
 
+def _raw_position(text: str) -> tuple[str, int]:
+    joint, sep, raw_text = text.partition("=")
+    try:
+        raw = int(raw_text, 0)
+    except ValueError:
+        raw = -1
+    if not sep or not joint or not 0 <= raw <= 0xFFFFFFFF:
+        raise argparse.ArgumentTypeError(
+            f"use JOINT=RAW with RAW a u32 (0x.. allowed), got {text!r}"
+        )
+    return joint, raw
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ocu-sim."""
     parser = argparse.ArgumentParser(
@@ -121,6 +134,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--duplicate", type=_probability, default=0.0, help="probability to send a datagram twice"
+    )
+    parser.add_argument(
+        "--noise-deg",
+        type=_non_negative,
+        default=0.0,
+        help="uniform noise of ± this many degrees on every reported joint position",
+    )
+    parser.add_argument(
+        "--raw-position",
+        action="append",
+        default=[],
+        type=_raw_position,
+        metavar="JOINT=RAW",
+        help="a broken encoder: JOINT always reports this raw u32 position (e.g. shoulder=0)",
     )
     parser.add_argument("--seed", type=int, default=None, help="seed of the fault decisions")
     parser.add_argument(
@@ -210,10 +237,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                 status_hz=args.status_hz,
                 battery_percent=args.battery_percent,
                 battery_drain_percent_per_s=args.battery_drain,
+                noise_deg=args.noise_deg,
             )
         except OSError as err:
             print(f"ocu-sim: cannot listen on {args.host}:{port}: {err}", file=sys.stderr)
             return 1
+        for joint, raw in args.raw_position:
+            try:
+                simulator.set_raw_position(joint, raw)
+            except ValueError as err:
+                simulator.stop()
+                parser.error(f"--raw-position: {err}")
         with simulator:
             host, bound_port = simulator.address
             print(f"ocu-sim listening on {host}:{bound_port}", flush=True)

@@ -46,6 +46,10 @@ def profile() -> RobotProfile:
         ["--port", "70000"],
         ["--log-level", "LOUD"],
         ["--profile", "/nonexistent/robot.toml"],
+        ["--noise-deg", "-1"],
+        ["--raw-position", "shoulder"],
+        ["--raw-position", "shoulder=4294967296"],
+        ["--port", "0", "--raw-position", "nose=0"],
     ],
 )
 def test_bad_values_are_argparse_errors(
@@ -67,6 +71,11 @@ def test_defaults(profile: RobotProfile) -> None:
     args = build_parser().parse_args(["--video-size", "640X480", "--log-level", "debug"])
     assert args.video_size == (640, 480)
     assert args.log_level == "DEBUG"
+    args = build_parser().parse_args(
+        ["--noise-deg", "0.5", "--raw-position", "shoulder=0xFFFFFFFF"]
+    )
+    assert args.noise_deg == 0.5
+    assert args.raw_position == [("shoulder", 0xFFFFFFFF)]
 
 
 def _read_line(stream: IO[str] | None, timeout_s: float) -> str:
