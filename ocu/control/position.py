@@ -446,7 +446,10 @@ class PositionController:
     # ---- output ----------------------------------------------------------------------------
 
     def update(self, now: float) -> dict[str, float]:
-        """Velocity per channel (rad/s) for every joint under control, at time now."""
+        """Velocity per channel (rad/s) for every joint under control, at time now.
+
+        A joint that finished in this step has no entry: its channel must be zeroed.
+        """
         if self._last_update_at is not None and now > self._last_update_at:
             self._period_s = now - self._last_update_at
         self._last_update_at = now
@@ -455,7 +458,7 @@ class PositionController:
             channel = self.channel_of(name)
             velocity = self._step(name, track, now)
             if name not in self._tracks:
-                velocity = 0.0
+                continue  # finished: its channel is no longer the controller's (caller zeroes)
             track.velocity_rad_s = velocity
             output[channel] = velocity
         return output
