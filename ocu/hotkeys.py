@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -51,17 +51,6 @@ KEY_POSITIONS: dict[str, int] = {
 _NAME_BY_POSITION = {code: name for name, code in KEY_POSITIONS.items()}
 # How the help names a key, where its name is not what is printed on it.
 KEY_LABELS = {"Slash": "?", "Minus": "-", "Equal": "=", "Comma": ",", "Period": "."}
-# Words for the + and - directions (the paper's table 4); "+"/"-" for other channels.
-DIRECTION_WORDS = {
-    "drive_linear": ("forward", "reverse"),
-    "drive_turn": ("rotate left", "rotate right"),
-    "waist": ("rotate left", "rotate right"),
-    "shoulder": ("up", "down"),
-    "elbow": ("up", "down"),
-    "neck": ("up", "down"),
-    "flippers": ("up", "down"),
-    "gripper": ("open", "close"),
-}
 
 
 class KeyMapError(ValueError):
@@ -88,6 +77,8 @@ class KeyMap:
     commands: Mapping[str, str]
     fine_factor: float = DEFAULT_FINE_FACTOR
     sources: tuple[str, ...] = ()
+    # Words for each channel's + and - (the profile's `directions`), for the help.
+    directions: Mapping[str, tuple[str, str]] = field(default_factory=dict)
 
     def is_bound(self, key: str) -> bool:
         """Whether pressing this key does something."""
@@ -108,7 +99,7 @@ class KeyMap:
             directions[binding.direction].append(key_label(key))
         lines = []
         for channel, directions in by_channel.items():
-            words = DIRECTION_WORDS.get(channel, ("+", "-"))
+            words = self.directions.get(channel, ("+", "-"))
             keys = " / ".join(" ".join(directions[d]) for d in (1, -1) if directions[d])
             what = " / ".join(words[i] for i, d in enumerate((1, -1)) if directions[d])
             lines.append((keys, f"{channel.replace('_', ' ')}: {what}"))
@@ -219,7 +210,14 @@ def parse_key_map(
     if ESTOP_KEY in hold:
         raise KeyMapError(f"{source}: {ESTOP_KEY} is the emergency stop and cannot move a joint")
     sources = (*base.sources, source) if base else (source,)
-    return KeyMap(hold=hold, commands=commands, fine_factor=fine_factor, sources=sources)
+    directions = {name: channel.directions for name, channel in profile.channels.items()}
+    return KeyMap(
+        hold=hold,
+        commands=commands,
+        fine_factor=fine_factor,
+        sources=sources,
+        directions=directions,
+    )
 
 
 def load_key_map(profile: RobotProfile, override: Path | None = None) -> KeyMap:

@@ -15,16 +15,11 @@ AXIS_COUNT = 16
 BUTTON_COUNT = 16
 AXIS_MAX = 32767
 SCALE_NAMES = ("linear", "rotation", "joint")
-CHANNEL_NAMES = (
-    "drive_linear",
-    "drive_turn",
-    "flippers",
-    "waist",
-    "shoulder",
-    "elbow",
-    "neck",
-    "gripper",
-)
+# Roles a channel may play. The chassis is driven by one `drive_linear` channel (m/s) and one
+# `drive_turn` channel (rad/s), bounded and lifted as a pair (ocu.control.drive).
+DRIVE_LINEAR_ROLE = "drive_linear"
+DRIVE_TURN_ROLE = "drive_turn"
+CHANNEL_ROLES = (DRIVE_LINEAR_ROLE, DRIVE_TURN_ROLE)
 
 
 # The keys each table of the profile may hold; any other key is refused by name, so a
@@ -97,7 +92,18 @@ SI_KEYS = (
 )
 CHASSIS_KEYS = ("track_width_m",)
 BUTTON_KEYS = ("torch", "camera_select")
-CHANNEL_KEYS = ("axis", "scale", "unit", "min_speed", "default_max", "hard_max")
+CHANNEL_KEYS = (
+    "axis",
+    "scale",
+    "unit",
+    "min_speed",
+    "default_max",
+    "hard_max",
+    "role",
+    "switch",
+    "directions",
+    "locked_while_driving",
+)
 # A motor's position keys only mean something with ticks_per_rad.
 MOTOR_POSITION_KEYS = ("zero_offset_ticks", "limits_deg")
 MOTOR_KEYS = ("device_id", "channel", "track", "ticks_per_rad", *MOTOR_POSITION_KEYS)
@@ -212,7 +218,12 @@ class CameraSettings:
 
 @dataclass(frozen=True)
 class Channel:
-    """One velocity channel: which RCP axis carries it and how SI maps to axis units."""
+    """One velocity channel: which RCP axis carries it, how SI maps to axis units, its role.
+
+    `directions` are the words for + and − ("up", "down"); `switch` gives the channel a
+    three-way switch in the console; `locked_while_driving` says the robot refuses to move it
+    while the chassis moves (the Engineer's waist).
+    """
 
     name: str
     axis: int
@@ -221,6 +232,10 @@ class Channel:
     min_speed: float
     default_max: float
     hard_max: float
+    role: str | None = None
+    switch: bool = False
+    directions: tuple[str, str] = ("+", "-")
+    locked_while_driving: bool = False
 
 
 @dataclass(frozen=True)
@@ -264,6 +279,25 @@ class RobotProfile:
     extension: ExtensionSettings | None = None
     video: VideoSettings = VideoSettings()
     cameras: tuple[CameraSettings, ...] = ()
+
+    def channel_with_role(self, role: str) -> str | None:
+        """The channel that plays a role (e.g. "drive_linear"), or None."""
+        for channel in self.channels.values():
+            if channel.role == role:
+                return channel.name
+        return None
+
+    @property
+    def drive_channels(self) -> tuple[str, str] | None:
+        """The chassis' (linear, turn) channels, or None for a robot without a chassis."""
+        linear = self.channel_with_role(DRIVE_LINEAR_ROLE)
+        turn = self.channel_with_role(DRIVE_TURN_ROLE)
+        return (linear, turn) if linear is not None and turn is not None else None
+
+    @property
+    def switch_channels(self) -> list[str]:
+        """Channels that have a three-way switch in the console."""
+        return [c.name for c in self.channels.values() if c.switch]
 
     def motor_by_device(self, device_id: int) -> Motor | None:
         """The motor with this telemetry device ID, or None."""
@@ -419,6 +453,19 @@ def _parse_channel(name: str, reader: _Reader, scales: dict[str, float]) -> Chan
             f"{reader.where}.hard_max: {hard_max} needs axis value {hard_max * per_unit:.0f}, "
             f"over the int16 range; at most {limit:.4f}"
         )
+    role = reader.choice("role", CHANNEL_ROLES) if reader.optional("role") else None
+    directions: tuple[str, str] = ("+", "-")
+    if reader.optional("directions"):
+        words = reader.table["directions"]
+        if (
+            not isinstance(words, list)
+            or len(words) != 2
+            or not all(isinstance(w, str) and w.strip() for w in words)
+        ):
+            raise ProfileError(
+                f'{reader.where}.directions: two words for + and -, e.g. ["up", "down"]'
+            )
+        directions = (words[0].strip(), words[1].strip())
     return Channel(
         name=name,
         axis=axis,
@@ -427,6 +474,14 @@ def _parse_channel(name: str, reader: _Reader, scales: dict[str, float]) -> Chan
         min_speed=min_speed,
         default_max=default_max,
         hard_max=hard_max,
+        role=role,
+        switch=reader.boolean("switch") if reader.optional("switch") else False,
+        directions=directions,
+        locked_while_driving=(
+            reader.boolean("locked_while_driving")
+            if reader.optional("locked_while_driving")
+            else False
+        ),
     )
 
 
@@ -434,7 +489,8 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
     device_id = reader.integer("device_id", low=0, high=255)
     channel = reader.string("channel") if reader.optional("channel") else None
     if channel is not None and channel not in channels:
-        raise ProfileError(f"{reader.where}.channel: unknown channel {channel!r}")
+        hint = did_you_mean(channel, channels)
+        raise ProfileError(f"{reader.where}.channel: unknown channel {channel!r}; {hint}")
     track = reader.string("track") if reader.optional("track") else None
     if track is not None and track not in ("left", "right"):
         raise ProfileError(f"{reader.where}.track: must be 'left' or 'right'")
@@ -602,13 +658,26 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
         "rotation": si.number("rotation_axis_per_rad_s", low=1e-9),
         "joint": si.number("joint_axis_per_rad_s", low=1e-9),
     }
-    channels_reader = root.sub("channels", CHANNEL_NAMES, unknown="unknown channel")
+    # Channels are named by the profile; what they do is their role.
+    channels_reader = root.sub("channels", None)
     channels: dict[str, Channel] = {}
-    for name in CHANNEL_NAMES:
+    for name in channels_reader.table:
         channels[name] = _parse_channel(name, channels_reader.sub(name, CHANNEL_KEYS), scales)
+    if not channels:
+        raise ProfileError("profile.channels: at least one channel is needed")
     axes = [c.axis for c in channels.values()]
     if len(set(axes)) != len(axes):
         raise ProfileError("profile.channels: two channels share one axis")
+    for role in CHANNEL_ROLES:
+        having = [c.name for c in channels.values() if c.role == role]
+        if len(having) > 1:
+            raise ProfileError(f"profile.channels: {having} all have role {role!r}; one may")
+    roles = {c.role for c in channels.values() if c.role is not None}
+    if roles and roles != set(CHANNEL_ROLES):
+        raise ProfileError(
+            f"profile.channels: the chassis needs both roles {list(CHANNEL_ROLES)}, "
+            f"found only {sorted(roles)}"
+        )
 
     # Motors are named by the profile: any name, each a table of known keys.
     motors_reader = root.sub("motors", None)

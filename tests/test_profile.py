@@ -14,7 +14,6 @@ import pytest
 
 from ocu.profile import (
     AXIS_MAX,
-    CHANNEL_NAMES,
     ProfileError,
     RobotProfile,
     default_profile_path,
@@ -30,6 +29,18 @@ LINEAR_AXIS_PER_M_S = 71553.837
 ROTATION_AXIS_PER_RAD_S = 25171.216
 
 DELETE = object()
+
+# The Engineer's channels, in the order the shipped profile lists them.
+ENGINEER_CHANNELS = (
+    "drive_linear",
+    "drive_turn",
+    "flippers",
+    "waist",
+    "shoulder",
+    "elbow",
+    "neck",
+    "gripper",
+)
 
 
 def _edited(path: tuple[str, ...], value: object) -> dict[str, Any]:
@@ -95,7 +106,11 @@ def test_drive_minimum_speed_from_the_paper(profile: RobotProfile) -> None:
 
 
 def test_every_channel_fits_the_int16_axis(profile: RobotProfile) -> None:
-    assert tuple(profile.channels) == CHANNEL_NAMES
+    assert tuple(profile.channels) == ENGINEER_CHANNELS
+    assert profile.drive_channels == ("drive_linear", "drive_turn")
+    assert profile.switch_channels == ["flippers", "gripper"]
+    assert [c.name for c in profile.channels.values() if c.locked_while_driving] == ["waist"]
+    assert profile.channels["gripper"].directions == ("open", "close")
     for channel in profile.channels.values():
         assert 0 <= channel.axis <= 15
         assert 0.0 <= channel.min_speed <= channel.default_max <= channel.hard_max
@@ -164,7 +179,7 @@ def test_assumptions_name_existing_keys(profile: RobotProfile) -> None:
 
 
 def test_assumption_patterns_are_checked() -> None:
-    assert _matches(SHIPPED_DATA, ["channels", "*", "axis"]) == len(CHANNEL_NAMES)
+    assert _matches(SHIPPED_DATA, ["channels", "*", "axis"]) == len(ENGINEER_CHANNELS)
     assert _matches(SHIPPED_DATA, ["motors", "*", "ticks_per_rad"]) == 8
     assert _matches(SHIPPED_DATA, ["link", "no_such_key"]) == 0
     assert _matches(SHIPPED_DATA, ["channels", "*", "no_such_key"]) == 0
@@ -185,7 +200,15 @@ _LIMITS = r"must be \[low, high\] with low < high$"
         (("link", "frame_types", "video"), DELETE, r"^profile\.link\.frame_types\.video: missing$"),
         (("si", "linear_axis_per_m_s"), DELETE, r"^profile\.si\.linear_axis_per_m_s: missing$"),
         (("chassis",), DELETE, r"^profile\.chassis: missing$"),
-        (("channels", "neck"), DELETE, r"^profile\.channels\.neck: missing$"),
+        # Channels are the profile's own: without one, the motor that names it is wrong.
+        (
+            ("channels", "neck"),
+            DELETE,
+            r"^profile\.motors\.neck\.channel: unknown channel 'neck'; known: ",
+        ),
+        (("channels", "waist", "role"), "drive_linear", r"all have role 'drive_linear'"),
+        (("channels", "drive_turn", "role"), DELETE, r"needs both roles"),
+        (("channels", "flippers", "directions"), ["up"], r"flippers\.directions: two words"),
         (("channels", "waist", "axis"), DELETE, r"^profile\.channels\.waist\.axis: missing$"),
         (
             ("motors", "waist", "zero_offset_ticks"),
@@ -319,13 +342,14 @@ _LIMITS = r"must be \[low, high\] with low < high$"
         (
             ("motors", "waist", "channel"),
             "tail",
-            r"^profile\.motors\.waist\.channel: unknown channel 'tail'$",
+            r"^profile\.motors\.waist\.channel: unknown channel 'tail'; ",
         ),
+        # A robot may have a channel more (the profile names them), on an axis of its own.
         (
             ("channels", "tail"),
-            {"axis": 9, "scale": "joint", "unit": "rad/s", "min_speed": 0.0}
+            {"axis": 2, "scale": "joint", "unit": "rad/s", "min_speed": 0.0}
             | {"default_max": 0.1, "hard_max": 0.2},
-            r"^profile\.channels\.tail: unknown channel; known: drive_linear, drive_turn, ",
+            r"^profile\.channels: two channels share one axis$",
         ),
         # motor limits
         (
@@ -438,7 +462,7 @@ def _renamed(path: tuple[str, ...], new_name: str) -> dict[str, Any]:
         (
             ("channels", "waist"),
             "wasit",
-            r"^profile\.channels\.wasit: unknown channel; did you mean 'waist'\?$",
+            r"^profile\.motors\.waist\.channel: unknown channel 'waist'; did you mean 'wasit'\?$",
         ),
         (
             ("channels", "waist", "min_speed"),

@@ -6,7 +6,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
-from ocu.profile import AXIS_MAX, CHANNEL_NAMES, Motor, RobotProfile
+from ocu.profile import AXIS_MAX, Motor, RobotProfile
 from ocu.protocol import (
     AXIS_COUNT,
     BUTTON_COUNT,
@@ -16,15 +16,11 @@ from ocu.protocol import (
     TelemetryPacket,
 )
 
-# The chassis channels: linear speed (m/s) and turn rate (rad/s) of the tracks.
-DRIVE_LINEAR = "drive_linear"
-DRIVE_TURN = "drive_turn"
-DRIVE_CHANNELS = (DRIVE_LINEAR, DRIVE_TURN)
 _I16_MAX = 32767
 
 
 class CommandError(ValueError):
-    """A command names an unknown channel or holds a value that is not a finite number."""
+    """A command names a channel the profile lacks or holds a value that is not finite."""
 
 
 def make_codec(profile: RobotProfile) -> Codec:
@@ -43,9 +39,8 @@ class Command:
     video_bitrate: float = 0.0
 
     def __post_init__(self) -> None:
+        # Which channels exist is the profile's business (CommandMapper checks them).
         for name, value in self.velocities.items():
-            if name not in CHANNEL_NAMES:
-                raise CommandError(f"unknown velocity channel {name!r}")
             if not math.isfinite(value):
                 raise CommandError(f"{name}: velocity must be finite, got {value!r}")
         if self.camera is not None and not 0 <= self.camera < 255:
@@ -122,6 +117,9 @@ class CommandMapper:
         self, command: Command, limits: VelocityLimits | None = None
     ) -> RemoteControlPacket:
         """The RCP for a command, each velocity clamped to the limits (hard max if None)."""
+        unknown = set(command.velocities) - set(self.profile.channels)
+        if unknown:
+            raise CommandError(f"unknown velocity channels {sorted(unknown)}")
         axes = [0] * AXIS_COUNT
         for name, channel in self.profile.channels.items():
             value = command.velocity(name)
@@ -225,8 +223,11 @@ def read_telemetry(profile: RobotProfile, packet: TelemetryPacket) -> dict[str, 
 
 def track_speeds(profile: RobotProfile, velocities: Mapping[str, float]) -> tuple[float, float]:
     """Left and right belt speeds (m/s) of a drive command (differential drive)."""
-    linear_m_s = velocities.get(DRIVE_LINEAR, 0.0)
-    turn_rad_s = velocities.get(DRIVE_TURN, 0.0)
+    drive = profile.drive_channels
+    if drive is None:
+        return 0.0, 0.0
+    linear_m_s = velocities.get(drive[0], 0.0)
+    turn_rad_s = velocities.get(drive[1], 0.0)
     half_width_m = profile.track_width_m / 2.0
     return (linear_m_s - turn_rad_s * half_width_m, linear_m_s + turn_rad_s * half_width_m)
 

@@ -23,9 +23,6 @@ from enum import Enum
 from typing import Generic, ParamSpec
 
 from ocu.control.commands import (
-    DRIVE_CHANNELS,
-    DRIVE_LINEAR,
-    DRIVE_TURN,
     Command,
     CommandError,
     JointReading,
@@ -142,8 +139,8 @@ class TeleopModel:
         self._channels = {name: ChannelCommand() for name in profile.channels}
         # What the operator asked of the two drive channels; `_channels` holds what is sent:
         # both scaled by one factor so the turn radius is kept (ocu.control.drive).
-        self._drive = all(name in profile.channels for name in DRIVE_CHANNELS)
-        self._drive_request = {name: ChannelCommand() for name in DRIVE_CHANNELS}
+        self._drive = profile.drive_channels
+        self._drive_request = {name: ChannelCommand() for name in self._drive or ()}
         self._hotkey_speed: dict[str, float | None] = dict.fromkeys(profile.channels)
         self._held: dict[str, tuple[str, int]] = {}
         self._fine = False
@@ -239,7 +236,7 @@ class TeleopModel:
         radius is kept), not one by one here.
         """
         speed = self.hotkey_speed(channel)
-        if self._drive and channel in DRIVE_CHANNELS:
+        if channel in self._drive_request:
             return speed * self.fine_factor
         floor = min(self.profile.channels[channel].min_speed, speed)
         return max(speed * self.fine_factor, floor)
@@ -261,7 +258,7 @@ class TeleopModel:
             self._check_channel(channel)
             value = _check_finite(channel, raw)
             # The drive pair is bounded together when it is composed (turn radius kept).
-            drive = self._drive and channel in DRIVE_CHANNELS
+            drive = channel in self._drive_request
             checked[channel] = value if drive else self.limits.clamp(channel, value)
         self._operator_acted()
         for channel, value in checked.items():
@@ -504,7 +501,7 @@ class TeleopModel:
 
     def _requested(self, channel: str) -> ChannelCommand:
         """What the operator asked of a channel (the drive pair is sent scaled)."""
-        if self._drive and channel in DRIVE_CHANNELS:
+        if channel in self._drive_request:
             return self._drive_request[channel]
         return self._channels[channel]
 
@@ -517,14 +514,14 @@ class TeleopModel:
             direction = 1.0 if command.velocity > 0 else -1.0
             self._set_channel(channel, direction * self.hotkey_speed(channel), Source.SWITCH)
         elif command.source in (Source.SLIDER, Source.TEXT):
-            if self._drive and channel in DRIVE_CHANNELS:
+            if channel in self._drive_request:
                 self._apply_drive()  # the pair is bounded again from the operator's request
             else:
                 clamped = self.limits.clamp(channel, command.velocity)
                 self._set_channel(channel, clamped, command.source)
 
     def _set_channel(self, channel: str, velocity: float, source: Source) -> None:
-        if self._drive and channel in DRIVE_CHANNELS:
+        if channel in self._drive_request:
             self._drive_request[channel] = ChannelCommand(float(velocity), source)
             self._apply_drive()
             return
@@ -537,17 +534,19 @@ class TeleopModel:
 
     def _apply_drive(self) -> None:
         """Both drive channels from the operator's request, scaled by one factor."""
-        linear, turn = self._drive_request[DRIVE_LINEAR], self._drive_request[DRIVE_TURN]
+        assert self._drive is not None
+        linear_name, turn_name = self._drive
+        linear, turn = self._drive_request[linear_name], self._drive_request[turn_name]
         channels = self.profile.channels
         bounds = DriveBounds(
-            max_linear_m_s=self.limits.get(DRIVE_LINEAR),
-            max_angular_rad_s=self.limits.get(DRIVE_TURN),
-            min_linear_m_s=channels[DRIVE_LINEAR].min_speed,
-            min_angular_rad_s=channels[DRIVE_TURN].min_speed,
+            max_linear_m_s=self.limits.get(linear_name),
+            max_angular_rad_s=self.limits.get(turn_name),
+            min_linear_m_s=channels[linear_name].min_speed,
+            min_angular_rad_s=channels[turn_name].min_speed,
         )
         v, w = scale_drive(linear.velocity, turn.velocity, bounds)
-        self._store(DRIVE_LINEAR, ChannelCommand(v, linear.source if v else Source.NONE))
-        self._store(DRIVE_TURN, ChannelCommand(w, turn.source if w else Source.NONE))
+        self._store(linear_name, ChannelCommand(v, linear.source if v else Source.NONE))
+        self._store(turn_name, ChannelCommand(w, turn.source if w else Source.NONE))
 
     def _zero_all(self) -> None:
         had_keys = bool(self._held)

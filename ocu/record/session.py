@@ -28,8 +28,6 @@ from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket
 from ocu.protocol.extended import ExtendedCodec, VideoFragment
 from ocu.record import schemas as s
 
-DRIVE_CHANNELS = ("drive_linear", "drive_turn")
-
 # What the recorder queues: (kind, monotonic time, payload...). The kinds:
 SENT = 0
 RECEIVED = 1
@@ -248,15 +246,18 @@ class RecordingFile:
         except ProtocolError:
             return
         command = self._mapper.to_command(packet)
-        self._add(
-            mono,
-            s.CMD_VEL,
-            {
-                "linear": {"x": command.velocity("drive_linear"), "y": 0.0, "z": 0.0},
-                "angular": {"x": 0.0, "y": 0.0, "z": command.velocity("drive_turn")},
-            },
-        )
-        joints = [name for name in self.profile.channels if name not in DRIVE_CHANNELS]
+        drive = self.profile.drive_channels
+        if drive is not None:
+            linear, turn = drive
+            self._add(
+                mono,
+                s.CMD_VEL,
+                {
+                    "linear": {"x": command.velocity(linear), "y": 0.0, "z": 0.0},
+                    "angular": {"x": 0.0, "y": 0.0, "z": command.velocity(turn)},
+                },
+            )
+        joints = [name for name in self.profile.channels if name not in (drive or ())]
         self._add(
             mono,
             s.CMD_JOINTS,

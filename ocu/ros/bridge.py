@@ -38,9 +38,6 @@ from ocu.profile import RobotProfile
 
 log = logging.getLogger("ocu.ros")
 
-DRIVE_LINEAR = "drive_linear"
-DRIVE_TURN = "drive_turn"
-DRIVE_CHANNELS = (DRIVE_LINEAR, DRIVE_TURN)
 DEFAULT_CMD_VEL_TIMEOUT_S = 0.5
 # A longer silence would let a dead planner's last command run on for too long: the robot's
 # own watchdog is 1 s, and the timeout also sets how long cmd_vel must be quiet after a
@@ -61,11 +58,13 @@ class BridgeError(ValueError):
 class BridgeSettings:
     """The bridge's tunables; the node reads them from its private ROS parameters.
 
-    The minima are robot facts: `from_profile` takes them from the drive channels.
+    The minima are robot facts: `from_profile` takes them from the drive channels, and the
+    channels themselves from their roles (`drive`: the linear and the turn channel).
     """
 
     min_linear_m_s: float
     min_angular_rad_s: float
+    drive: tuple[str, str]
     cmd_vel_timeout_s: float = DEFAULT_CMD_VEL_TIMEOUT_S
     rate_hz: float = DEFAULT_RATE_HZ
     twist_stamped: bool = False
@@ -88,19 +87,32 @@ class BridgeSettings:
     @classmethod
     def from_profile(cls, profile: RobotProfile, **overrides: float | bool) -> BridgeSettings:
         """Defaults from the profile: the thresholds are the drive channels' min_speed."""
-        values: dict[str, float | bool] = {
-            "min_linear_m_s": profile.channels[DRIVE_LINEAR].min_speed,
-            "min_angular_rad_s": profile.channels[DRIVE_TURN].min_speed,
+        drive = profile.drive_channels
+        if drive is None:
+            raise BridgeError(
+                "the profile has no chassis (no channels with the roles drive_linear and "
+                "drive_turn): cmd_vel cannot drive it"
+            )
+        values: dict[str, float | bool | tuple[str, str]] = {
+            "min_linear_m_s": profile.channels[drive[0]].min_speed,
+            "min_angular_rad_s": profile.channels[drive[1]].min_speed,
+            "drive": drive,
         }
         values.update(overrides)
         return cls(**values)  # type: ignore[arg-type]
 
+    @property
+    def drive_zero(self) -> dict[str, float]:
+        """Both drive channels at zero."""
+        return dict.fromkeys(self.drive, 0.0)
+
 
 def drive_bounds(settings: BridgeSettings, limits: VelocityLimits) -> DriveBounds:
     """The chassis bounds now: maxima from the link's limits, minima from the settings."""
+    linear, turn = settings.drive
     return DriveBounds(
-        max_linear_m_s=limits.get(DRIVE_LINEAR),
-        max_angular_rad_s=limits.get(DRIVE_TURN),
+        max_linear_m_s=limits.get(linear),
+        max_angular_rad_s=limits.get(turn),
         min_linear_m_s=settings.min_linear_m_s,
         min_angular_rad_s=settings.min_angular_rad_s,
     )
@@ -117,7 +129,7 @@ def twist_to_drive(
         linear, angular = scale_drive(linear_x, angular_z, drive_bounds(settings, limits))
     except DriveError as err:
         raise BridgeError(str(err)) from err
-    return {DRIVE_LINEAR: linear, DRIVE_TURN: angular}
+    return dict(zip(settings.drive, (linear, angular), strict=True))
 
 
 class CmdVelTimeout:
@@ -335,8 +347,10 @@ def bridge_report(status: BridgeStatus, hardware_id: str) -> DiagnosticReport:
     values = (
         ("state", status.state.value),
         ("link gate", status.link_gate.value),
-        ("drive_linear (m/s)", f"{status.drive.get(DRIVE_LINEAR, 0.0):.3f}"),
-        ("drive_turn (rad/s)", f"{status.drive.get(DRIVE_TURN, 0.0):.3f}"),
+        *(
+            (f"{name} ({unit})", f"{status.drive.get(name, 0.0):.3f}")
+            for name, unit in zip(status.drive, ("m/s", "rad/s"), strict=False)
+        ),
         ("last cmd_vel age (s)", _optional(status.cmd_vel_age_s, ".2f")),
         ("cmd_vel timeout (s)", f"{status.cmd_vel_timeout_s:g}"),
         ("cmd_vel received", str(status.cmd_vel_count)),
@@ -376,7 +390,7 @@ class BridgeCore:
         self._controller = PositionController(profile, self._limits)
         self._timeout = CmdVelTimeout(self.settings.cmd_vel_timeout_s)
         self._state = BridgeState.OFF
-        self._drive = dict.fromkeys(DRIVE_CHANNELS, 0.0)
+        self._drive = self.settings.drive_zero
         self._goal_channels: set[str] = set()
         self._cmd_vel_count = 0
         self._rejected = 0
@@ -406,7 +420,7 @@ class BridgeCore:
             self._limits = limits if limits is not None else VelocityLimits(self.profile)
             self._controller = PositionController(self.profile, self._limits)
             self._goal_channels = set()
-            self._drive = dict.fromkeys(DRIVE_CHANNELS, 0.0)
+            self._drive = self.settings.drive_zero
             self._timeout = CmdVelTimeout(self.settings.cmd_vel_timeout_s)
             # Read under the bridge's lock: a change the link makes meanwhile is reported
             # to on_link_state afterwards, which waits for this lock, so none is missed.
@@ -457,7 +471,7 @@ class BridgeCore:
     def _release(self) -> None:
         self._controller.cancel()
         self._goal_channels = set()
-        self._drive = dict.fromkeys(DRIVE_CHANNELS, 0.0)
+        self._drive = self.settings.drive_zero
 
     def _owned_channels(self) -> list[str]:
         owned = [name for name, value in self._drive.items() if value != 0.0]
@@ -545,7 +559,7 @@ class BridgeCore:
                 # A broken publisher is no quiet one: it does not open the gate.
                 self._last_motion_at = now
                 self._rejected += 1
-                self._send_drive(dict.fromkeys(DRIVE_CHANNELS, 0.0))
+                self._send_drive(self.settings.drive_zero)
                 self._update_state()
                 raise
             motion = any(v != 0.0 for v in drive.values())
@@ -555,7 +569,7 @@ class BridgeCore:
                 self._last_motion_at = now
             if motion and self._gate is not LinkGate.OPEN:
                 self._link_refused += 1
-                self._send_drive(dict.fromkeys(DRIVE_CHANNELS, 0.0))
+                self._send_drive(self.settings.drive_zero)
                 self._update_state()
                 return None
             self._send_drive(drive)
@@ -634,7 +648,7 @@ class BridgeCore:
                     log.warning(
                         "no cmd_vel for %.2f s: tracks stopped", self.settings.cmd_vel_timeout_s
                     )
-                    self._send_drive(dict.fromkeys(DRIVE_CHANNELS, 0.0))
+                    self._send_drive(self.settings.drive_zero)
             messages: list[str] = []
             if self._goal_channels:
                 velocities = self._controller.update(now)

@@ -27,8 +27,6 @@ from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.ros.bridge import (
     DEFAULT_CMD_VEL_TIMEOUT_S,
     DEFAULT_RATE_HZ,
-    DRIVE_LINEAR,
-    DRIVE_TURN,
     MAX_CMD_VEL_TIMEOUT_S,
     BridgeError,
     BridgeSettings,
@@ -142,9 +140,11 @@ def read_config(get: ParamGetter, profile: RobotProfile, profile_path: str | Non
         sim_args = tuple(shlex.split(_text(get, "sim_args")))
     except ValueError as err:
         raise ConfigError(f"~sim_args: {err}") from err
-    linear, turn = profile.channels[DRIVE_LINEAR], profile.channels[DRIVE_TURN]
     try:
-        bridge = BridgeSettings(
+        defaults = BridgeSettings.from_profile(profile)
+        linear, turn = (profile.channels[name] for name in defaults.drive)
+        bridge = BridgeSettings.from_profile(
+            profile,
             min_linear_m_s=_number(get, "min_linear", linear.min_speed),
             min_angular_rad_s=_number(get, "min_angular", turn.min_speed),
             cmd_vel_timeout_s=_timeout(get),
@@ -363,8 +363,8 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
             log.error("%s", err)
             return 1
         for channel, value in (
-            (DRIVE_LINEAR, config.max_linear_m_s),
-            (DRIVE_TURN, config.max_angular_rad_s),
+            (config.bridge.drive[0], config.max_linear_m_s),
+            (config.bridge.drive[1], config.max_angular_rad_s),
         ):
             kept = link.set_max_velocity(channel, value)
             if kept != value:

@@ -39,7 +39,6 @@ from types import TracebackType
 from typing import NamedTuple
 
 from ocu.control.commands import (
-    DRIVE_CHANNELS,
     Command,
     CommandMapper,
     make_codec,
@@ -88,7 +87,6 @@ MAX_DATAGRAM_BYTES = 65_535
 MAX_DATAGRAMS_PER_WAKE = 256
 STOP_JOIN_TIMEOUT_S = 5.0
 
-WAIST_CHANNEL = "waist"
 
 _I16_MIN = -32768
 _I16_MAX = 32767
@@ -689,15 +687,18 @@ class RobotSimulator:
             name: speed if abs(speed) >= channels[name].min_speed else 0.0
             for name, speed in commanded.items()
         }
-        drive = [name for name in DRIVE_CHANNELS if name in commanded]
+        drive = list(self.profile.drive_channels or ())
         if any(effective[name] != 0.0 for name in drive):
             for name in drive:
                 effective[name] = commanded[name]
-        # The vendor server refuses to turn the waist while the chassis moves.
-        driving = any(effective.get(name, 0.0) != 0.0 for name in DRIVE_CHANNELS)
-        self._waist_suppressed = driving and effective.get(WAIST_CHANNEL, 0.0) != 0.0
-        if self._waist_suppressed:
-            effective[WAIST_CHANNEL] = 0.0
+        # The vendor server refuses to turn the waist while the chassis moves (the profile's
+        # locked_while_driving channels).
+        driving = any(effective[name] != 0.0 for name in drive)
+        locked = [name for name, ch in channels.items() if ch.locked_while_driving]
+        self._waist_suppressed = driving and any(effective[name] != 0.0 for name in locked)
+        if driving:
+            for name in locked:
+                effective[name] = 0.0
         for channel, motor in self._channel_motors.items():
             low_rad, high_rad = _limits_rad(motor)
             angle_rad = self._angles_rad[motor.name]
@@ -774,7 +775,10 @@ class RobotSimulator:
                     status |= STATUS_AT_LOWER_LIMIT
                 if angle_rad >= high_rad:
                     status |= STATUS_AT_UPPER_LIMIT
-            if motor.channel == WAIST_CHANNEL and self._waist_suppressed:
+            locked = motor.channel is not None and (
+                self.profile.channels[motor.channel].locked_while_driving
+            )
+            if locked and self._waist_suppressed:
                 status |= STATUS_SUPPRESSED
         speed_scale = self.profile.telemetry_speed_per_rad_s
         current_scale = self.profile.telemetry_current_per_amp

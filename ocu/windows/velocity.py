@@ -26,9 +26,8 @@ from ocu.widgets.number_box import NumberBox, NumberError, format_number
 from ocu.widgets.value_slider import ValueSlider
 from ocu.widgets.video_status import HeadlightIndicator
 
-# Words for the + and - directions of the channels that have a switch (the key map's sign
-# convention: + is up / open).
-SWITCH_WORDS = {"flippers": ("▲ up", "▼ down"), "gripper": ("open", "close")}
+# Arrows beside the words of a switch whose directions are up and down.
+ARROWS = {"up": "▲ up", "down": "▼ down"}
 SOURCE_TEXT = {
     Source.NONE: "",
     Source.SLIDER: "slider",
@@ -120,7 +119,8 @@ class VelocityPanel(QWidget):
         switches = QGroupBox("Switches")
         switch_layout = QGridLayout(switches)
         for row, (name, words) in enumerate(
-            (n, w) for n, w in SWITCH_WORDS.items() if n in model.profile.channels
+            (n, tuple(ARROWS.get(w, w) for w in model.profile.channels[n].directions))
+            for n in model.profile.switch_channels
         ):
             switch_layout.addWidget(QLabel(channel_title(name)), row, 0)
             group = QButtonGroup(self)

@@ -89,7 +89,9 @@ def test_replay_reproduces_the_telemetry_the_gui_saw(
     # The recording's wall clock, not the replay's: each frame at its recorded moment. (The
     # live side read time.time() itself; a VM may step its wall clock meanwhile, so the
     # frames are compared with the typical offset, and one step is forgiven.)
-    offsets = sorted(again.wall_time - live.wall_time for live, again in zip(seen, replayed))
+    offsets = sorted(
+        again.wall_time - live.wall_time for live, again in zip(seen, replayed, strict=True)
+    )
     typical = offsets[len(offsets) // 2]
     assert abs(typical) < 0.05
     near = [abs(offset - typical) < 0.05 for offset in offsets]

@@ -13,10 +13,8 @@ from ocu.control.commands import JointReading, VelocityLimits
 from ocu.control.position import PositionError
 from ocu.link.core import LinkState
 from ocu.link.stats import LinkStats
-from ocu.profile import RobotProfile
+from ocu.profile import RobotProfile, load_profile
 from ocu.ros.bridge import (
-    DRIVE_LINEAR,
-    DRIVE_TURN,
     BridgeCore,
     BridgeError,
     BridgeSettings,
@@ -30,6 +28,9 @@ from ocu.ros.bridge import (
     link_report,
     twist_to_drive,
 )
+
+# The Engineer's chassis channels, by their roles in the shipped profile.
+DRIVE_LINEAR, DRIVE_TURN = load_profile().drive_channels or ("", "")
 
 
 class Clock:
