@@ -11,9 +11,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ocu.control.commands import JointReading, VelocityLimits
+from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionError
 from ocu.profile import Motor, RobotProfile
+from ocu.records import JointReading
 
 DEFAULT_GAIN_PER_S = 10.0
 DEFAULT_TOLERANCE_RAD = math.radians(0.3)

@@ -25,9 +25,10 @@ from PySide6.QtCore import QSettings, Qt
 from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
 
-from ocu.link.core import LinkCore, LinkState
+from ocu.link.core import LinkCore
 from ocu.link.qt import LinkThread
 from ocu.profile import RobotProfile, load_profile
+from ocu.records import LinkState
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator
 from ocu.windows.main_window import MainWindow
 

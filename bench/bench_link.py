@@ -19,10 +19,10 @@ import time
 
 import numpy as np
 
-from ocu.control.commands import make_codec
 from ocu.link.core import LinkCore
 from ocu.profile import RobotProfile, load_profile
 from ocu.protocol import RemoteControlPacket
+from ocu.protocol.wire import make_codec
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator
 

@@ -37,8 +37,9 @@ from baseline_position import ResetPredictionController
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import ConstantSpeedController, PositionController
 from ocu.control.runner import Controller, PositionRunner
-from ocu.link.core import LinkCore, LinkListener, TelemetryFrame
+from ocu.link.core import LinkCore, LinkListener
 from ocu.profile import load_profile
+from ocu.records import TelemetryFrame
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, StateRecorder
 

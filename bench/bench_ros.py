@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from ocu.control.commands import make_codec
 from ocu.link.core import LinkCore
 from ocu.profile import RobotProfile, load_profile
 from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket
+from ocu.protocol.wire import make_codec
 from ocu.ros.environment import missing_ros
 from ocu.ros.master import RosMaster
 

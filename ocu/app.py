@@ -180,8 +180,8 @@ def run_console(
     """Start simulator (if no robot), link and window; run the Qt event loop."""
     from PySide6.QtWidgets import QApplication
 
-    from ocu.link.core import LinkCore, LinkError
-    from ocu.link.qt import LinkThread
+    from ocu.link.base import Link, LinkError
+    from ocu.link.live import UdpLink
     from ocu.record.errors import RecordingError
     from ocu.record.recorder import Recorder
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
@@ -212,17 +212,17 @@ def run_console(
         robot_address = robot
         try:
             # The first link is made here so a bad address fails before any window opens.
-            first_link: list[LinkThread] = [
-                LinkThread(LinkCore(profile, robot_address, extension=True))
+            first_link: list[Link] = [
+                UdpLink(profile, robot_address, extension=True, description=address_text)
             ]
         except LinkError as err:
             log.error("%s", err)
             return 1
 
-        def make_link() -> LinkThread:
+        def make_link() -> Link:
             if first_link:
                 return first_link.pop()
-            return LinkThread(LinkCore(profile, robot_address, extension=True))
+            return UdpLink(profile, robot_address, extension=True, description=address_text)
 
         settings = open_settings(config_dir)
         window = MainWindow(profile, make_link, address_text, settings, key_map, recorder=recorder)
@@ -244,15 +244,16 @@ def run_replay(
     """The console on a recording: no simulator, no link; plays from the start."""
     from PySide6.QtWidgets import QApplication
 
+    from ocu.link.base import LinkError
     from ocu.record.errors import RecordingError
-    from ocu.record.replay import ReplaySource
+    from ocu.record.replay_link import ReplayLink
     from ocu.windows.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
     try:
-        source = ReplaySource(path, profile)
-    except RecordingError as err:
+        source = ReplayLink(path, profile)
+    except (RecordingError, LinkError) as err:
         log.error("%s", err)
         return 1
     settings = open_settings(config_dir)

@@ -1,4 +1,4 @@
-"""Hotkeys: the key map file and the key bindings, plain functions over a TeleopModel (no Qt).
+"""Hotkeys: the key map file and the key bindings, plain functions over a ConsoleModel (no Qt).
 
 A key is named by its position on a US keyboard ("W"), whatever the layout prints on it; the
 Qt side turns a key event into that name (from the scan code when the platform gives one)
@@ -15,7 +15,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from ocu.control.teleop import DEFAULT_FINE_FACTOR, TeleopModel
+from ocu.console.model import DEFAULT_FINE_FACTOR, ConsoleModel
 from ocu.profile import RobotProfile, did_you_mean
 
 USER_KEY_MAP_NAME = "hotkeys.toml"
@@ -232,17 +232,17 @@ def load_key_map(profile: RobotProfile, override: Path | None = None) -> KeyMap:
 # ---- key bindings: plain functions over the model ------------------------------------------
 
 
-def emergency_stop(model: TeleopModel, reason: str = "Space") -> None:
+def emergency_stop(model: ConsoleModel, reason: str = "Space") -> None:
     """Stop everything now and latch until the operator acts again."""
     model.emergency_stop(reason)
 
 
-def toggle_help(model: TeleopModel) -> None:
+def toggle_help(model: ConsoleModel) -> None:
     """Show or hide the hotkey help overlay."""
     model.set_help_visible(not model.help_visible)
 
 
-COMMANDS: dict[str, Callable[[TeleopModel], None]] = {
+COMMANDS: dict[str, Callable[[ConsoleModel], None]] = {
     "emergency_stop": emergency_stop,
     "help": toggle_help,
 }
@@ -252,7 +252,7 @@ COMMAND_TITLES = {
 }
 
 
-def press(model: TeleopModel, key_map: KeyMap, key: str) -> bool:
+def press(model: ConsoleModel, key_map: KeyMap, key: str) -> bool:
     """A key went down (auto-repeat already filtered out); True if it is bound."""
     if key == ESTOP_KEY:
         emergency_stop(model, ESTOP_KEY)
@@ -271,16 +271,16 @@ def press(model: TeleopModel, key_map: KeyMap, key: str) -> bool:
     return False
 
 
-def release(model: TeleopModel, key_map: KeyMap, key: str) -> bool:
+def release(model: ConsoleModel, key_map: KeyMap, key: str) -> bool:
     """A key went up; True if it was a held motion key."""
     return model.hotkey_up(key)
 
 
-def release_all(model: TeleopModel, reason: str) -> bool:
+def release_all(model: ConsoleModel, reason: str) -> bool:
     """Release every held key (focus lost, window hidden); True if any was held."""
     return model.release_hotkeys(reason)
 
 
-def set_fine(model: TeleopModel, fine: bool) -> None:
+def set_fine(model: ConsoleModel, fine: bool) -> None:
     """Shift went down or up."""
     model.set_fine(fine)

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from ocu import hotkeys
-from ocu.control.teleop import TeleopModel
+from ocu.console.model import ConsoleModel
 from ocu.hotkeys import HoldBinding, KeyMap, KeyMapError, load_key_map
 from ocu.profile import RobotProfile
 
@@ -36,8 +36,8 @@ def key_map(profile: RobotProfile) -> KeyMap:
 
 
 @pytest.fixture
-def model(profile: RobotProfile) -> TeleopModel:
-    return TeleopModel(profile)
+def model(profile: RobotProfile) -> ConsoleModel:
+    return ConsoleModel(profile)
 
 
 def test_default_map_is_table_4(key_map: KeyMap) -> None:
@@ -133,7 +133,7 @@ def test_non_utf8_file_is_refused_with_the_reason(profile: RobotProfile, tmp_pat
 
 
 def test_every_table_4_key_moves_its_channel_while_held(
-    model: TeleopModel, key_map: KeyMap
+    model: ConsoleModel, key_map: KeyMap
 ) -> None:
     for key, (channel, direction) in TABLE_4.items():
         assert hotkeys.press(model, key_map, key)
@@ -142,7 +142,7 @@ def test_every_table_4_key_moves_its_channel_while_held(
         assert model.velocities() == {}
 
 
-def test_space_stops_everything(model: TeleopModel, key_map: KeyMap) -> None:
+def test_space_stops_everything(model: ConsoleModel, key_map: KeyMap) -> None:
     stops: list[str] = []
     model.events.estop_requested.connect(stops.append)
     hotkeys.press(model, key_map, "W")
@@ -154,7 +154,7 @@ def test_space_stops_everything(model: TeleopModel, key_map: KeyMap) -> None:
     assert not hotkeys.release(model, key_map, "W")  # nothing held any more
 
 
-def test_help_keys_toggle_and_escape_closes(model: TeleopModel, key_map: KeyMap) -> None:
+def test_help_keys_toggle_and_escape_closes(model: ConsoleModel, key_map: KeyMap) -> None:
     assert hotkeys.press(model, key_map, "F1")
     assert model.help_visible
     assert hotkeys.press(model, key_map, "Slash")
@@ -165,12 +165,12 @@ def test_help_keys_toggle_and_escape_closes(model: TeleopModel, key_map: KeyMap)
     assert not model.help_visible
 
 
-def test_unbound_keys_are_not_consumed(model: TeleopModel, key_map: KeyMap) -> None:
+def test_unbound_keys_are_not_consumed(model: ConsoleModel, key_map: KeyMap) -> None:
     assert not hotkeys.press(model, key_map, "K")
     assert not hotkeys.release(model, key_map, "K")
 
 
-def test_release_all_and_shift(model: TeleopModel, key_map: KeyMap) -> None:
+def test_release_all_and_shift(model: ConsoleModel, key_map: KeyMap) -> None:
     hotkeys.press(model, key_map, "Q")
     hotkeys.set_fine(model, True)
     assert model.velocities() == {"waist": model.fine_speed("waist")}

@@ -13,7 +13,7 @@ PURE_MODULES = (
     "ocu.profile",
     "ocu.control.commands",
     "ocu.control.position",
-    "ocu.control.teleop",
+    "ocu.console.model",
     "ocu.hotkeys",
     "ocu.link.core",
     "ocu.sim.simulator",

@@ -17,12 +17,12 @@ from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
 
-from ocu.control.commands import make_codec
-from ocu.link.core import LinkState
 from ocu.profile import RobotProfile
 from ocu.protocol import RemoteControlPacket
+from ocu.protocol.wire import make_codec
 from ocu.record.recorder import Recorder
 from ocu.record.replay import ReplaySource
+from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
 from ocu.windows.main_window import MainWindow
 from tests.windows.console_fixtures import (

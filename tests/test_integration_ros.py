@@ -26,7 +26,7 @@ from PySide6.QtCore import Qt, QTimer
 from PySide6.QtTest import QTest
 from pytestqt.qtbot import QtBot
 
-from ocu.control.teleop import TeleopModel
+from ocu.console.model import ConsoleModel
 from ocu.profile import RobotProfile
 from ocu.ros.bridge import BridgeState
 from ocu.ros.environment import missing_ros
@@ -68,7 +68,7 @@ def needs_ros() -> None:
 
 
 def test_operator_acted_comes_before_every_operator_input(profile: RobotProfile) -> None:
-    model = TeleopModel(profile)
+    model = ConsoleModel(profile)
     seen: list[dict[str, float]] = []
     model.events.operator_acted.connect(lambda: seen.append(model.velocities()))
     model.hotkey_down("W", "drive_linear", 1)

@@ -26,8 +26,8 @@ from PySide6.QtWidgets import QWidget
 from pytestqt.qtbot import QtBot
 
 from ocu.app import SIGNAL_POLL_MS
-from ocu.link.core import LinkState
 from ocu.profile import RobotProfile
+from ocu.records import LinkState
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator
 from ocu.widgets.value_slider import STEPS
 from ocu.windows.main_window import MainWindow

@@ -4,72 +4,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
 
 from ocu.profile import AXIS_MAX, Motor, RobotProfile
 from ocu.protocol import (
     AXIS_COUNT,
     BUTTON_COUNT,
-    Codec,
     MotorRecord,
     RemoteControlPacket,
     TelemetryPacket,
 )
+from ocu.records import Command, CommandError, JointReading
 
 _I16_MAX = 32767
-
-
-class CommandError(ValueError):
-    """A command names a channel the profile lacks or holds a value that is not finite."""
-
-
-def make_codec(profile: RobotProfile) -> Codec:
-    """A codec with the profile's frame type IDs."""
-    types = profile.link.frame_types
-    return Codec(rcp_type=types.rcp, telemetry_type=types.telemetry, video_type=types.video)
-
-
-@dataclass(frozen=True)
-class Command:
-    """What the OCU asks of the robot: channel velocities (m/s or rad/s) and switches."""
-
-    velocities: Mapping[str, float] = field(default_factory=dict)
-    torch: bool = False
-    camera: int | None = None
-    video_bitrate: float = 0.0
-
-    def __post_init__(self) -> None:
-        # Which channels exist is the profile's business (CommandMapper checks them).
-        for name, value in self.velocities.items():
-            if not math.isfinite(value):
-                raise CommandError(f"{name}: velocity must be finite, got {value!r}")
-        if self.camera is not None and not 0 <= self.camera < 255:
-            raise CommandError(f"camera index must be in [0, 254], got {self.camera}")
-
-    def velocity(self, channel: str) -> float:
-        """Velocity of one channel; 0.0 when unset."""
-        return float(self.velocities.get(channel, 0.0))
-
-    @property
-    def is_motion(self) -> bool:
-        """Whether any channel asks for movement."""
-        return any(v != 0.0 for v in self.velocities.values())
-
-    def with_velocity(self, channel: str, value: float) -> Command:
-        """A copy with one channel changed."""
-        velocities = dict(self.velocities)
-        velocities[channel] = value
-        return replace(self, velocities=velocities)
-
-    def with_velocities(self, values: Mapping[str, float]) -> Command:
-        """A copy with several channels changed."""
-        velocities = dict(self.velocities)
-        velocities.update(values)
-        return replace(self, velocities=velocities)
-
-    def stopped(self) -> Command:
-        """The same switches with every velocity zero (the e-stop command)."""
-        return replace(self, velocities={})
 
 
 class VelocityLimits:
@@ -149,30 +95,6 @@ class CommandMapper:
             camera=selector - 1 if selector > 0 else None,
             video_bitrate=packet.video_bitrate,
         )
-
-
-@dataclass(frozen=True)
-class JointReading:
-    """One motor's telemetry in SI units."""
-
-    name: str
-    device_id: int
-    state: int
-    mode: int
-    angle_rad: float | None
-    speed_rad_s: float
-    current_a: float
-    status: int
-    target_angle_rad: float | None
-    speed_command_rad_s: float
-    current_command_a: float
-    # Why the OCU does not believe this reading (ocu.control.plausibility); None: plausible.
-    fault: str | None = None
-
-    @property
-    def plausible(self) -> bool:
-        """Whether the reading may be acted on."""
-        return self.fault is None
 
 
 def ticks_to_rad(motor: Motor, ticks: int) -> float:

@@ -21,9 +21,9 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ocu.control.commands import JointReading
 from ocu.profile import Motor, RobotProfile
 from ocu.protocol import TelemetryPacket
+from ocu.records import JointReading
 
 DEFAULT_MARGIN_DEG = 5.0
 DEFAULT_SPEED_FACTOR = 2.0

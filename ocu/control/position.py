@@ -35,8 +35,9 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ocu.control.commands import JointReading, VelocityLimits
+from ocu.control.commands import VelocityLimits
 from ocu.profile import Motor, RobotProfile
+from ocu.records import JointReading
 
 DEFAULT_MAX_GAIN_PER_S = 10.0
 # The gain times the delay is kept at or below this: a servo 50 % off its commanded speed

@@ -8,7 +8,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from ocu.control.commands import JointReading
+from ocu.records import JointReading
 
 CONTROL_PERIOD_S = 0.02
 

@@ -41,7 +41,7 @@ def resolve(address: Address) -> Address:
     try:
         return socket.gethostbyname(address[0]), address[1]
     except OSError as err:
-        raise TransportError(f"cannot resolve host {address[0]!r}: {err}") from err
+        raise TransportError(str(err)) from err
 
 
 class Transport(ABC):

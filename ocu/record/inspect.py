@@ -21,15 +21,13 @@ from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
-from ocu.control.commands import make_codec
-from ocu.link.reassembly import Reassembler
+from ocu.link.receiver import Receiver
 from ocu.link.stats import tick_loss
 from ocu.profile import ProfileError, RobotProfile, load_profile
-from ocu.protocol import ProtocolError, TelemetryPacket
-from ocu.protocol.extended import ExtendedCodec, VideoFragment
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.reader import Recording
+from ocu.records import TELEMETRY, DatagramReceived, LinkEvent, VideoFrame
 
 SEQUENCE_MODULO = 2**32
 
@@ -127,20 +125,27 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
         robot_watchdog_s=profile.link.robot_watchdog_s,
     )
     channels: dict[str, ChannelSummary] = {}
-    codec = make_codec(profile)
-    ext = profile.extension
-    ext_codec = (
-        ExtendedCodec(ext.frame_types.hello, ext.frame_types.video_fragment, ext.frame_types.status)
-        if ext is not None
-        else None
-    )
     ticks: list[int] = []
-    video = profile.video
-    reassembler = Reassembler(
-        video.reassembly_max_frames, video.reassembly_max_bytes, video.reassembly_timeout_s
-    )
     completed: dict[int, int] = defaultdict(int)
     sequences: dict[int, tuple[int, int]] = {}
+    tick_hz = profile.link.telemetry_tick_hz
+
+    def count(event: LinkEvent) -> None:
+        # Every telemetry datagram counts for the loss, also the late and repeated ones.
+        if isinstance(event, DatagramReceived) and event.kind == TELEMETRY:
+            assert event.robot_time_s is not None
+            ticks.append(round(event.robot_time_s * tick_hz))
+        elif isinstance(event, VideoFrame) and event.camera is not None:
+            if event.sequence is None:
+                return
+            first, last = sequences.get(event.camera, (event.sequence, event.sequence))
+            if (event.sequence - last) % SEQUENCE_MODULO < SEQUENCE_MODULO // 2:
+                last = event.sequence
+            sequences[event.camera] = (first, last)
+            completed[event.camera] += 1
+
+    # The live link's own receiver decodes the recorded datagrams, on the recording's clock.
+    receiver = Receiver(profile, count, extension=True)
     last_stats = None
     start_ns = recording.start_ns
     for message in recording.messages():
@@ -149,27 +154,11 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
         if channel is None:
             channel = channels[topic] = ChannelSummary(topic)
         channel.add(message.log_time_ns, len(message.data))
-        if topic == s.RAW_TELEMETRY:
-            data = bytes(recording.decode(message).data)
-            try:
-                tick = TelemetryPacket.decode(data, codec.telemetry_type).tick
-            except ProtocolError:
-                continue
-            ticks.append(tick)
-        elif topic == s.RAW_VIDEO_FRAGMENT and ext_codec is not None:
-            data = bytes(recording.decode(message).data)
-            try:
-                fragment = ext_codec.decode(data)
-            except ProtocolError:
-                continue
-            if not isinstance(fragment, VideoFragment):
-                continue
-            first, last = sequences.get(fragment.camera, (fragment.sequence, fragment.sequence))
-            if (fragment.sequence - last) % SEQUENCE_MODULO < SEQUENCE_MODULO // 2:
-                last = fragment.sequence
-            sequences[fragment.camera] = (first, last)
-            if reassembler.add(fragment, message.log_time_ns / 1e9) is not None:
-                completed[fragment.camera] += 1
+        if topic in s.RAW_TOPICS:
+            raw = recording.decode(message)
+            if raw.source == s.SOURCE_ROBOT:
+                at = message.log_time_ns / 1e9
+                receiver.received(bytes(raw.data), at, at)
         elif topic == s.LINK_STATS:
             last_stats = recording.decode(message)
         elif topic == s.EVENTS:

@@ -1,6 +1,6 @@
 """Record a link session to an MCAP file: raw datagrams and decoded ROS 2 messages.
 
-The recorder is one more LinkListener (attach() tees it beside the GUI's). Its callbacks run
+The recorder is one more subscriber of a Link (attach()). Its callbacks run
 on the link's threads and only append to a bounded queue: when the queue is full the item is
 dropped and counted, the link never waits. A named writer thread ("ocu-record") turns items
 into CDR messages and writes them with the mcap package's Writer, in chunks that are closed
@@ -28,19 +28,12 @@ from pathlib import Path
 
 from mcap.writer import CompressionType
 
-from ocu.link.core import (
-    LinkCore,
-    LinkListener,
-    LinkState,
-    StatusFrame,
-    TelemetryFrame,
-    VideoFrame,
-)
-from ocu.link.stats import LinkStats
+from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.session import (
+    COMMAND,
     EVENT,
     RECEIVED,
     SENT,
@@ -50,6 +43,19 @@ from ocu.record.session import (
     VIDEO,
     Item,
     RecordingFile,
+)
+from ocu.records import (
+    CommandSent,
+    DatagramReceived,
+    DatagramSent,
+    ExtensionChanged,
+    LinkEvent,
+    LinkStateChanged,
+    LinkStats,
+    SafetyEvent,
+    StatusFrame,
+    TelemetryFrame,
+    VideoFrame,
 )
 
 log = logging.getLogger("ocu.record")
@@ -84,47 +90,6 @@ def timestamped_name(wall_s: float | None = None) -> str:
     return time.strftime("ocu-%Y%m%d-%H%M%S.mcap", moment)
 
 
-class TeeListener(LinkListener):
-    """Forwards every link event to several listeners in order; one failing spares the rest."""
-
-    def __init__(self, *listeners: LinkListener) -> None:
-        self.listeners = listeners
-
-    def _each(self, name: str, *args: object) -> None:
-        for listener in self.listeners:
-            try:
-                getattr(listener, name)(*args)
-            except Exception:
-                log.exception("listener %r failed in %s", listener, name)
-
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        self._each("telemetry_received", frame)
-
-    def video_frame_received(self, frame: VideoFrame) -> None:
-        self._each("video_frame_received", frame)
-
-    def status_received(self, frame: StatusFrame) -> None:
-        self._each("status_received", frame)
-
-    def extension_changed(self, active: bool, reason: str) -> None:
-        self._each("extension_changed", active, reason)
-
-    def link_state_changed(self, state: LinkState, reason: str) -> None:
-        self._each("link_state_changed", state, reason)
-
-    def stats_updated(self, stats: LinkStats) -> None:
-        self._each("stats_updated", stats)
-
-    def safety_event(self, message: str) -> None:
-        self._each("safety_event", message)
-
-    def datagram_sent(self, data: bytes, sent_at: float) -> None:
-        self._each("datagram_sent", data, sent_at)
-
-    def datagram_received(self, data: bytes, received_at: float) -> None:
-        self._each("datagram_received", data, received_at)
-
-
 @dataclass(frozen=True)
 class RecorderStats:
     """What the recorder has done so far (or did, once stopped)."""
@@ -139,49 +104,11 @@ class RecorderStats:
     error: str | None
 
 
-class _QueueListener(LinkListener):
-    """The recorder's face towards the link: enqueue and return."""
-
-    def __init__(self, recorder: Recorder) -> None:
-        self.recorder = recorder
-
-    def datagram_sent(self, data: bytes, sent_at: float) -> None:
-        self.recorder.put((SENT, sent_at, data), len(data))
-
-    def datagram_received(self, data: bytes, received_at: float) -> None:
-        self.recorder.put((RECEIVED, received_at, data), len(data))
-
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        self.recorder.put((TELEMETRY, frame.received_at, frame), TELEMETRY_ITEM_BYTES)
-
-    def video_frame_received(self, frame: VideoFrame) -> None:
-        if self.recorder.decoded_video:
-            self.recorder.put((VIDEO, frame.received_at, frame), len(frame.jpeg))
-
-    def status_received(self, frame: StatusFrame) -> None:
-        self.recorder.put((STATUS, frame.received_at, frame), 0)
-
-    def stats_updated(self, stats: LinkStats) -> None:
-        self.recorder.put((STATS, self.recorder.clock(), stats), 0)
-
-    def link_state_changed(self, state: LinkState, reason: str) -> None:
-        self.recorder.put(
-            (EVENT, self.recorder.clock(), s.EVENT_LINK_STATE, state.value, reason), 0
-        )
-
-    def safety_event(self, message: str) -> None:
-        self.recorder.put((EVENT, self.recorder.clock(), s.EVENT_SAFETY, "", message), 0)
-
-    def extension_changed(self, active: bool, reason: str) -> None:
-        state = "active" if active else "inactive"
-        self.recorder.put((EVENT, self.recorder.clock(), s.EVENT_EXTENSION, state, reason), 0)
-
-
 class Recorder:
     """Writes what one or more links send and receive to an MCAP file, off their threads.
 
-    attach(core) after the core's own listener is in place (LinkThread sets one in its
-    constructor); start(path) and stop() any number of times; stop() is idempotent.
+    attach(link) any number of links; start(path) and stop() any number of times; stop() is
+    idempotent.
     `on_error(message)` is called from the writer thread when a write error ends a recording.
     """
 
@@ -209,7 +136,6 @@ class Recorder:
         self.decoded_video = decoded_video
         self.on_error = on_error
         self.clock = clock
-        self.listener: LinkListener = _QueueListener(self)
 
         self._control = threading.Lock()
         self._cond = threading.Condition()
@@ -243,16 +169,39 @@ class Recorder:
             if self._queued_bytes * 4 >= self.max_queue_bytes:
                 self._cond.notify()
 
-    def attach(self, core: LinkCore) -> None:
-        """Tee this recorder beside a LinkCore's current listener (set by LinkThread)."""
-        core.listener = TeeListener(core.listener, self.listener)
+    def attach(self, link: Link) -> None:
+        """Record what this link sends and receives (while recording)."""
+        link.subscribe(self.on_event)
 
-    @staticmethod
-    def detach(core: LinkCore) -> None:
-        """Undo attach(): give the core back its first listener."""
-        listener = core.listener
-        if isinstance(listener, TeeListener) and listener.listeners:
-            core.listener = listener.listeners[0]
+    def detach(self, link: Link) -> None:
+        """Stop recording this link."""
+        link.unsubscribe(self.on_event)
+
+    def on_event(self, event: LinkEvent) -> None:
+        """One link event into the queue (the link's threads; never blocks)."""
+        if isinstance(event, DatagramSent):
+            self.put((SENT, event.sent_at, event), len(event.data))
+        elif isinstance(event, DatagramReceived):
+            self.put((RECEIVED, event.received_at, event), len(event.data))
+        elif isinstance(event, CommandSent):
+            self.put((COMMAND, event.sent_at, event.command), 0)
+        elif isinstance(event, TelemetryFrame):
+            self.put((TELEMETRY, event.received_at, event), TELEMETRY_ITEM_BYTES)
+        elif isinstance(event, VideoFrame):
+            if self.decoded_video:
+                self.put((VIDEO, event.received_at, event), len(event.jpeg))
+        elif isinstance(event, StatusFrame):
+            self.put((STATUS, event.received_at, event), 0)
+        elif isinstance(event, LinkStats):
+            self.put((STATS, self.clock(), event), 0)
+        elif isinstance(event, LinkStateChanged):
+            state = event.state.value
+            self.put((EVENT, self.clock(), s.EVENT_LINK_STATE, state, event.reason), 0)
+        elif isinstance(event, SafetyEvent):
+            self.put((EVENT, self.clock(), s.EVENT_SAFETY, "", event.message), 0)
+        elif isinstance(event, ExtensionChanged):
+            state = "active" if event.active else "inactive"
+            self.put((EVENT, self.clock(), s.EVENT_EXTENSION, state, event.reason), 0)
 
     # ---- control ---------------------------------------------------------------------------
 

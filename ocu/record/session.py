@@ -20,13 +20,18 @@ from typing import Any
 
 from mcap.writer import CompressionType, Writer
 
-from ocu.control.commands import CommandMapper, make_codec
-from ocu.link.core import StatusFrame, TelemetryFrame, VideoFrame
-from ocu.link.stats import LinkStats
+from ocu import records as r
 from ocu.profile import RobotProfile
-from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket
-from ocu.protocol.extended import ExtendedCodec, VideoFragment
 from ocu.record import schemas as s
+from ocu.records import (
+    Command,
+    DatagramReceived,
+    DatagramSent,
+    LinkStats,
+    StatusFrame,
+    TelemetryFrame,
+    VideoFrame,
+)
 
 # What the recorder queues: (kind, monotonic time, payload...). The kinds:
 SENT = 0
@@ -36,6 +41,16 @@ VIDEO = 3
 STATUS = 4
 STATS = 5
 EVENT = 6
+COMMAND = 7
+
+# The raw channel of each kind of datagram (ocu.records).
+SENT_TOPICS = {r.RCP: s.RAW_RCP, r.HELLO: s.RAW_HELLO}
+RECEIVED_TOPICS = {
+    r.TELEMETRY: s.RAW_TELEMETRY,
+    r.VIDEO: s.RAW_VIDEO,
+    r.VIDEO_FRAGMENT: s.RAW_VIDEO_FRAGMENT,
+    r.STATUS: s.RAW_STATUS,
+}
 
 Item = tuple[Any, ...]
 
@@ -86,17 +101,6 @@ class RecordingFile:
         self._closed = False
         self._link_state = ""
         self._extension_active = False
-        self._codec = make_codec(profile)
-        self._mapper = CommandMapper(profile)
-        ext = profile.extension
-        self._ext_codec = (
-            ExtendedCodec(
-                ext.frame_types.hello, ext.frame_types.video_fragment, ext.frame_types.status
-            )
-            if ext is not None
-            else None
-        )
-        self._tick_ns = 1e9 / profile.link.telemetry_tick_hz
         self._camera_names = profile.link.camera_names
         self._encoders = {t.name: s.make_encoder(t) for t in s.MESSAGE_TYPES}
         self._file: io.BufferedWriter = open(path, "wb")  # noqa: SIM115 - closed in close()
@@ -207,6 +211,8 @@ class RecordingFile:
         kind, mono = item[0], item[1]
         if kind == SENT:
             self._sent(mono, item[2])
+        elif kind == COMMAND:
+            self._command(mono, item[2])
         elif kind == RECEIVED:
             self._received(mono, item[2])
         elif kind == TELEMETRY:
@@ -228,24 +234,11 @@ class RecordingFile:
             "data": data,
         }
 
-    def _sent(self, mono: float, data: bytes) -> None:
-        sent_ns = self.wall_ns(mono)
-        kind = data[0] if data else -1
-        ext = self.profile.extension
-        if kind == self.profile.link.frame_types.rcp:
-            topic = s.RAW_RCP
-        elif ext is not None and kind == ext.frame_types.hello:
-            topic = s.RAW_HELLO
-        else:
-            topic = s.RAW_OTHER
-        self._add(mono, topic, self._raw(sent_ns, 0, s.SOURCE_OCU, data))
-        if topic != s.RAW_RCP:
-            return
-        try:
-            packet = RemoteControlPacket.decode(data, kind)
-        except ProtocolError:
-            return
-        command = self._mapper.to_command(packet)
+    def _sent(self, mono: float, event: DatagramSent) -> None:
+        topic = SENT_TOPICS.get(event.kind, s.RAW_OTHER)
+        self._add(mono, topic, self._raw(self.wall_ns(mono), 0, s.SOURCE_OCU, event.data))
+
+    def _command(self, mono: float, command: Command) -> None:
         drive = self.profile.drive_channels
         if drive is not None:
             linear, turn = drive
@@ -262,7 +255,7 @@ class RecordingFile:
             mono,
             s.CMD_JOINTS,
             {
-                "header": {"stamp": s.stamp(sent_ns), "frame_id": ""},
+                "header": {"stamp": s.stamp(self.wall_ns(mono)), "frame_id": ""},
                 "name": joints,
                 "position": [],
                 "velocity": [command.velocity(name) for name in joints],
@@ -270,40 +263,14 @@ class RecordingFile:
             },
         )
 
-    def _received(self, mono: float, data: bytes) -> None:
-        receive_ns = self.wall_ns(mono)
-        kind = data[0] if data else -1
-        types = self.profile.link.frame_types
-        send_ns: int | None = None
-        if kind == types.telemetry:
-            topic = s.RAW_TELEMETRY
-            try:
-                tick = TelemetryPacket.decode(data, kind).tick
-                send_ns = round(tick * self._tick_ns)
-            except ProtocolError:
-                pass
-        elif kind == types.video:
-            topic = s.RAW_VIDEO
-        elif self._ext_codec is not None and self._ext_codec.handles(kind):
-            if kind == self._ext_codec.fragment_type:
-                topic = s.RAW_VIDEO_FRAGMENT
-                try:
-                    packet = self._ext_codec.decode(data)
-                    if isinstance(packet, VideoFragment):
-                        send_ns = packet.capture_time_us * 1000
-                except ProtocolError:
-                    pass
-            elif kind == self._ext_codec.status_type:
-                topic = s.RAW_STATUS
-            else:
-                topic = s.RAW_OTHER
-        else:
-            topic = s.RAW_OTHER
+    def _received(self, mono: float, event: DatagramReceived) -> None:
+        # What the packet was and its own stamp come from the receiver, which decoded it.
+        robot_ns = None if event.robot_time_s is None else round(event.robot_time_s * 1e9)
         self._add(
             mono,
-            topic,
-            self._raw(send_ns or 0, receive_ns, s.SOURCE_ROBOT, data),
-            publish_ns=send_ns,
+            RECEIVED_TOPICS.get(event.kind, s.RAW_OTHER),
+            self._raw(robot_ns or 0, self.wall_ns(mono), s.SOURCE_ROBOT, event.data),
+            publish_ns=robot_ns,
         )
 
     def _telemetry(self, mono: float, frame: TelemetryFrame) -> None:
@@ -328,7 +295,7 @@ class RecordingFile:
                 "velocity": velocities,
                 "effort": efforts,
             },
-            publish_ns=round(frame.packet.tick * self._tick_ns),
+            publish_ns=round(frame.packet.tick * 1e9 / self.profile.link.telemetry_tick_hz),
         )
 
     def camera_name(self, camera: int | None) -> str:

@@ -29,12 +29,11 @@ from dataclasses import dataclass
 from enum import Enum, IntEnum
 from typing import Protocol
 
-from ocu.control.commands import JointReading, VelocityLimits
+from ocu.control.commands import VelocityLimits
 from ocu.control.drive import DriveBounds, DriveError, scale_drive
 from ocu.control.position import PositionController, PositionError
-from ocu.link.core import LinkState
-from ocu.link.stats import LinkStats
 from ocu.profile import RobotProfile
+from ocu.records import JointReading, LinkState, LinkStats
 
 log = logging.getLogger("ocu.ros")
 

@@ -340,12 +340,14 @@ def _run(args: list[str], stop: threading.Event) -> int:
 
 
 def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Event) -> int:
-    from ocu.link.core import LinkCore, LinkError, LinkListener
+    from ocu.control.commands import VelocityLimits
+    from ocu.link.base import LinkError
+    from ocu.link.live import UdpLink
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
 
     simulator: SimulatorProcess | None = None
-    link: LinkCore | None = None
+    link: UdpLink | None = None
     bridge: RosBridge | None = None
     try:
         robot = config.robot
@@ -358,15 +360,17 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
             robot = simulator.address
             log.info("built-in simulator at %s:%d", *robot)
         try:
-            link = LinkCore(profile, robot, extension=config.extension)
+            link = UdpLink(profile, robot, extension=config.extension)
         except LinkError as err:
             log.error("%s", err)
             return 1
+        # The node is the only commander: the maxima ROS is held to are its own.
+        limits = VelocityLimits(profile)
         for channel, value in (
             (config.bridge.drive[0], config.max_linear_m_s),
             (config.bridge.drive[1], config.max_angular_rad_s),
         ):
-            kept = link.set_max_velocity(channel, value)
+            kept = limits.set(channel, value)
             if kept != value:
                 log.warning(
                     "%s maximum %.3f above the profile's hard maximum: %.3f", channel, value, kept
@@ -376,11 +380,10 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         bridge = RosBridge(
             profile, config.bridge, hardware_id=f"{robot[0]}:{robot[1]}", heartbeat=True
         )
-        # LinkCore logs its state changes and safety events itself (forwarded to rosout);
-        # the bridge hears them through the tee: LINK LOST stops what ROS moves.
-        link.listener = bridge.wrap_listener(LinkListener())
+        # The link logs its state changes and safety events itself (forwarded to rosout);
+        # the bridge subscribes to them: LINK LOST stops what ROS moves.
+        bridge.start(link, limits)
         link.start()
-        bridge.start(link)
         log.info("commanding %s:%d; SIGINT or SIGTERM stops the robot and exits", *robot)
         while not stop.wait(STOP_POLL_S):
             if bridge.failed.is_set():

@@ -19,18 +19,19 @@ import logging
 import math
 import threading
 import time
-from typing import Any, Protocol
+from typing import Any
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionError
-from ocu.link.core import LinkListener, LinkState, StatusFrame, TelemetryFrame, VideoFrame
-from ocu.link.stats import LinkStats
+from ocu.link.base import Link
 from ocu.profile import RobotProfile
+from ocu.records import LinkEvent, LinkState, LinkStateChanged, TelemetryFrame, VideoFrame
 from ocu.ros.bridge import (
     BridgeCore,
     BridgeError,
     BridgeSettings,
     BridgeState,
+    CommandSink,
     DiagnosticReport,
     StateCallback,
     bridge_report,
@@ -58,21 +59,6 @@ DIAGNOSTICS_TOPIC = "/diagnostics"
 DIAGNOSTICS_PERIOD_S = 1.0
 WARNING_INTERVAL_S = 2.0
 STOP_JOIN_TIMEOUT_S = 5.0
-
-
-class BridgeLink(Protocol):
-    """What the bridge needs of a link; LinkCore has all of it."""
-
-    limits: VelocityLimits
-
-    @property
-    def state(self) -> LinkState: ...
-
-    def set_velocities(self, **velocities: float) -> None: ...
-
-    def heartbeat(self) -> None: ...
-
-    def stats(self) -> LinkStats: ...
 
 
 def init_node(
@@ -169,7 +155,7 @@ class RosBridge:
         # thread beats it itself, so a stalled GUI still stops the robot.
         self.heartbeat = heartbeat
         self._life_lock = threading.Lock()
-        self._link: BridgeLink | None = None
+        self._link: Link | None = None
         self._subscribers: list[Any] = []
         self._publishers: _Publishers | None = None
         self._thread: threading.Thread | None = None
@@ -180,14 +166,21 @@ class RosBridge:
 
     # ---- life --------------------------------------------------------------------------
 
-    def start(self, link: BridgeLink) -> None:
-        """Subscribe, advertise and command `link`; rospy.init_node must have run."""
+    def start(self, link: Link, limits: VelocityLimits, sink: CommandSink | None = None) -> None:
+        """Subscribe to `link`, advertise and command it; rospy.init_node must have run.
+
+        Commands go to `sink` when given (the console's model), else to the link itself;
+        `limits` are the velocity maxima ROS is held to.
+        """
         with self._life_lock:
             if self._link is not None:
                 raise RuntimeError("the ROS bridge is already started")
             self._link = link
             self._publishers = _Publishers(self.profile)
-            self.core.attach(link, link.limits, link_state=lambda: link.state)
+            link.subscribe(self._on_link_event)
+            self.core.attach(
+                sink if sink is not None else link, limits, link_state=lambda: link.state
+            )
             if self.settings.twist_stamped:
                 twist = rospy.Subscriber(
                     CMD_VEL_TOPIC, TwistStamped, self._on_twist_stamped, queue_size=1
@@ -224,6 +217,7 @@ class RosBridge:
                 thread.join(STOP_JOIN_TIMEOUT_S)
             # After detach the core refuses callbacks still in flight on rospy threads.
             self.core.detach(stop=stop_motion)
+            self._link.unsubscribe(self._on_link_event)
             publishers, self._publishers = self._publishers, None
             self._link = None
         if publishers is not None:
@@ -251,6 +245,15 @@ class RosBridge:
             return self._link is not None
 
     # ---- link events (any thread) ------------------------------------------------------
+
+    def _on_link_event(self, event: LinkEvent) -> None:
+        if isinstance(event, LinkStateChanged):
+            # A lost link stops what ROS moves, whatever cmd_vel says next.
+            self.core.on_link_state(event.state, event.reason)
+        elif isinstance(event, TelemetryFrame):
+            self.on_telemetry(event)
+        elif isinstance(event, VideoFrame):
+            self.on_video_frame(event)
 
     def on_telemetry(self, frame: TelemetryFrame) -> None:
         """Feed the position controller and publish joint_states."""
@@ -290,11 +293,6 @@ class RosBridge:
     def on_link_state(self, state: LinkState, reason: str) -> None:
         """The link's state: LINK LOST stops ROS's motion and refuses cmd_vel until recovery."""
         self.core.on_link_state(state, reason)
-
-    def wrap_listener(self, listener: LinkListener) -> LinkListener:
-        """A listener that passes every event to `listener` and telemetry, video and link
-        state to the bridge too (the node and the console wrap their link's listener)."""
-        return _TeeListener(listener, self)
 
     def publish_diagnostics(self) -> None:
         """Publish the link's and the bridge's health on /diagnostics."""
@@ -381,51 +379,3 @@ class RosBridge:
                     log.exception("diagnostics failed")
             next_step = max(next_step + period_s, now)
             self._stop.wait(max(next_step - time.monotonic(), 0.0))
-
-
-class _TeeListener(LinkListener):
-    """Every event to the primary listener; telemetry, video and link state to the bridge."""
-
-    def __init__(self, primary: LinkListener, bridge: RosBridge) -> None:
-        self.primary = primary
-        self.bridge = bridge
-
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        try:
-            self.bridge.on_telemetry(frame)
-        except Exception:
-            log.exception("ROS bridge telemetry failed")
-        self.primary.telemetry_received(frame)
-
-    def video_frame_received(self, frame: VideoFrame) -> None:
-        try:
-            self.bridge.on_video_frame(frame)
-        except Exception:
-            log.exception("ROS bridge video failed")
-        self.primary.video_frame_received(frame)
-
-    def status_received(self, frame: StatusFrame) -> None:
-        self.primary.status_received(frame)
-
-    def extension_changed(self, active: bool, reason: str) -> None:
-        self.primary.extension_changed(active, reason)
-
-    def link_state_changed(self, state: LinkState, reason: str) -> None:
-        # The bridge first: it must stop ROS's motion before anything else reacts.
-        try:
-            self.bridge.on_link_state(state, reason)
-        except Exception:
-            log.exception("ROS bridge link state failed")
-        self.primary.link_state_changed(state, reason)
-
-    def stats_updated(self, stats: LinkStats) -> None:
-        self.primary.stats_updated(stats)
-
-    def safety_event(self, message: str) -> None:
-        self.primary.safety_event(message)
-
-    def datagram_sent(self, data: bytes, sent_at: float) -> None:
-        self.primary.datagram_sent(data, sent_at)
-
-    def datagram_received(self, data: bytes, received_at: float) -> None:
-        self.primary.datagram_received(data, received_at)

@@ -38,13 +38,7 @@ from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import NamedTuple
 
-from ocu.control.commands import (
-    Command,
-    CommandMapper,
-    make_codec,
-    rad_to_ticks,
-    track_speeds,
-)
+from ocu.control.commands import CommandMapper, rad_to_ticks, track_speeds
 from ocu.profile import Motor, RobotProfile
 from ocu.protocol import (
     MotorRecord,
@@ -54,6 +48,8 @@ from ocu.protocol import (
     VideoFramePacket,
 )
 from ocu.protocol.extended import ExtendedCodec, HelloPacket
+from ocu.protocol.wire import make_codec
+from ocu.records import Command
 from ocu.sim.extended import (
     DEFAULT_DRAIN_PERCENT_PER_S,
     DEFAULT_STATUS_HZ,

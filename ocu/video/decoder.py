@@ -22,7 +22,7 @@ from typing import cast
 import cv2
 import numpy as np
 
-from ocu.link.core import VideoFrame
+from ocu.records import VideoFrame
 from ocu.video.correction import CorrectionTimings, Corrector, Pixels
 from ocu.video.slot import LatestFrames
 

@@ -6,13 +6,11 @@ the e-stop indicator, which stays at the right edge.
 
 from __future__ import annotations
 
-import time
-
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QGridLayout, QHBoxLayout, QLabel, QWidget
 
-from ocu.link.core import LinkState, TelemetryFrame
-from ocu.link.stats import LinkStats
+from ocu.console.model import ConsoleModel
+from ocu.records import LinkState, LinkStats
 
 BLOCK = "font-weight:bold;font-size:15pt;padding:3px 12px;border-radius:4px;"
 STATE_STYLES = {
@@ -46,14 +44,13 @@ def _label(name: str, style: str = INFO_STYLE) -> QLabel:
 
 
 class LinkStatus(QWidget):
-    """Always-visible link facts and the e-stop state, for the status bar."""
+    """Always-visible link facts and the e-stop state, for the status bar (a model view)."""
 
-    def __init__(self, address_text: str, parent: QWidget | None = None) -> None:
+    def __init__(
+        self, model: ConsoleModel, address_text: str, parent: QWidget | None = None
+    ) -> None:
         super().__init__(parent)
-        self.state = LinkState.CONNECTING
-        self.last_telemetry_at: float | None = None
-        self.estop_active = False
-        self.moving = False
+        self.model = model
         self.replay = False
         layout = QHBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)
@@ -87,6 +84,22 @@ class LinkStatus(QWidget):
         self._age_timer.timeout.connect(self._refresh_state)
         self._age_timer.start()
         self._refresh_state()
+        robot = model.robot.events
+        robot.link_state_changed.connect(self._on_state)
+        robot.stats_changed.connect(self.on_stats)
+        robot.telemetry_changed.connect(lambda _frame: self._refresh_state())
+        model.events.estop_changed.connect(lambda _active, reason: self._show_estop(reason))
+        model.events.command_changed.connect(self._show_estop)
+
+    @property
+    def state(self) -> LinkState:
+        """The link state shown (the model's)."""
+        return self.model.robot.link_state
+
+    @property
+    def last_telemetry_at(self) -> float | None:
+        """When the telemetry shown arrived (the model's)."""
+        return self.model.robot.last_telemetry_at
 
     def add_indicator(self, widget: QWidget) -> None:
         """Show another widget left of the e-stop indicator (Record button, ROS state)."""
@@ -96,17 +109,8 @@ class LinkStatus(QWidget):
         """The simulator or robot address shown."""
         self.address_label.setText(address_text)
 
-    def on_state(self, state: LinkState, reason: str) -> None:
-        """Link state changed."""
-        self.state = state
+    def _on_state(self, _state: LinkState, reason: str) -> None:
         self.state_label.setToolTip(reason)
-        if state == LinkState.CONNECTING:
-            self.last_telemetry_at = None
-        self._refresh_state()
-
-    def on_telemetry(self, frame: TelemetryFrame) -> None:
-        """Remember when telemetry last arrived."""
-        self.last_telemetry_at = frame.received_at
         self._refresh_state()
 
     def on_stats(self, stats: LinkStats) -> None:
@@ -131,18 +135,19 @@ class LinkStatus(QWidget):
         self.replay = True
         self._show_estop()
 
-    def set_estop(self, active: bool, reason: str = "") -> None:
-        """Whether an emergency stop holds the robot until the operator acts again."""
-        self.estop_active = active
-        self.estop_label.setToolTip(reason)
-        self._show_estop()
+    @property
+    def estop_active(self) -> bool:
+        """Whether an emergency stop holds the robot (the model's latch)."""
+        return self.model.estopped
 
-    def set_moving(self, moving: bool) -> None:
-        """Whether any channel is commanded to move."""
-        self.moving = moving
-        self._show_estop()
+    @property
+    def moving(self) -> bool:
+        """Whether any channel is commanded to move (the model's command)."""
+        return self.model.is_moving
 
-    def _show_estop(self) -> None:
+    def _show_estop(self, reason: str | None = None) -> None:
+        if reason is not None:
+            self.estop_label.setToolTip(reason)
         if self.replay:
             self.estop_label.setText("REPLAY · nothing sent")
             self.estop_label.setStyleSheet(REPLAY_STYLE)
@@ -162,8 +167,8 @@ class LinkStatus(QWidget):
         if self.state_label.styleSheet() != style:
             self.state_label.setStyleSheet(style)
         self.state_label.setText(STATE_TEXT[self.state])
-        if self.last_telemetry_at is None:
+        age = self.model.robot.telemetry_age()
+        if age is None:
             self.age_label.setText("no telemetry yet")
         else:
-            age = time.monotonic() - self.last_telemetry_at
             self.age_label.setText(f"telemetry {age:.1f} s ago")

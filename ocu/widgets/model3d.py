@@ -32,10 +32,10 @@ from PySide6.QtGui import (
 from PySide6.QtOpenGLWidgets import QOpenGLWidget
 from PySide6.QtWidgets import QMenu, QVBoxLayout, QWidget
 
-from ocu.control.commands import JointReading
 from ocu.model.tree import KinematicTree
 from ocu.model.urdf import RobotModel, load_urdf
 from ocu.profile import RobotProfile
+from ocu.records import JointReading
 from ocu.render.camera import VIEW_KEYS, VIEWS, OrbitCamera
 from ocu.render.platform import GlMode, choose_gl_platform, configure_gl_platform
 from ocu.render.scene import RenderFrame, build_frame, model_bounds

@@ -1,18 +1,18 @@
-"""Live plots of every motor's position, speed and current over a bounded time window."""
+"""Live plots of every motor's position, speed and current: a view of the robot's history.
+
+The samples live in the console model (ocu.console.robot.RobotState.history); the plots
+redraw from it at most four times a second.
+"""
 
 from __future__ import annotations
-
-import math
-from collections import deque
 
 import pyqtgraph as pg
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
-from ocu.link.core import TelemetryFrame
-from ocu.profile import RobotProfile
+from ocu.console.robot import RobotState
+from ocu.records import TelemetryFrame
 
-WINDOW_S = 60.0
 REDRAW_PERIOD_MS = 250
 QUANTITIES = (
     ("position", "angle", "°"),
@@ -24,17 +24,12 @@ QUANTITIES = (
 class TelemetryPlots(QWidget):
     """Three stacked plots sharing the time axis (seconds before the latest packet)."""
 
-    def __init__(
-        self, profile: RobotProfile, window_s: float = WINDOW_S, parent: QWidget | None = None
-    ) -> None:
+    def __init__(self, robot: RobotState, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setObjectName("telemetry_plots")
-        self.profile = profile
-        self.window_s = window_s
-        self.samples: dict[str, deque[tuple[float, float | None, float, float]]] = {
-            name: deque() for name in profile.motors
-        }
-        self._latest_at: float | None = None
+        self.robot = robot
+        profile = robot.profile
+        window_s = robot.history_s
         self._dirty = False
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
@@ -73,35 +68,22 @@ class TelemetryPlots(QWidget):
         self._timer.setInterval(REDRAW_PERIOD_MS)
         self._timer.timeout.connect(self.redraw)
         self._timer.start()
+        robot.events.telemetry_changed.connect(self._on_telemetry)
 
-    def add_frame(self, frame: TelemetryFrame) -> None:
-        """Store one packet's readings; old samples beyond the window are dropped."""
-        at = frame.received_at
-        for name, reading in frame.readings.items():
-            series = self.samples.get(name)
-            if series is None:
-                continue
-            # An implausible angle (-11796480° for a broken encoder) would flatten the plot.
-            angle = None
-            if reading.angle_rad is not None and reading.fault is None:
-                angle = math.degrees(reading.angle_rad)
-            series.append((at, angle, reading.speed_rad_s, reading.current_a))
-            while series and series[0][0] < at - self.window_s:
-                series.popleft()
-        self._latest_at = at
+    def _on_telemetry(self, _frame: TelemetryFrame) -> None:
         self._dirty = True
 
     def sample_count(self, name: str) -> int:
-        """Samples held for one motor (bounded by the window)."""
-        return len(self.samples[name])
+        """Samples of one motor in the model's history (bounded by its window)."""
+        return len(self.robot.history[name])
 
     def redraw(self) -> None:
         """Re-plot the curves if new samples arrived."""
-        if not self._dirty or self._latest_at is None:
+        latest = self.robot.last_telemetry_at
+        if not self._dirty or latest is None:
             return
         self._dirty = False
-        latest = self._latest_at
-        for name, series in self.samples.items():
+        for name, series in self.robot.history.items():
             times = [s[0] - latest for s in series]
             for index, (key, _, _) in enumerate(QUANTITIES, start=1):
                 curve = self.curves.get((key, name))

@@ -7,9 +7,9 @@ import math
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import QHeaderView, QTableWidget, QTableWidgetItem, QWidget
 
-from ocu.link.core import TelemetryFrame
 from ocu.profile import RobotProfile
 from ocu.protocol import MOTOR_SLOTS
+from ocu.records import TelemetryFrame
 
 COLUMNS = (
     "id",

@@ -13,7 +13,7 @@ from PySide6.QtCore import QPointF, QRectF, QSize, Qt
 from PySide6.QtGui import QColor, QFont, QFontMetrics, QPainter, QPaintEvent, QPen, QPolygonF
 from PySide6.QtWidgets import QLabel, QSizePolicy, QWidget
 
-from ocu.link.core import StatusFrame
+from ocu.records import StatusFrame
 
 NOT_REPORTED = "not reported"
 GOOD_COLOUR = QColor(40, 160, 70)

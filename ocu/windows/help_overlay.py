@@ -7,7 +7,7 @@ from html import escape
 from PySide6.QtCore import QEvent, QObject, Qt
 from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
 
-from ocu.control.teleop import TeleopModel
+from ocu.console.model import ConsoleModel
 from ocu.hotkeys import KeyMap
 
 OVERLAY_STYLE = "background: rgba(20, 24, 28, 215); color: white;"
@@ -34,7 +34,7 @@ def help_html(key_map: KeyMap) -> str:
 class HelpOverlay(QWidget):
     """Covers its parent while the model says help is visible."""
 
-    def __init__(self, model: TeleopModel, key_map: KeyMap, parent: QWidget) -> None:
+    def __init__(self, model: ConsoleModel, key_map: KeyMap, parent: QWidget) -> None:
         super().__init__(parent)
         self.host = parent
         self.setObjectName("help_overlay")

@@ -15,10 +15,10 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from ocu.console.model import ConsoleModel
 from ocu.control.position import PositionError
-from ocu.control.teleop import TeleopModel
-from ocu.link.core import TelemetryFrame
 from ocu.profile import Motor
+from ocu.records import TelemetryFrame
 from ocu.widgets.number_box import NumberBox, NumberError, format_number
 from ocu.widgets.telemetry_plots import TelemetryPlots
 from ocu.widgets.telemetry_table import TelemetryTable
@@ -51,7 +51,7 @@ def target_rad(motor: Motor, degrees: float) -> float:
 class JointPositionPanel(QWidget):
     """Targets for the joints with position feedback; telemetry table and plots below."""
 
-    def __init__(self, model: TeleopModel, parent: QWidget | None = None) -> None:
+    def __init__(self, model: ConsoleModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setObjectName("joint_position_panel")
         self.model = model
@@ -119,7 +119,7 @@ class JointPositionPanel(QWidget):
         top_layout.addLayout(buttons)
 
         self.table = TelemetryTable(model.profile)
-        self.plots = TelemetryPlots(model.profile)
+        self.plots = TelemetryPlots(model.robot)
         left = QSplitter(Qt.Orientation.Vertical)
         left.addWidget(top)
         left.addWidget(self.table)
@@ -137,6 +137,7 @@ class JointPositionPanel(QWidget):
         layout.addWidget(self.splitter)
 
         model.events.targets_changed.connect(self._on_targets)
+        model.robot.events.telemetry_changed.connect(self.on_telemetry)
         # Every e-stop, latched already or not (estop_changed fires only on a change).
         model.events.estop_requested.connect(self._on_estop)
         model.events.position_message.connect(self.show_message)
@@ -190,7 +191,6 @@ class JointPositionPanel(QWidget):
                     label.setStyleSheet("")
                     label.setToolTip("")
         self.table.show_frame(frame)
-        self.plots.add_frame(frame)
 
     def show_message(self, text: str) -> None:
         """A controller message (reached, stale telemetry, ...)."""

@@ -34,7 +34,7 @@ from PySide6.QtWidgets import (
 )
 
 from ocu import hotkeys
-from ocu.control.teleop import TeleopModel
+from ocu.console.model import ConsoleModel
 from ocu.hotkeys import KeyMap
 from ocu.windows.held_keys import XKeymapProbe
 
@@ -244,7 +244,7 @@ class KeyFilter(QObject):
 
     def __init__(
         self,
-        model: TeleopModel,
+        model: ConsoleModel,
         key_map: KeyMap,
         owns: Callable[[QWidget], bool],
         platform: str | None = None,

@@ -5,10 +5,12 @@ of the safety rules: focus loss, hiding, minimising, a lost link and closing all
 robot through the model; a stalled GUI thread is caught by the link's own watchdog, and the
 model is halted when the thread comes back so nothing resumes by itself.
 
-Beside the operator: the video panel shows the link's cameras, a Recorder (if given) tees
-every link into an MCAP file, and the ROS toggle lets a ROS 1 planner drive until the
-operator acts. Built on a ReplaySource instead of links, the same window replays a
-recording: REPLAY banner, command widgets disabled, no hotkeys, nothing sent.
+The window only wires: the link's events (through its Qt adapter) go into the console model,
+the model's command goes to the link, and the views subscribe to the model. Beside the
+operator: the video panel shows the link's cameras, a Recorder (if given) subscribes to every
+link the window makes, and the ROS toggle lets a ROS 1 planner drive through the model until
+the operator acts. Given a replay (a read-only link) instead of a link factory, the same
+window replays a recording: REPLAY banner, command widgets disabled, no hotkeys, nothing sent.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import replace
 
 from PySide6.QtCore import QByteArray, QEvent, QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent, QHideEvent
@@ -31,16 +32,20 @@ from PySide6.QtWidgets import (
 )
 
 from ocu import hotkeys
-from ocu.control.teleop import TeleopModel
+from ocu.console.model import ConsoleModel
 from ocu.hotkeys import KeyMap
-from ocu.link.core import LinkState, TelemetryFrame
-from ocu.link.qt import LinkThread
+from ocu.link.base import Link
 from ocu.profile import RobotProfile
-from ocu.record.qt import RecordButton
+from ocu.protocol.extended import CameraRequest
+from ocu.qt.link import QtLink
+from ocu.qt.record import RecordButton
+from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
-from ocu.record.replay import ReplayBanner, ReplayControls, ReplaySource
+from ocu.record.replay_link import ReplayLink
+from ocu.records import LinkState, TelemetryFrame
 from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.model3d import Model3DWidget
+from ocu.widgets.replay import ReplayBanner, ReplayControls
 from ocu.widgets.video import VideoPanel
 from ocu.windows.help_overlay import HelpOverlay
 from ocu.windows.joint_position import JointPositionPanel
@@ -61,9 +66,7 @@ DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
 REPLAY_DISABLED_TIP = "Replay: commands are disabled"
 
-LinkFactory = Callable[[], LinkThread]
-# What the window connects to: a live link, or a recording replayed with the same signals.
-LinkSource = LinkThread | ReplaySource
+LinkFactory = Callable[[], Link]
 
 
 class MainWindow(QMainWindow):
@@ -83,7 +86,7 @@ class MainWindow(QMainWindow):
         *,
         connect: bool = True,
         recorder: Recorder | None = None,
-        replay: ReplaySource | None = None,
+        replay: ReplayLink | None = None,
         parent: QWidget | None = None,
     ) -> None:
         super().__init__(parent)
@@ -96,8 +99,9 @@ class MainWindow(QMainWindow):
         self.recorder = recorder if replay is None else None
         self.settings = settings
         self.key_map = key_map if key_map is not None else hotkeys.load_key_map(profile)
-        self.model = TeleopModel(profile, fine_factor=self.key_map.fine_factor)
-        self.link: LinkSource | None = None
+        self.model = ConsoleModel(profile, fine_factor=self.key_map.fine_factor)
+        self.link: QtLink | None = None
+        self.replay_controller = ReplayController(replay, self) if replay is not None else None
         self._shut = False
         self._last_tick: float | None = None
         if replay is None:
@@ -110,7 +114,7 @@ class MainWindow(QMainWindow):
         self.velocity_panel = VelocityPanel(self.model)
         self.max_panel = MaxVelocityPanel(self.model)
         self.joint_panel = JointPositionPanel(self.model)
-        self.video_panel = VideoPanel(profile, None)
+        self.video_panel = VideoPanel(self.model)
         self.event_log = QListWidget()
         self.event_log.setObjectName("event_log")
         self.event_log.setFocusPolicy(Qt.FocusPolicy.NoFocus)
@@ -141,7 +145,7 @@ class MainWindow(QMainWindow):
         assert isinstance(model_view, Model3DWidget)
         self.model_view = model_view
 
-        self.link_status = LinkStatus(address_text)
+        self.link_status = LinkStatus(self.model, address_text)
         self.statusBar().addPermanentWidget(self.link_status, 1)
         self.statusBar().setSizeGripEnabled(False)
         self.record_button: RecordButton | None = None
@@ -159,6 +163,7 @@ class MainWindow(QMainWindow):
             self.link_status.add_indicator(self.record_button)
         self.ros = RosControl(
             profile,
+            self.model,
             address_text,
             before_start=lambda: self.model.halt("ROS control on"),
             log_event=self.log_event,
@@ -180,31 +185,28 @@ class MainWindow(QMainWindow):
 
         events = self.model.events
         events.command_changed.connect(self._push_command)
+        events.stream_request_changed.connect(self._push_streams)
         events.estop_requested.connect(self._link_estop)
-        events.estop_changed.connect(self.link_status.set_estop)
-        events.max_changed.connect(self._push_max)
         events.connection_changed.connect(self._on_connection)
         events.operator_acted.connect(self._on_operator_acted)
         events.message.connect(self.log_event)
         events.position_message.connect(self.log_event)
         video = self.video_panel
-        video.status_changed.connect(self.velocity_panel.headlight.show_status)
         video.snapshot_saved.connect(lambda path: self.log_event(f"snapshot saved: {path}"))
         video.snapshot_failed.connect(self.log_event)
-        video.extension_active_changed.connect(
-            lambda active: self.log_event(
+        self.model.robot.events.extension_changed.connect(
+            lambda active, _reason: self.log_event(
                 "robot speaks the protocol extension" if active else "vendor protocol"
             )
         )
-        if replay is not None:
-            self._build_replay_bar(replay)
+        if self.replay_controller is not None:
+            self._build_replay_bar(self.replay_controller)
 
         self._control_timer = QTimer(self)
         self._control_timer.setInterval(CONTROL_PERIOD_MS)
         self._control_timer.timeout.connect(self._control_tick)
         self._control_timer.start()
         self._last_view_at = 0.0
-        self._last_telemetry_at: float | None = None
         self._view_timer = QTimer(self)
         self._view_timer.setInterval(VIEW_PERIOD_MS)
         self._view_timer.timeout.connect(self._view_tick)
@@ -254,7 +256,7 @@ class MainWindow(QMainWindow):
         help_action.triggered.connect(lambda: hotkeys.toggle_help(self.model))
         self.menuBar().addAction(help_action)
 
-    def _build_replay_bar(self, source: ReplaySource) -> None:
+    def _build_replay_bar(self, source: ReplayController) -> None:
         """REPLAY banner and play/seek/speed on top; every command widget disabled."""
         bar = QToolBar("Replay", self)
         bar.setObjectName("replay_toolbar")
@@ -313,44 +315,44 @@ class MainWindow(QMainWindow):
     def _start_link(self) -> None:
         if self.link is not None or self._shut:
             return
-        link: LinkSource
         if self.replay is not None:
-            link = self.replay
+            link: Link = self.replay
         else:
             assert self.link_factory is not None
             link = self.link_factory()
-        # Not started yet: no other thread touches the limits.
-        for channel in self.profile.channels:
-            link.core.limits.set(channel, self.model.max_velocity(channel))
-        link.telemetry_ready.connect(self._on_telemetry_ready)
-        link.link_state_changed.connect(self._on_link_state)
-        link.stats_updated.connect(self.link_status.on_stats)
-        link.safety_event.connect(self._on_safety_event)
-        self.link = link
-        self.link_status.on_state(LinkState.CONNECTING, "connecting")
-        self.video_panel.set_link(link)
-        if isinstance(link, LinkThread):
-            # Both tee beside the listener LinkThread set, before any datagram flows.
+        qt = QtLink(link, self)
+        robot = self.model.robot
+        qt.telemetry_ready.connect(self._on_telemetry_ready)
+        qt.link_state_changed.connect(self._on_link_state)
+        qt.stats_updated.connect(robot.on_stats)
+        qt.status_received.connect(robot.on_status)
+        qt.extension_changed.connect(robot.on_extension)
+        qt.safety_event.connect(self._on_safety_event)
+        self.link = qt
+        robot.on_link_state(LinkState.CONNECTING, "connecting")
+        self.video_panel.set_link(qt)
+        if not link.read_only:
+            # Subscribed before any datagram flows.
             if self.recorder is not None:
-                self.recorder.attach(link.core)
+                self.recorder.attach(link)
             self.ros.link_started(link)
-            link.set_command(self.model.command(link.core.command))
-        link.start_link()
-        self.log_event("replay started" if self.replay is not None else "link started")
+            link.set_command(self.model.command())
+            link.set_stream_request(self.model.stream_request)
+        qt.start()
+        self.log_event("replay started" if link.read_only else "link started")
 
     def _stop_link(self) -> None:
-        link, self.link = self.link, None
-        if link is None:
+        qt, self.link = self.link, None
+        if qt is None:
             return
         self.video_panel.set_link(None)
-        if isinstance(link, LinkThread):
+        if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
-        link.shutdown()
-        self.link_status.on_state(LinkState.CLOSED, "disconnected by the operator")
-        if self.replay is not None:
-            self.log_event("replay stopped")
-        else:
-            self.log_event("link stopped (zeros sent last)")
+        qt.shutdown()
+        if self.recorder is not None:
+            self.recorder.detach(qt.link)
+        self.model.robot.on_link_state(LinkState.CLOSED, "disconnected by the operator")
+        self.log_event("replay stopped" if qt.read_only else "link stopped (zeros sent last)")
 
     def _on_connection(self, connected: bool) -> None:
         if connected:
@@ -359,33 +361,26 @@ class MainWindow(QMainWindow):
             self._stop_link()
 
     def _push_command(self) -> None:
-        self.link_status.set_moving(self.model.is_moving)
-        link = self.link
-        if not isinstance(link, LinkThread):
-            return  # no link, or a replay: nothing is ever sent
-        if self.ros.in_control and not self.model.is_moving:
-            # ROS drives (any operator motion overrides it first): only the operator's
-            # switches change, ROS's velocities stay.
-            link.set_command(replace(link.core.command, torch=self.model.torch))
-            return
-        link.set_command(self.model.command(link.core.command))
-
-    def _push_max(self, channel: str, value: float) -> None:
+        # The model owns the whole command (ROS's velocities too): the link is fed from it
+        # alone and never read back.
         if self.link is not None:
-            self.link.core.set_max_velocity(channel, value)
+            self.link.link.set_command(self.model.command())
+
+    def _push_streams(self, streams: tuple[CameraRequest, ...]) -> None:
+        if self.link is not None:
+            self.link.link.set_stream_request(streams)
 
     def _link_estop(self, reason: str) -> None:
-        if isinstance(self.link, LinkThread):
-            self.link.emergency_stop(reason)
+        if self.link is not None:
+            self.link.link.emergency_stop(reason)
 
     def _on_operator_acted(self) -> None:
-        self._override_ros("operator")
+        self.ros.override("operator")
 
     def _override_ros(self, reason: str) -> None:
-        """ROS loses control at once; the model's command replaces everything ROS sent."""
-        link = self.link
-        if self.ros.override(reason) and isinstance(link, LinkThread):
-            link.set_command(self.model.command(link.core.command))
+        """ROS loses control at once; the channels it drove stop."""
+        self.ros.override(reason)
+        self.model.clear_external()
 
     def _is_current_link(self) -> bool:
         # Queued signals of a link stopped meanwhile may still arrive; they are stale.
@@ -406,21 +401,19 @@ class MainWindow(QMainWindow):
         frame = link.take_telemetry() if link is not None else None
         if frame is not None:
             self._on_telemetry(frame)
-        if self._last_telemetry_at is not None:
+        last = self.model.robot.last_telemetry_at
+        if last is not None:
             predicted = self.model.predicted_angles(self._last_view_at)
-            self.model_view.set_joint_angles(predicted, fresh_at=self._last_telemetry_at)
+            self.model_view.set_joint_angles(predicted, fresh_at=last)
 
     def _on_telemetry(self, frame: TelemetryFrame) -> None:
-        self._last_telemetry_at = frame.received_at
-        self.model.on_telemetry(frame.readings, frame.received_at, frame.delay_s)
-        self.joint_panel.on_telemetry(frame)
-        self.link_status.on_telemetry(frame)
+        self.model.on_telemetry(frame)
         self.model_view.show_reading(frame)
 
     def _on_link_state(self, state: LinkState, reason: str) -> None:
         if not self._is_current_link():
             return
-        self.link_status.on_state(state, reason)
+        self.model.robot.on_link_state(state, reason)
         self.log_event(f"link {state.value}: {reason}")
         if state == LinkState.LOST:
             self.model.halt("link lost")
@@ -449,14 +442,15 @@ class MainWindow(QMainWindow):
     def _check_focus(self) -> None:
         active = QApplication.activeWindow()
         if active is None or not self.owns(active):
-            self.model.halt("console lost focus")
+            # A planner the operator watches in another window (rviz) goes on.
+            self.model.halt("console lost focus", keep_external=True)
 
     def _on_focus_window(self, _window: object) -> None:
         self._check_focus()
 
     def _on_application_state(self, state: Qt.ApplicationState) -> None:
         if state != Qt.ApplicationState.ApplicationActive:
-            self.model.halt("application inactive")
+            self.model.halt("application inactive", keep_external=True)
 
     def changeEvent(self, event: QEvent) -> None:
         """Minimising or losing activation stops the robot."""

@@ -11,7 +11,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from ocu.control.teleop import TeleopModel
+from ocu.console.model import ConsoleModel
 from ocu.widgets.number_box import NumberBox, NumberError, format_number
 from ocu.widgets.value_slider import ValueSlider
 from ocu.windows.velocity import ERROR_TEXT_STYLE, channel_title
@@ -20,7 +20,7 @@ from ocu.windows.velocity import ERROR_TEXT_STYLE, channel_title
 class MaxVelocityPanel(QWidget):
     """Sliders and boxes that set each channel's maximum (never above the hard maximum)."""
 
-    def __init__(self, model: TeleopModel, parent: QWidget | None = None) -> None:
+    def __init__(self, model: ConsoleModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setObjectName("max_velocity_panel")
         self.model = model

@@ -2,8 +2,10 @@
 
 ROS may command the robot only while the toggle is on, and the operator always wins: any
 key, slider, switch, typed value, target or Space overrides ROS at once (the toggle then
-unchecks itself; turning it on again hands control back). rospy is imported only when the
-toggle is first turned on, so the console runs and starts without ROS.
+unchecks itself; turning it on again hands control back). ROS's velocities go into the console
+model like any other input (queued to the GUI thread), so the link has one command and one
+commander; a stalled GUI stops ROS too. rospy is imported only when the toggle is first
+turned on, so the console runs and starts without ROS.
 
 The toggle is enabled only when Debian's ROS 1 is installed and a ROS master answers; the
 master is probed on a short-lived thread (a remote master may take a second to time out,
@@ -21,8 +23,10 @@ from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QAction
 from PySide6.QtWidgets import QLabel, QWidget
 
-from ocu.link.qt import LinkThread
+from ocu.console.model import ConsoleModel
+from ocu.link.base import Link
 from ocu.profile import RobotProfile
+from ocu.records import CommandError
 from ocu.ros.bridge import STATE_TEXT, BridgeState
 from ocu.ros.environment import master_online, master_uri, missing_ros
 
@@ -48,33 +52,45 @@ SHORT_TEXT = {
 }
 
 
+class _ModelSink:
+    """Where the hosted bridge's velocities go: into the model, on the GUI thread."""
+
+    def __init__(self, post: Callable[[dict[str, float]], None]) -> None:
+        self._post = post
+
+    def set_velocities(self, **velocities: float) -> None:
+        self._post(dict(velocities))
+
+
 class RosControl(QObject):
     """The toggle (`action`), the status-bar label (`label`) and the bridge behind them."""
 
     # From bridge and rospy threads: queued to the GUI thread.
     state_changed = Signal(object, str)
     _probed = Signal(object)
+    _velocities = Signal(object)
 
     def __init__(
         self,
         profile: RobotProfile,
+        model: ConsoleModel,
         hardware_id: str,
+        *,
         before_start: Callable[[], object],
         log_event: Callable[[str], None],
         parent: QWidget,
-        *,
         disabled_reason: str | None = None,
     ) -> None:
         super().__init__(parent)
         self.profile = profile
+        self.model = model
         self.hardware_id = hardware_id
         self.before_start = before_start
         self.log_event = log_event
         self.bridge: RosBridge | None = None
-        self.link: LinkThread | None = None
+        self.link: Link | None = None
         self.unavailable: str | None = disabled_reason or "checking for a ROS master"
         self._fixed_reason = disabled_reason
-        self._wrapped: LinkThread | None = None
         self._probe_thread: threading.Thread | None = None
         self._shut = False
 
@@ -87,6 +103,8 @@ class RosControl(QObject):
         self.label.hide()
         self.state_changed.connect(self._on_state)
         self._probed.connect(self._on_probed)
+        self._velocities.connect(self._apply_velocities)
+        self._sink = _ModelSink(self._velocities.emit)
         self._show_availability()
         self.probe()
 
@@ -128,24 +146,28 @@ class RosControl(QObject):
 
     # ---- the link --------------------------------------------------------------------------
 
-    def link_started(self, link: LinkThread) -> None:
-        """A new link, not started yet: the bridge (if any) sees its telemetry and video."""
+    def link_started(self, link: Link) -> None:
+        """A new link, not started yet: the bridge subscribes to it when turned on."""
         self.link = link
-        self._wrap(link)
 
     def link_stopping(self) -> None:
         """The link is about to shut down: ROS lets go first (zeros what it moved)."""
         self.link = None
-        self._wrapped = None
         if self.bridge is not None:
             self.bridge.stop()
+        self.model.clear_external()
         self.action.setChecked(False)
         self._show_availability()
 
-    def _wrap(self, link: LinkThread) -> None:
-        if self.bridge is not None and self._wrapped is not link:
-            link.core.listener = self.bridge.wrap_listener(link.core.listener)
-            self._wrapped = link
+    def _apply_velocities(self, velocities: dict[str, float]) -> None:
+        # GUI thread. A command the bridge sent before it was overridden may still be queued:
+        # only a bridge in control may move the robot.
+        if not self.in_control:
+            return
+        try:
+            self.model.set_external_velocities(velocities)
+        except CommandError as err:
+            log.warning("ROS command refused: %s", err)
 
     # ---- control ---------------------------------------------------------------------------
 
@@ -167,6 +189,7 @@ class RosControl(QObject):
         if not checked:
             if self.bridge is not None:
                 self.bridge.stop()
+            self.model.clear_external()
             return
         refusal = self._refusal()
         if refusal is None:
@@ -192,13 +215,12 @@ class RosControl(QObject):
         bridge = self.bridge
         if bridge is None:
             bridge = self.bridge = self._make_bridge()
-        self._wrap(link)
         if bridge.started:
             bridge.enable()  # back after an override
             return
         # One commander at a time: the operator's own motion stops before ROS takes over.
         self.before_start()
-        bridge.start(link.core)
+        bridge.start(link, self.model.limits, sink=self._sink)
 
     def _make_bridge(self) -> RosBridge:
         import rospy
@@ -234,6 +256,7 @@ class RosControl(QObject):
         self._shut = True
         if self.bridge is not None:
             self.bridge.stop()
+        self._velocities.disconnect(self._apply_velocities)
         thread, self._probe_thread = self._probe_thread, None
         if thread is not None:
             thread.join(PROBE_JOIN_S)

@@ -18,8 +18,8 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
+from ocu.console.model import ConsoleModel
 from ocu.control.position import PositionError
-from ocu.control.teleop import TeleopModel
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.render.platform import configure_gl_platform
 from ocu.render.screenshot import ScreenshotError, parse_size
@@ -78,7 +78,7 @@ def parse_targets(items: Sequence[str], profile: RobotProfile) -> dict[str, floa
             raise ScreenshotError(f"--joints {item!r}: angle must be finite")
         targets[name] = math.radians(degrees)
     try:
-        TeleopModel(profile).set_targets(targets)  # refused here rather than in the window
+        ConsoleModel(profile).set_targets(targets)  # refused here rather than in the window
     except PositionError as err:
         raise ScreenshotError(f"--joints: {err}") from err
     return targets
@@ -118,8 +118,8 @@ def _shoot(
     from PySide6.QtCore import QSettings, QTimer
     from PySide6.QtWidgets import QApplication
 
-    from ocu.link.core import LinkCore
-    from ocu.link.qt import LinkThread
+    from ocu.link.base import Link
+    from ocu.link.live import UdpLink
     from ocu.record.recorder import Recorder
     from ocu.sim.launcher import SimulatorProcess
     from ocu.windows.main_window import MainWindow
@@ -129,8 +129,8 @@ def _shoot(
     with SimulatorProcess(args.profile, args.sim_arg) as simulator:
         address = simulator.address
 
-        def make_link() -> LinkThread:
-            return LinkThread(LinkCore(profile, address, extension=True))
+        def make_link() -> Link:
+            return UdpLink(profile, address, extension=True)
 
         settings = QSettings(str(config_dir / "ocu.ini"), QSettings.Format.IniFormat)
         window = MainWindow(

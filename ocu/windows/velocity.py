@@ -21,7 +21,7 @@ from PySide6.QtWidgets import (
 )
 
 from ocu import hotkeys
-from ocu.control.teleop import ChannelCommand, Source, TeleopModel
+from ocu.console.model import ChannelCommand, ConsoleModel, Source
 from ocu.widgets.number_box import NumberBox, NumberError, format_number
 from ocu.widgets.value_slider import ValueSlider
 from ocu.widgets.video_status import HeadlightIndicator
@@ -53,7 +53,7 @@ def channel_title(name: str) -> str:
 class VelocityPanel(QWidget):
     """Writes the operator's velocity input to the model; shows the model's commands."""
 
-    def __init__(self, model: TeleopModel, parent: QWidget | None = None) -> None:
+    def __init__(self, model: ConsoleModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setObjectName("velocity_panel")
         # The panel itself takes the keyboard first (it is first in the focus chain), so the
@@ -172,6 +172,11 @@ class VelocityPanel(QWidget):
         events.torch_changed.connect(self._on_torch)
         events.connection_changed.connect(self._on_connection)
         self._on_connection(model.connected)
+        # What the robot reports of its headlight, beside what the operator asks for.
+        model.robot.events.status_changed.connect(self.headlight.show_status)
+        model.robot.events.extension_changed.connect(
+            lambda _active, _reason: self.headlight.show_status(model.robot.status)
+        )
 
     # ---- operator -> model -----------------------------------------------------------------
 

@@ -9,11 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from ocu.control.commands import (
-    Command,
-    CommandError,
     CommandMapper,
     VelocityLimits,
-    make_codec,
     rad_to_ticks,
     read_motor,
     read_telemetry,
@@ -21,6 +18,8 @@ from ocu.control.commands import (
 )
 from ocu.profile import Motor, load_profile
 from ocu.protocol import Codec, MotorRecord, RemoteControlPacket, TelemetryPacket
+from ocu.protocol.wire import make_codec
+from ocu.records import Command, CommandError
 
 PROFILE = load_profile()
 MAPPER = CommandMapper(PROFILE)

@@ -13,15 +13,16 @@ from collections.abc import Iterator
 
 import pytest
 
-from ocu.control.commands import JointReading, VelocityLimits
+from ocu.control.commands import VelocityLimits
 from ocu.control.position import (
     JointPredictor,
     PositionController,
     PositionError,
 )
 from ocu.control.runner import PositionRunner
-from ocu.link.core import LinkCore, LinkListener, TelemetryFrame
+from ocu.link.core import LinkCore, LinkListener
 from ocu.profile import RobotProfile
+from ocu.records import JointReading, TelemetryFrame
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, StateRecorder
 

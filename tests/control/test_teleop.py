@@ -9,16 +9,16 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ocu.control.commands import Command, CommandError, JointReading
 from ocu.control.position import PositionError
-from ocu.control.teleop import ChannelCommand, Event, Source, TeleopModel
+from ocu.console.model import ChannelCommand, Event, Source, ConsoleModel
 from ocu.profile import RobotProfile, load_profile
+from ocu.records import Command, CommandError, JointReading
 
 
 class Recorder:
     """Collects every event of a model."""
 
-    def __init__(self, model: TeleopModel) -> None:
+    def __init__(self, model: ConsoleModel) -> None:
         self.commands: list[dict[str, float]] = []
         self.estops: list[str] = []
         self.estop_states: list[bool] = []
@@ -35,8 +35,8 @@ class Recorder:
 
 
 @pytest.fixture
-def model(profile: RobotProfile) -> TeleopModel:
-    return TeleopModel(profile)
+def model(profile: RobotProfile) -> ConsoleModel:
+    return ConsoleModel(profile)
 
 
 def reading(profile: RobotProfile, name: str, angle_rad: float) -> JointReading:
@@ -44,7 +44,7 @@ def reading(profile: RobotProfile, name: str, angle_rad: float) -> JointReading:
     return JointReading(name, motor.device_id, 1, 2, angle_rad, 0.0, 0.3, 0, angle_rad, 0.0, 0.3)
 
 
-def test_slider_sets_one_channel_bounded_by_its_maximum(model: TeleopModel) -> None:
+def test_slider_sets_one_channel_bounded_by_its_maximum(model: ConsoleModel) -> None:
     log = Recorder(model)
     limit = model.max_velocity("waist")
     assert model.set_velocity("waist", 10.0) == limit
@@ -53,7 +53,7 @@ def test_slider_sets_one_channel_bounded_by_its_maximum(model: TeleopModel) -> N
     assert model.set_velocity("waist", -10.0) == -limit
 
 
-def test_typed_values_apply_together_and_all_or_nothing(model: TeleopModel) -> None:
+def test_typed_values_apply_together_and_all_or_nothing(model: ConsoleModel) -> None:
     log = Recorder(model)
     model.set_velocities({"waist": 0.1, "elbow": -0.2}, Source.TEXT)
     assert model.velocities() == {"waist": 0.1, "elbow": -0.2}
@@ -65,7 +65,7 @@ def test_typed_values_apply_together_and_all_or_nothing(model: TeleopModel) -> N
     assert model.velocities() == {"waist": 0.1, "elbow": -0.2}
 
 
-def test_hold_to_move_release_to_stop_and_two_keys_at_once(model: TeleopModel) -> None:
+def test_hold_to_move_release_to_stop_and_two_keys_at_once(model: ConsoleModel) -> None:
     speed_linear = model.hotkey_speed("drive_linear")
     speed_waist = model.hotkey_speed("waist")
     assert model.hotkey_down("W", "drive_linear", 1)
@@ -80,7 +80,7 @@ def test_hold_to_move_release_to_stop_and_two_keys_at_once(model: TeleopModel) -
     assert not model.hotkey_up("Q")
 
 
-def test_opposite_keys_cancel_and_the_last_release_stops(model: TeleopModel) -> None:
+def test_opposite_keys_cancel_and_the_last_release_stops(model: ConsoleModel) -> None:
     model.hotkey_down("W", "drive_linear", 1)
     model.hotkey_down("S", "drive_linear", -1)
     assert model.channel("drive_linear").velocity == 0.0
@@ -88,7 +88,7 @@ def test_opposite_keys_cancel_and_the_last_release_stops(model: TeleopModel) -> 
     assert model.channel("drive_linear").velocity == -model.hotkey_speed("drive_linear")
 
 
-def test_hotkey_speed_defaults_to_the_maximum_and_is_bounded_by_it(model: TeleopModel) -> None:
+def test_hotkey_speed_defaults_to_the_maximum_and_is_bounded_by_it(model: ConsoleModel) -> None:
     assert model.hotkey_speed("waist") == model.max_velocity("waist")
     assert model.set_hotkey_speed("waist", 0.1) == 0.1
     model.hotkey_down("Q", "waist", 1)
@@ -102,7 +102,7 @@ def test_hotkey_speed_defaults_to_the_maximum_and_is_bounded_by_it(model: Teleop
 
 
 def test_max_velocity_never_exceeds_the_hard_maximum(
-    model: TeleopModel, profile: RobotProfile
+    model: ConsoleModel, profile: RobotProfile
 ) -> None:
     hard = profile.channels["drive_linear"].hard_max
     assert model.set_max_velocity("drive_linear", 10.0) == hard
@@ -113,7 +113,7 @@ def test_max_velocity_never_exceeds_the_hard_maximum(
 
 
 def test_shift_moves_at_a_fraction_but_not_below_the_servo_deadband(
-    model: TeleopModel, profile: RobotProfile
+    model: ConsoleModel, profile: RobotProfile
 ) -> None:
     model.hotkey_down("Q", "waist", 1)
     model.set_fine(True)
@@ -128,7 +128,7 @@ def test_shift_moves_at_a_fraction_but_not_below_the_servo_deadband(
     assert model.channel("drive_linear").velocity == profile.channels["drive_linear"].min_speed
 
 
-def test_emergency_stop_zeroes_everything_and_latches(model: TeleopModel) -> None:
+def test_emergency_stop_zeroes_everything_and_latches(model: ConsoleModel) -> None:
     log = Recorder(model)
     model.set_velocity("waist", 0.3)
     model.hotkey_down("W", "drive_linear", 1)
@@ -165,14 +165,14 @@ def test_emergency_stop_zeroes_everything_and_latches(model: TeleopModel) -> Non
     ids=["slider", "accept", "switch", "target"],
 )
 def test_every_operator_act_releases_the_latch(
-    model: TeleopModel, act: Callable[[TeleopModel], None]
+    model: ConsoleModel, act: Callable[[ConsoleModel], None]
 ) -> None:
     model.emergency_stop()
     act(model)
     assert not model.estopped
 
 
-def test_halt_stops_without_latching_or_estop(model: TeleopModel) -> None:
+def test_halt_stops_without_latching_or_estop(model: ConsoleModel) -> None:
     log = Recorder(model)
     model.hotkey_down("W", "drive_linear", 1)
     model.set_velocity("neck", 0.2)
@@ -185,7 +185,7 @@ def test_halt_stops_without_latching_or_estop(model: TeleopModel) -> None:
     assert log.messages[-1] == "motion stopped: window hidden"
 
 
-def test_switch_moves_at_the_hotkey_speed(model: TeleopModel) -> None:
+def test_switch_moves_at_the_hotkey_speed(model: ConsoleModel) -> None:
     model.set_hotkey_speed("flippers", 0.2)
     model.set_switch("flippers", -1)
     assert model.channel("flippers") == ChannelCommand(-0.2, Source.SWITCH)
@@ -195,7 +195,7 @@ def test_switch_moves_at_the_hotkey_speed(model: TeleopModel) -> None:
         model.set_switch("flippers", 2)
 
 
-def test_manual_command_drops_held_keys_of_that_channel(model: TeleopModel) -> None:
+def test_manual_command_drops_held_keys_of_that_channel(model: ConsoleModel) -> None:
     model.hotkey_down("Q", "waist", 1)
     model.set_velocity("waist", -0.1)
     assert model.held_keys == frozenset()
@@ -203,7 +203,7 @@ def test_manual_command_drops_held_keys_of_that_channel(model: TeleopModel) -> N
     assert model.channel("waist") == ChannelCommand(-0.1, Source.SLIDER)
 
 
-def test_torch_is_part_of_the_command_and_survives_an_estop(model: TeleopModel) -> None:
+def test_torch_is_part_of_the_command_and_survives_an_estop(model: ConsoleModel) -> None:
     model.set_torch(True)
     model.set_velocity("waist", 0.2)
     base = Command(camera=2, video_bitrate=5.0)
@@ -213,7 +213,7 @@ def test_torch_is_part_of_the_command_and_survives_an_estop(model: TeleopModel) 
     assert model.command(base) == Command({}, torch=True, camera=2, video_bitrate=5.0)
 
 
-def test_connection_request_halts_before_disconnecting(model: TeleopModel) -> None:
+def test_connection_request_halts_before_disconnecting(model: ConsoleModel) -> None:
     seen: list[tuple[bool, dict[str, float]]] = []
     model.events.connection_changed.connect(lambda c: seen.append((c, model.velocities())))
     model.set_velocity("waist", 0.2)
@@ -227,7 +227,7 @@ def test_connection_request_halts_before_disconnecting(model: TeleopModel) -> No
 
 
 def test_position_targets_drive_their_channels_and_several_move_at_once(
-    model: TeleopModel, profile: RobotProfile
+    model: ConsoleModel, profile: RobotProfile
 ) -> None:
     log = Recorder(model)
     model.on_telemetry(
@@ -250,7 +250,7 @@ def test_position_targets_drive_their_channels_and_several_move_at_once(
 
 
 def test_reached_target_stops_its_channel_with_a_message(
-    model: TeleopModel, profile: RobotProfile
+    model: ConsoleModel, profile: RobotProfile
 ) -> None:
     log = Recorder(model)
     model.on_telemetry({"neck": reading(profile, "neck", 0.0)}, received_at=0.0)
@@ -263,7 +263,7 @@ def test_reached_target_stops_its_channel_with_a_message(
     assert any("reached" in m for m in log.position_messages)
 
 
-def test_bad_target_applies_nothing(model: TeleopModel) -> None:
+def test_bad_target_applies_nothing(model: ConsoleModel) -> None:
     with pytest.raises(PositionError, match="outside the limits"):
         model.set_targets({"waist": 0.1, "shoulder": math.radians(170.0)})
     with pytest.raises(PositionError, match="not a joint driven"):
@@ -271,7 +271,7 @@ def test_bad_target_applies_nothing(model: TeleopModel) -> None:
     assert model.targets == {}
 
 
-def test_cancel_targets_stops_the_channels(model: TeleopModel, profile: RobotProfile) -> None:
+def test_cancel_targets_stops_the_channels(model: ConsoleModel, profile: RobotProfile) -> None:
     model.on_telemetry({"elbow": reading(profile, "elbow", 0.0)}, received_at=0.0)
     model.set_target("elbow", 1.0)
     model.update(0.01)
@@ -284,7 +284,7 @@ def test_cancel_targets_stops_the_channels(model: TeleopModel, profile: RobotPro
 # ---- invariants ----------------------------------------------------------------------------
 
 _CHANNELS = ("drive_linear", "drive_turn", "waist", "gripper")
-Op = Callable[[TeleopModel], object]
+Op = Callable[[ConsoleModel], object]
 
 
 def _down(key: str, channel: str, direction: int) -> Op:
@@ -325,7 +325,7 @@ _ops = st.one_of(
 
 @given(st.lists(_ops, max_size=30))
 def test_velocities_stay_within_the_maxima_and_stop_when_keys_are_up(ops: list[Op]) -> None:
-    model = TeleopModel(load_profile())
+    model = ConsoleModel(load_profile())
     for op in ops:
         op(model)
         for name, value in model.velocities().items():
@@ -353,7 +353,7 @@ def test_event_runs_every_callback_before_raising() -> None:
     assert seen == [3, 4]
 
 
-def test_the_drive_pair_keeps_its_turn_radius(model: TeleopModel, profile: RobotProfile) -> None:
+def test_the_drive_pair_keeps_its_turn_radius(model: ConsoleModel, profile: RobotProfile) -> None:
     # Typed below the servos' starting speed: both lifted by one factor (seed 002 eq. 5.4).
     kept = model.set_velocities({"drive_linear": 0.1, "drive_turn": 0.05})
     assert kept == pytest.approx({"drive_linear": 0.2, "drive_turn": 0.1})
@@ -370,7 +370,7 @@ def test_the_drive_pair_keeps_its_turn_radius(model: TeleopModel, profile: Robot
     assert v / w == pytest.approx(0.6 / 0.4)
 
 
-def test_fine_drive_keys_keep_the_ratio_of_their_speeds(model: TeleopModel) -> None:
+def test_fine_drive_keys_keep_the_ratio_of_their_speeds(model: ConsoleModel) -> None:
     model.set_fine(True)
     model.hotkey_down("W", "drive_linear", 1)
     model.hotkey_down("A", "drive_turn", 1)
@@ -381,7 +381,7 @@ def test_fine_drive_keys_keep_the_ratio_of_their_speeds(model: TeleopModel) -> N
     assert model.velocities() == {"drive_linear": pytest.approx(0.2)}  # lifted alone
 
 
-def test_what_is_sent_feeds_the_prediction(model: TeleopModel) -> None:
+def test_what_is_sent_feeds_the_prediction(model: ConsoleModel) -> None:
     from ocu.control.commands import JointReading
 
     reading = JointReading("shoulder", 5, 1, 2, 0.1, 0.0, 0.0, 0, 0.1, 0.0, 0.0)

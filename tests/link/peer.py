@@ -6,9 +6,9 @@ import socket
 import time
 from collections.abc import Callable
 
-from ocu.control.commands import make_codec
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, RemoteControlPacket, TelemetryPacket
+from ocu.protocol.wire import make_codec
 
 
 class RobotPeer:

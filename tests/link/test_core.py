@@ -6,21 +6,34 @@ import random
 import threading
 import time
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 
-from ocu.control.commands import Command, CommandMapper, make_codec
-from ocu.link.core import LinkCore, LinkError, LinkListener, LinkState, TelemetryFrame, VideoFrame
-from ocu.link.stats import LinkStats, LossEstimator, RateMeter, tick_loss
+from ocu.control.commands import CommandMapper
+from ocu.link.base import LinkError
+from ocu.link.live import UdpLink
+from ocu.link.stats import LossEstimator, RateMeter, tick_loss
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket, VideoFramePacket
+from ocu.protocol.wire import make_codec
+from ocu.records import (
+    Command,
+    LinkEvent,
+    LinkState,
+    LinkStateChanged,
+    LinkStats,
+    SafetyEvent,
+    TelemetryFrame,
+    VideoFrame,
+)
 from tests.link.peer import RobotPeer
 
 JPEG = b"\xff\xd8\xff\xe0" + b"x" * 100 + b"\xff\xd9"
 
 
-class Recorder(LinkListener):
-    """Collects every event; tests wait on it with deadlines."""
+class Recorder:
+    """Collects every link event (a listener); tests wait on it with deadlines."""
 
     def __init__(self) -> None:
         self.cond = threading.Condition()
@@ -29,26 +42,22 @@ class Recorder(LinkListener):
         self.states: list[tuple[LinkState, str]] = []
         self.safety: list[str] = []
         self.stats: list[LinkStats] = []
+        self.events: list[LinkEvent] = []
 
-    def _add(self, items: list[object], item: object) -> None:
+    def __call__(self, event: LinkEvent) -> None:
         with self.cond:
-            items.append(item)
+            self.events.append(event)
+            if isinstance(event, TelemetryFrame):
+                self.telemetry.append(event)
+            elif isinstance(event, VideoFrame):
+                self.video.append(event)
+            elif isinstance(event, LinkStateChanged):
+                self.states.append((event.state, event.reason))
+            elif isinstance(event, SafetyEvent):
+                self.safety.append(event.message)
+            elif isinstance(event, LinkStats):
+                self.stats.append(event)
             self.cond.notify_all()
-
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        self._add(self.telemetry, frame)  # type: ignore[arg-type]
-
-    def video_frame_received(self, frame: VideoFrame) -> None:
-        self._add(self.video, frame)  # type: ignore[arg-type]
-
-    def link_state_changed(self, state: LinkState, reason: str) -> None:
-        self._add(self.states, (state, reason))  # type: ignore[arg-type]
-
-    def safety_event(self, message: str) -> None:
-        self._add(self.safety, message)  # type: ignore[arg-type]
-
-    def stats_updated(self, stats: LinkStats) -> None:
-        self._add(self.stats, stats)  # type: ignore[arg-type]
 
     def wait(self, predicate: Callable[[], bool], timeout_s: float = 3.0) -> bool:
         with self.cond:
@@ -63,10 +72,10 @@ def peer(profile: RobotProfile) -> Iterator[RobotPeer]:
 
 
 def make_link(
-    profile: RobotProfile, peer: RobotPeer, **kwargs: object
-) -> tuple[LinkCore, Recorder]:
+    profile: RobotProfile, peer: RobotPeer, **kwargs: Any
+) -> tuple[UdpLink, Recorder]:
     recorder = Recorder()
-    link = LinkCore(profile, peer.address, listener=recorder, **kwargs)  # type: ignore[arg-type]
+    link = UdpLink(profile, peer.address, listener=recorder, **kwargs)
     return link, recorder
 
 
@@ -140,16 +149,16 @@ def test_rate_outside_profile_bounds_is_refused(
         link.shutdown()
 
 
-def test_commands_are_clamped_to_current_limits(profile: RobotProfile, peer: RobotPeer) -> None:
+def test_commands_are_clamped_to_the_hard_maximum(profile: RobotProfile, peer: RobotPeer) -> None:
+    # The operator's current maxima are the console model's; the link holds the profile's.
     link, _ = make_link(profile, peer, send_rate_hz=1.0)
     link.start()
     try:
         peer.recv_rcp()
-        link.set_max_velocity("waist", 0.1)
         link.set_velocities(waist=-5.0)
-        axis = profile.channels["waist"].axis
-        packet, _ = peer.recv_until(lambda p: p.axes[axis] != 0)
-        assert packet.axes[axis] == -round(0.1 * profile.channels["waist"].axis_per_unit)
+        waist = profile.channels["waist"]
+        packet, _ = peer.recv_until(lambda p: p.axes[waist.axis] != 0)
+        assert packet.axes[waist.axis] == -round(waist.hard_max * waist.axis_per_unit)
     finally:
         link.shutdown()
 
@@ -387,12 +396,13 @@ def test_shutdown_is_idempotent_and_sends_zeros_last(
 
 def test_faulty_listener_does_not_stop_the_link(profile: RobotProfile, peer: RobotPeer) -> None:
     class Broken(Recorder):
-        def telemetry_received(self, frame: TelemetryFrame) -> None:
-            super().telemetry_received(frame)
-            raise RuntimeError("listener bug")
+        def __call__(self, event: LinkEvent) -> None:
+            super().__call__(event)
+            if isinstance(event, TelemetryFrame):
+                raise RuntimeError("listener bug")
 
     recorder = Broken()
-    link = LinkCore(profile, peer.address, listener=recorder)
+    link = UdpLink(profile, peer.address, listener=recorder)
     link.start()
     try:
         peer.send_telemetry(link.address)
@@ -464,7 +474,7 @@ def test_rcp_encoding_matches_mapper(profile: RobotProfile, peer: RobotPeer) -> 
         command = Command({"neck": -0.3, "gripper": 0.1}, torch=True, camera=3)
         link.set_command(command)
         packet, _, source = peer.recv_rcp()
-        assert packet == CommandMapper(profile).to_packet(command, link.limits)
+        assert packet == CommandMapper(profile).to_packet(command)
         assert source == link.address
     finally:
         link.shutdown()
@@ -472,7 +482,7 @@ def test_rcp_encoding_matches_mapper(profile: RobotProfile, peer: RobotPeer) -> 
 
 def test_unresolvable_robot_host_gives_clear_error(profile: RobotProfile) -> None:
     with pytest.raises(LinkError, match=r"cannot resolve robot host 'no-such-host\.invalid'"):
-        LinkCore(profile, ("no-such-host.invalid", 10000))
+        UdpLink(profile, ("no-such-host.invalid", 10000))
 
 
 def test_commands_from_another_thread_do_not_hide_a_silent_owner(

@@ -7,9 +7,10 @@ from collections.abc import Iterator
 import pytest
 from pytestqt.qtbot import QtBot
 
-from ocu.link.core import LinkCore, LinkState
+from ocu.link.core import LinkCore
 from ocu.link.qt import DecodedVideoFrame, LinkThread
 from ocu.profile import RobotProfile
+from ocu.records import LinkState
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator
 from tests.link.test_core import Recorder

@@ -15,9 +15,10 @@ from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication, QWidget
 from pytestqt.qtbot import QtBot
 
-from ocu.control.commands import Command, JointReading, rad_to_ticks, read_telemetry
+from ocu.control.commands import rad_to_ticks, read_telemetry
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket
+from ocu.records import Command, JointReading
 from ocu.widgets.model3d import Model3DWidget, image_array
 
 DEADLINE_MS = 5000

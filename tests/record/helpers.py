@@ -12,8 +12,8 @@ from typing import Any
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from ocu.link.core import LinkListener, LinkState, StatusFrame, TelemetryFrame, VideoFrame
-from ocu.link.stats import LinkStats
+from ocu.link.core import LinkListener
+from ocu.records import LinkState, LinkStats, StatusFrame, TelemetryFrame, VideoFrame
 
 DEADLINE_S = 10.0
 

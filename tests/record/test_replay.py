@@ -11,15 +11,14 @@ from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
 
-from ocu.control.commands import Command
-from ocu.link.core import LinkCore, LinkState, TelemetryFrame
+from ocu.link.core import LinkCore
 from ocu.link.qt import LinkThread
-from ocu.link.stats import LinkStats
 from ocu.profile import RobotProfile
 from ocu.record.player import ReplayCore, ReplayPlayer
 from ocu.record.reader import Recording
 from ocu.record.recorder import Recorder
 from ocu.record.replay import ReplayBanner, ReplayControls, ReplaySource, format_time
+from ocu.records import Command, LinkState, LinkStats, TelemetryFrame
 from ocu.sim.simulator import RobotSimulator
 from tests.record.helpers import Collector
 

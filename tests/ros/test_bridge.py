@@ -9,11 +9,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ocu.control.commands import JointReading, VelocityLimits
+from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionError
-from ocu.link.core import LinkState
-from ocu.link.stats import LinkStats
 from ocu.profile import RobotProfile, load_profile
+from ocu.records import JointReading, LinkState, LinkStats
 from ocu.ros.bridge import (
     BridgeCore,
     BridgeError,

@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from ocu.control.commands import Command
-from ocu.link.core import LinkCore, LinkListener, LinkState
+from ocu.link.core import LinkCore, LinkListener
 from ocu.profile import RobotProfile
+from ocu.records import Command, LinkState
 from ocu.ros.bridge import BridgeState
 from ocu.sim.simulator import RobotSimulator, SimState
 

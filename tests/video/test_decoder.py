@@ -7,8 +7,8 @@ import threading
 import cv2
 import numpy as np
 
-from ocu.link.core import VideoFrame
 from ocu.profile import RobotProfile
+from ocu.records import VideoFrame
 from ocu.video.correction import CorrectionSettings, Corrector
 from ocu.video.decoder import DecodedFrame, VideoDecoder, decode_jpeg
 

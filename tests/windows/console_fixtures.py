@@ -13,10 +13,11 @@ from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
 
-from ocu.link.core import LinkCore, LinkState
+from ocu.link.core import LinkCore
 from ocu.link.qt import LinkThread
 from ocu.profile import RobotProfile
 from ocu.record.recorder import Recorder
+from ocu.records import LinkState
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator, SimState
 from ocu.windows.main_window import MainWindow
 

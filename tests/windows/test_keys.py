@@ -10,9 +10,8 @@ from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
 
-from ocu.control.commands import JointReading
-from ocu.link.core import TelemetryFrame
 from ocu.profile import RobotProfile
+from ocu.records import JointReading, TelemetryFrame
 from ocu.sim.simulator import RobotSimulator
 from ocu.windows.key_filter import key_from_qt, key_name
 from ocu.windows.main_window import MainWindow

@@ -7,8 +7,8 @@ import re
 from PySide6.QtCore import QSettings, Qt
 from pytestqt.qtbot import QtBot
 
-from ocu.link.core import LinkState
 from ocu.profile import RobotProfile
+from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
 from ocu.windows.main_window import MainWindow
 from tests.windows.console_fixtures import DEADLINE_MS, ConsoleFactory

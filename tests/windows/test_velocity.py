@@ -7,9 +7,9 @@ from PySide6.QtCore import Qt
 from PySide6.QtTest import QTest
 from pytestqt.qtbot import QtBot
 
-from ocu.control.teleop import Source
-from ocu.link.core import LinkState
+from ocu.console.model import Source
 from ocu.profile import RobotProfile
+from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
 from ocu.widgets.number_box import NumberError, parse_number
 from ocu.widgets.value_slider import STEPS

@@ -1,10 +1,13 @@
-"""The operator model: what the operator asks of every channel, and why (no Qt).
+"""The console model: the whole command and what is known of the robot (no Qt, napari-style).
 
-Every velocity channel holds one command with its source: a slider, a text box, a hotkey, a
-switch or the position controller. The latest manual input on a channel wins and takes the
-joint back from the position controller. Views subscribe to `events` and write the
-operator's input back through the methods below; the console sends `command()` to the link
-whenever `events.command_changed` fires.
+It owns the one command the link sends — every channel's velocity with its source (a slider,
+a text box, a hotkey, a switch, the position controller, a planner through ROS), the torch,
+the selected camera, the video bit-rate, the per-camera stream request — bounded by the one
+set of velocity limits; and the robot's state (`robot`, ocu.console.robot). The latest manual
+input on a channel wins: it takes the joint back from the position controller and the channel
+back from ROS. Views subscribe to `events` and `robot.events` and write the operator's input
+back through the methods below; the window sends `command()` to the link whenever
+`events.command_changed` fires and never reads a command back from the link.
 
 Stops come in two strengths. `emergency_stop()` asks the link for its e-stop burst, zeroes
 everything and latches: the model commands nothing until the operator acts again (a key
@@ -18,53 +21,21 @@ import logging
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import Enum
-from typing import Generic, ParamSpec
 
-from ocu.control.commands import (
-    Command,
-    CommandError,
-    JointReading,
-    VelocityLimits,
-)
+from ocu.console.events import Event
+from ocu.console.robot import RobotState
+from ocu.control.commands import VelocityLimits
 from ocu.control.drive import DriveBounds, scale_drive
 from ocu.control.position import PositionController
 from ocu.profile import RobotProfile
+from ocu.protocol.extended import CameraRequest
+from ocu.records import Command, CommandError, TelemetryFrame
 
-log = logging.getLogger("ocu.teleop")
-
-P = ParamSpec("P")
+log = logging.getLogger("ocu.console")
 
 DEFAULT_FINE_FACTOR = 0.25
-
-
-class Event(Generic[P]):
-    """A list of callbacks called in order; one failing callback does not skip the others."""
-
-    def __init__(self) -> None:
-        self._callbacks: list[Callable[P, None]] = []
-
-    def connect(self, callback: Callable[P, None]) -> None:
-        """Call `callback` on every emit."""
-        self._callbacks.append(callback)
-
-    def disconnect(self, callback: Callable[P, None]) -> None:
-        """Stop calling `callback`; no error if it was not connected."""
-        if callback in self._callbacks:
-            self._callbacks.remove(callback)
-
-    def emit(self, *args: P.args, **kwargs: P.kwargs) -> None:
-        """Call every callback; the first error is raised after all have run."""
-        error: BaseException | None = None
-        for callback in list(self._callbacks):
-            try:
-                callback(*args, **kwargs)
-            except Exception as err:  # an e-stop must reach every subscriber
-                log.exception("event callback %r failed", callback)
-                error = error or err
-        if error is not None:
-            raise error
 
 
 class Source(Enum):
@@ -76,6 +47,8 @@ class Source(Enum):
     HOTKEY = "hotkey"
     SWITCH = "switch"
     POSITION = "position"
+    # A planner through the ROS bridge: any manual input on the channel overrides it.
+    ROS = "ros"
 
 
 MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH)
@@ -89,8 +62,8 @@ class ChannelCommand:
     source: Source = Source.NONE
 
 
-class TeleopEvents:
-    """Everything a view may subscribe to."""
+class ConsoleEvents:
+    """Everything a view may subscribe to (the robot's own are on `model.robot.events`)."""
 
     def __init__(self) -> None:
         self.channel_changed: Event[[str, ChannelCommand]] = Event()
@@ -105,6 +78,9 @@ class TeleopEvents:
         self.targets_changed: Event[[dict[str, float]]] = Event()
         self.connection_changed: Event[[bool]] = Event()
         self.help_changed: Event[[bool]] = Event()
+        self.camera_changed: Event[[int | None]] = Event()
+        self.bitrate_changed: Event[[float]] = Event()
+        self.stream_request_changed: Event[[tuple[CameraRequest, ...]]] = Event()
         self.message: Event[[str]] = Event()
         self.position_message: Event[[str]] = Event()
         # Before any operator input or emergency stop takes effect (a host hands control back
@@ -118,8 +94,9 @@ def _check_finite(channel: str, value: float) -> float:
     return float(value)
 
 
-class TeleopModel:
-    """Per-channel commands, held hotkeys, Shift fine mode, e-stop latch, position targets."""
+class ConsoleModel:
+    """The command (channels, switches, camera, bit-rate, streams), e-stop latch, targets,
+    hotkeys and Shift, the velocity limits, and the robot's state."""
 
     def __init__(
         self,
@@ -132,7 +109,8 @@ class TeleopModel:
             raise ValueError(f"fine_factor must be in (0, 1], got {fine_factor!r}")
         self.profile = profile
         self.clock = clock
-        self.events = TeleopEvents()
+        self.events = ConsoleEvents()
+        self.robot = RobotState(profile, clock=clock)
         self.limits = VelocityLimits(profile)
         self.controller = PositionController(profile, self.limits)
         self.fine_factor = fine_factor
@@ -145,12 +123,35 @@ class TeleopModel:
         self._held: dict[str, tuple[str, int]] = {}
         self._fine = False
         self._torch = False
+        # The video the robot is asked for: the selected camera (the vendor protocol streams
+        # one), the RCP's bit-rate field, and per camera what an extended robot sends.
+        self._camera: int | None = None
+        self._bitrate = profile.link.default_video_bitrate
+        extension = profile.extension
+        self._streams: tuple[CameraRequest, ...] = (
+            tuple(
+                CameraRequest(
+                    camera=index,
+                    width_px=extension.stream_width_px,
+                    height_px=extension.stream_height_px,
+                    fps=extension.stream_fps,
+                )
+                for index in range(len(profile.link.camera_names))
+            )
+            if extension is not None
+            else ()
+        )
         self._estopped = False
         self._estop_reason = ""
         self._connected = True
         self._help_visible = False
         self._targets: dict[str, float] = {}
-        self._published: tuple[dict[str, float], bool] = ({}, False)
+        self._published: tuple[dict[str, float], bool, int | None, float] = (
+            {},
+            False,
+            None,
+            self._bitrate,
+        )
 
     # ---- state -----------------------------------------------------------------------------
 
@@ -169,10 +170,29 @@ class TeleopModel:
             return {}
         return {name: c.velocity for name, c in self._channels.items() if c.velocity != 0.0}
 
-    def command(self, base: Command | None = None) -> Command:
-        """The command for the link: `base` (camera, bitrate) with our velocities and torch."""
-        base = base if base is not None else Command()
-        return replace(base, velocities=self.velocities(), torch=self._torch)
+    def command(self) -> Command:
+        """The command for the link: every channel's velocity and the switches."""
+        return Command(
+            velocities=self.velocities(),
+            torch=self._torch,
+            camera=self._camera,
+            video_bitrate=self._bitrate,
+        )
+
+    @property
+    def camera(self) -> int | None:
+        """The camera asked for (None: none selected yet)."""
+        return self._camera
+
+    @property
+    def video_bitrate(self) -> float:
+        """The RCP's video bit-rate field."""
+        return self._bitrate
+
+    @property
+    def stream_request(self) -> tuple[CameraRequest, ...]:
+        """What an extended robot is asked to stream, per camera."""
+        return self._streams
 
     @property
     def is_moving(self) -> bool:
@@ -329,6 +349,39 @@ class TeleopModel:
         self._publish()
         self.events.fine_changed.emit(fine)
 
+    def select_camera(self, camera: int) -> None:
+        """Ask for a camera's stream (the vendor protocol sends one at a time)."""
+        if not 0 <= camera < len(self.profile.link.camera_names):
+            raise CommandError(
+                f"camera {camera} outside 0-{len(self.profile.link.camera_names) - 1}"
+            )
+        if camera == self._camera:
+            return
+        self._camera = camera
+        self.events.camera_changed.emit(camera)
+        self._publish()
+
+    def set_video_bitrate(self, bitrate: float) -> None:
+        """The RCP's video bit-rate field (bits per second, >= 0)."""
+        if not (math.isfinite(bitrate) and bitrate >= 0.0):
+            raise CommandError(f"video bit-rate must be finite and >= 0, got {bitrate!r}")
+        if bitrate == self._bitrate:
+            return
+        self._bitrate = float(bitrate)
+        self.events.bitrate_changed.emit(self._bitrate)
+        self._publish()
+
+    def set_stream_request(self, request: CameraRequest) -> None:
+        """What an extended robot should stream for one camera (size, rate)."""
+        streams = list(self._streams)
+        if not 0 <= request.camera < len(streams):
+            raise CommandError(f"no stream request for camera {request.camera}")
+        if streams[request.camera] == request:
+            return
+        streams[request.camera] = request
+        self._streams = tuple(streams)
+        self.events.stream_request_changed.emit(self._streams)
+
     def set_torch(self, on: bool) -> None:
         """Headlight on or off."""
         if on == self._torch:
@@ -400,10 +453,14 @@ class TeleopModel:
         self._publish()
         self.events.message.emit(f"EMERGENCY STOP ({reason})")
 
-    def halt(self, reason: str) -> bool:
-        """Stop all motion without the e-stop burst; True if anything was moving or held."""
+    def halt(self, reason: str, *, keep_external: bool = False) -> bool:
+        """Stop all motion without the e-stop burst; True if anything was moving or held.
+
+        With `keep_external`, channels a planner drives (ROS) go on: the console losing focus
+        stops the operator's input, not a planner the operator may be watching in rviz.
+        """
         active = bool(self._held) or self.is_moving or bool(self._targets)
-        self._zero_all()
+        self._zero_all(keep_external=keep_external)
         self._publish()
         if active:
             self.events.message.emit(f"motion stopped: {reason}")
@@ -426,14 +483,46 @@ class TeleopModel:
 
     # ---- robot input -----------------------------------------------------------------------
 
-    def on_telemetry(
-        self,
-        readings: Mapping[str, JointReading],
-        received_at: float,
-        delay_s: float | None = None,
-    ) -> None:
-        """Feed a telemetry packet (and the round trip it took) to the position controller."""
-        self.controller.on_telemetry(readings, received_at, delay_s)
+    def on_telemetry(self, frame: TelemetryFrame) -> None:
+        """A telemetry frame: the robot's state and the position controller take it."""
+        self.controller.on_telemetry(frame.readings, frame.received_at, frame.delay_s)
+        self.robot.on_telemetry(frame)
+
+    # ---- a planner (the ROS bridge, through the window) ------------------------------------
+
+    def set_external_velocities(self, values: Mapping[str, float]) -> dict[str, float]:
+        """Velocities from a planner (ROS), bounded like every input; what was applied.
+
+        A channel the operator holds (a key, a slider, a typed value, a switch, a position
+        target) stays the operator's: the latest manual input wins.
+        """
+        checked = {}
+        for channel, raw in values.items():
+            self._check_channel(channel)
+            checked[channel] = _check_finite(channel, raw)
+        applied: dict[str, float] = {}
+        for channel, wanted in checked.items():
+            if self._requested(channel).source not in (Source.NONE, Source.ROS):
+                continue
+            # The drive pair is bounded together when it is composed (turn radius kept).
+            drive = channel in self._drive_request
+            value = wanted if drive else self.limits.clamp(channel, wanted)
+            self._set_channel(channel, value, Source.ROS if value else Source.NONE)
+            applied[channel] = self._channels[channel].velocity
+        self._publish()
+        return applied
+
+    def clear_external(self) -> None:
+        """The planner lost control: every channel it drives stops."""
+        for channel in self._channels:
+            if self._requested(channel).source is Source.ROS:
+                self._set_channel(channel, 0.0, Source.NONE)
+        self._publish()
+
+    @property
+    def external_channels(self) -> list[str]:
+        """Channels a planner drives now."""
+        return [c for c in self._channels if self._requested(c).source is Source.ROS]
 
     def predicted_angles(self, now: float | None = None) -> dict[str, float]:
         """Where the joints are now by the prediction (readings advanced by what was sent)."""
@@ -463,6 +552,10 @@ class TeleopModel:
 
     def _operator_acted(self) -> None:
         self.events.operator_acted.emit()
+        # The operator's input wins over a planner's, on every channel at once.
+        for channel in self._channels:
+            if self._requested(channel).source is Source.ROS:
+                self._set_channel(channel, 0.0, Source.NONE)
         if self._estopped:
             self._estopped = False
             self._estop_reason = ""
@@ -548,12 +641,14 @@ class TeleopModel:
         self._store(linear_name, ChannelCommand(v, linear.source if v else Source.NONE))
         self._store(turn_name, ChannelCommand(w, turn.source if w else Source.NONE))
 
-    def _zero_all(self) -> None:
+    def _zero_all(self, *, keep_external: bool = False) -> None:
         had_keys = bool(self._held)
         self._held.clear()
         self.controller.cancel()
         self._sync_targets()
         for channel in self._channels:
+            if keep_external and self._requested(channel).source is Source.ROS:
+                continue
             self._set_channel(channel, 0.0, Source.NONE)
         if had_keys:
             self.events.held_changed.emit(self.held_keys)
@@ -565,7 +660,7 @@ class TeleopModel:
             self.events.targets_changed.emit(dict(targets))
 
     def _publish(self, now: float | None = None) -> None:
-        state = (self.velocities(), self._torch)
+        state = (self.velocities(), self._torch, self._camera, self._bitrate)
         if state != self._published:
             self._published = state
             # The predictor integrates what is sent, whoever sent it.

@@ -1,0 +1,554 @@
+"""The live link to a robot: commands out on a transport, the robot's datagrams in, watchdogs.
+
+`UdpLink` talks to a robot (or `ocu-sim`) over UDP; `VirtualLink` to an in-process simulator
+over a virtual wire (ocu.net.transport), for tests and benchmarks. Both are a `LiveLink`.
+
+One loop thread ("ocu-link") owns the periodic work: the RCP tick (5 Hz by default), the
+extension hello, e-stop repeats, the watchdogs and the receive path (ocu.link.receiver).
+Command changes and the first e-stop datagram are sent from the caller's thread at once, so a
+busy loop (or Python's GIL switch interval) cannot delay them. The link bounds every command
+by the channels' hard maxima only; the operator's current maxima are the console model's.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import TypedDict, Unpack
+
+from ocu.control.commands import CommandMapper
+from ocu.link.base import Link, LinkError
+from ocu.link.reassembly import ReassemblyStats
+from ocu.link.receiver import Receiver
+from ocu.link.stats import RateMeter
+from ocu.net.loop import SelectLoop
+from ocu.net.transport import (
+    Address,
+    Transport,
+    TransportError,
+    UdpTransport,
+    VirtualEndpoint,
+    is_loopback,
+    resolve,
+)
+from ocu.profile import RobotProfile
+from ocu.protocol.extended import CameraRequest, HelloPacket
+from ocu.protocol.wire import make_codec, make_extension_codec
+from ocu.records import (
+    HELLO,
+    RCP,
+    Command,
+    CommandSent,
+    DatagramSent,
+    LinkState,
+    LinkStateChanged,
+    LinkStats,
+    Listener,
+    SafetyEvent,
+)
+
+log = logging.getLogger("ocu.link")
+
+RECV_BUFFER_BYTES = 65536
+MAX_DATAGRAMS_PER_WAKE = 256
+STATS_PERIOD_S = 0.5
+
+
+class LiveLink(Link):
+    """Sends RCPs to the robot on a transport and turns what comes back into events."""
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        transport: Transport,
+        robot_address: Address,
+        description: str,
+        *,
+        listener: Listener | None = None,
+        link_lost_after_s: float | None = None,
+        gui_alive_timeout_s: float | None = -1.0,
+        send_rate_hz: float | None = None,
+        send_on_change: bool = True,
+        extension: bool = False,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        super().__init__(profile, description)
+        if listener is not None:
+            self.subscribe(listener)
+        self.clock = clock
+        self.transport = transport
+        self.robot_address = robot_address
+        self.address = transport.address
+        # False leaves changes to the periodic tick, as the vendor client does (benchmarks).
+        self.send_on_change = send_on_change
+        self._mapper = CommandMapper(profile)
+        self._codec = make_codec(profile)
+        settings = profile.link
+        self.link_lost_after_s = (
+            settings.link_lost_after_s if link_lost_after_s is None else link_lost_after_s
+        )
+        # None disables the GUI-alive watchdog (a caller with its own timeout, e.g. ROS).
+        self.gui_alive_timeout_s = (
+            settings.gui_alive_timeout_s
+            if gui_alive_timeout_s is not None and gui_alive_timeout_s < 0
+            else gui_alive_timeout_s
+        )
+        # The protocol extension: probe with a hello on every tick when asked to and the
+        # profile defines it (and does not switch probing off).
+        ext = profile.extension
+        self.extension_enabled = extension and ext is not None and ext.probe
+        self._ext_codec = make_extension_codec(profile)
+        self.receiver = Receiver(
+            profile,
+            self.emit,
+            extension=self.extension_enabled,
+            link_lost_after_s=self.link_lost_after_s,
+        )
+        self._hello = HelloPacket()
+        if ext is not None:
+            self._hello = HelloPacket(
+                cameras=tuple(
+                    CameraRequest(
+                        camera=index,
+                        width_px=ext.stream_width_px,
+                        height_px=ext.stream_height_px,
+                        fps=ext.stream_fps,
+                    )
+                    for index in range(len(settings.camera_names))
+                ),
+                max_datagram_bytes=ext.max_datagram_bytes,
+            )
+
+        self._lock = threading.RLock()
+        # Re-entrant: a signal handler or listener that sends while this thread is already
+        # inside a send must not deadlock the link.
+        self._send_lock = threading.RLock()
+        self._command = Command(video_bitrate=settings.default_video_bitrate)
+        self._rate_hz = settings.send_rate_hz if send_rate_hz is None else send_rate_hz
+        self._check_rate(self._rate_hz)
+        self._estop_due: list[float] = []
+        self._estop_latched = False
+        self._gui_alive_at = clock()
+        self._gui_tripped = False
+        self._silenced: str | None = None
+        # The thread that calls heartbeat() owns the commands; until one does, whoever sets
+        # commands counts as alive by doing so.
+        self._owner_thread: int | None = None
+        self._closed = False
+        self._state = LinkState.CONNECTING
+        self._started_at = clock()
+        self._sent = 0
+        self._send_errors = 0
+        self._hellos_sent = 0
+        self._rcp_rate = RateMeter()
+        self._next_tick = self._next_stats = clock()
+        self._buffer = bytearray(RECV_BUFFER_BYTES)
+        self.loop = SelectLoop("ocu-link", clock=clock, on_error=self._loop_failed)
+        self.loop.add_reader(transport.socket, self._receive_all)
+
+    # ---- commands (any thread) -------------------------------------------------------------
+
+    @property
+    def command(self) -> Command:
+        """The command currently being sent."""
+        with self._lock:
+            return self._command
+
+    @property
+    def state(self) -> LinkState:
+        """The current link state."""
+        with self._lock:
+            return self._state
+
+    def set_command(self, command: Command) -> None:
+        """Replace the command; sends it at once when it differs from the current one."""
+        with self._lock:
+            changed = self._replace_command(command)
+            silenced = self._take_silenced()
+        if changed and self.send_on_change:
+            self._send_current()
+        if silenced:
+            self._notify_safety(silenced)
+
+    def set_velocities(self, **velocities: float) -> None:
+        """Change some channels of the current command (SI units), atomically."""
+        with self._lock:
+            changed = self._replace_command(self._command.with_velocities(velocities))
+            silenced = self._take_silenced()
+        if changed and self.send_on_change:
+            self._send_current()
+        if silenced:
+            self._notify_safety(silenced)
+
+    def _take_silenced(self) -> str | None:
+        message, self._silenced = self._silenced, None
+        return message
+
+    def _replace_command(self, command: Command) -> bool:
+        """Install a new command (lock held); whether it differs from the old one."""
+        if self._owner_thread in (None, threading.get_ident()):
+            self._gui_alive_at = self.clock()
+            self._gui_tripped = False
+        elif self._owner_silent():
+            # Commands from another thread (a ROS bridge hosted by the GUI) must neither
+            # hide a stalled owner nor move the robot while it is stalled.
+            if command.is_motion and not self._gui_tripped:
+                self._gui_tripped = True
+                stalled_s = self.clock() - self._gui_alive_at
+                self._silenced = (
+                    f"control thread silent for {stalled_s:.2f} s: motion commands zeroed"
+                )
+            command = command.stopped()
+        if self._state is LinkState.LOST:
+            # A robot the OCU cannot hear may still hear the OCU: it would drive blind.
+            command = command.stopped()
+        if command.is_motion:
+            self._estop_latched = False
+        if command == self._command:
+            return False
+        self._command = command
+        return True
+
+    def emergency_stop(self, reason: str = "operator") -> None:
+        """Zero every velocity now and repeat the zero command within the e-stop window."""
+        settings = self.profile.link
+        with self._lock:
+            self._command = self._command.stopped()
+            self._estop_latched = True
+            now = self.clock()
+            repeats = settings.estop_repeats - 1
+            step = settings.estop_window_s / repeats if repeats > 0 else 0.0
+            self._estop_due = [now + step * (k + 1) for k in range(repeats)]
+        self._send_current()
+        self.loop.wake()
+        self._notify_safety(f"EMERGENCY STOP ({reason})")
+
+    def _owner_silent(self) -> bool:
+        timeout = self.gui_alive_timeout_s
+        return timeout is not None and self.clock() - self._gui_alive_at > timeout
+
+    def heartbeat(self) -> None:
+        """Confirm that the thread owning the commands is alive (it becomes the owner)."""
+        with self._lock:
+            self._owner_thread = threading.get_ident()
+            self._gui_alive_at = self.clock()
+            self._gui_tripped = False
+
+    def set_rate_hz(self, rate_hz: float) -> None:
+        """Change the periodic send rate (bounded by the profile, 1-50 Hz for the Engineer)."""
+        self._check_rate(rate_hz)
+        with self._lock:
+            self._rate_hz = rate_hz
+            # A rate change takes effect at once rather than after the old period.
+            self._next_tick = min(self._next_tick, self.clock() + 1.0 / rate_hz)
+        self.loop.wake()
+
+    @property
+    def rate_hz(self) -> float:
+        """The periodic send rate."""
+        with self._lock:
+            return self._rate_hz
+
+    @property
+    def extension_active(self) -> bool:
+        """Whether the robot speaks the protocol extension (valid packets lately)."""
+        return self.receiver.extension_active
+
+    @property
+    def stream_request(self) -> HelloPacket:
+        """The hello sent to probe for the extension, with the per-camera stream request."""
+        with self._lock:
+            return self._hello
+
+    def set_stream_request(self, cameras: Sequence[CameraRequest]) -> None:
+        """Ask an extended robot for these per-camera streams; sent at once if it changed."""
+        hello = HelloPacket(
+            cameras=tuple(cameras), max_datagram_bytes=self._hello.max_datagram_bytes
+        )
+        hello.check()
+        with self._lock:
+            if hello == self._hello:
+                return
+            self._hello = hello
+        self._send_hello()
+
+    def video_stats(self) -> ReassemblyStats:
+        """Counters of the extension's fragment reassembly."""
+        return self.receiver.video_stats()
+
+    def _check_rate(self, rate_hz: float) -> None:
+        low, high = self.profile.link.send_rate_min_hz, self.profile.link.send_rate_max_hz
+        if not low <= rate_hz <= high:
+            raise ValueError(f"send rate must be within {low:g}-{high:g} Hz, got {rate_hz!r}")
+
+    # ---- loop ------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Run the loop in its named daemon thread ("ocu-link")."""
+        self.loop.start(self._step)
+
+    def run(self) -> None:
+        """Run the loop in the calling thread until shutdown()."""
+        self.loop.run(self._step)
+
+    def _step(self, now: float) -> float:
+        with self._lock:
+            tick_due = now >= self._next_tick
+            if tick_due:
+                self._next_tick = max(self._next_tick + 1.0 / self._rate_hz, now)
+            stats_due = now >= self._next_stats
+            if stats_due:
+                self._next_stats = now + STATS_PERIOD_S
+        if tick_due:
+            self._send_current()
+            self._send_hello()
+        if stats_due:
+            self.emit(self.stats())
+        self._check_watchdogs(now)
+        self.receiver.expire(now)
+        due = self._send_due_estops(now)
+        with self._lock:
+            deadline = min(self._next_tick, self._next_stats)
+        return min(deadline, due) if due is not None else deadline
+
+    def _loop_failed(self, err: BaseException) -> bool:
+        log.error("link loop failed (%s); sending zeros", err)
+        self._send_zeros()
+        return False
+
+    def _send_due_estops(self, now: float) -> float | None:
+        with self._lock:
+            due = [t for t in self._estop_due if t <= now]
+            self._estop_due = [t for t in self._estop_due if t > now]
+            next_due = min(self._estop_due) if self._estop_due else None
+        for _ in due:
+            self._send_current()
+        return next_due
+
+    def _check_watchdogs(self, now: float) -> None:
+        message = None
+        with self._lock:
+            timeout = self.gui_alive_timeout_s
+            stalled_s = now - self._gui_alive_at
+            if (
+                timeout is not None
+                and self._command.is_motion
+                and not self._gui_tripped
+                and stalled_s > timeout
+            ):
+                self._gui_tripped = True
+                self._command = self._command.stopped()
+                message = f"control thread silent for {stalled_s:.2f} s: motion commands zeroed"
+            last = self.receiver.last_valid_at
+            last = last if last is not None else self._started_at
+            lost = self._state in (LinkState.CONNECTED, LinkState.CONNECTING) and (
+                now - last > self.link_lost_after_s
+            )
+        if message:
+            self._send_current()
+            self._notify_safety(message)
+        if lost:
+            reason = f"no valid packet from the robot for {now - last:.1f} s"
+            with self._lock:
+                had_motion = self._command.is_motion
+                self._command = self._command.stopped()
+            self.receiver.robot_silent()
+            self._set_state(LinkState.LOST, reason)
+            if had_motion:
+                self._send_current()
+                self._notify_safety("link lost: motion commands zeroed")
+
+    # ---- receive ---------------------------------------------------------------------------
+
+    def _receive_all(self) -> None:
+        view = memoryview(self._buffer)
+        for _ in range(MAX_DATAGRAMS_PER_WAKE):
+            try:
+                item = self.transport.receive(self._buffer)
+            except OSError as err:
+                # ICMP port-unreachable from a closed robot port surfaces here on Linux.
+                log.debug("receive error: %s", err)
+                continue
+            if item is None:
+                return
+            size, source = item
+            self.handle_datagram(bytes(view[:size]), source)
+
+    def handle_datagram(self, data: bytes, source: Address) -> None:
+        """Decode and dispatch one datagram (the receiver's job); never raises on bad input."""
+        now = self.clock()
+        if source != self.robot_address:
+            self.receiver.foreign()
+            return
+        if self.receiver.received(data, now, time.time()) and self.state != LinkState.CONNECTED:
+            self._set_state(LinkState.CONNECTED, f"packets from {source[0]}:{source[1]}")
+
+    # ---- send ------------------------------------------------------------------------------
+
+    def current_packet_bytes(self) -> bytes:
+        """The RCP for the current command on the wire (bounded by the hard maxima)."""
+        with self._lock:
+            return self._codec.encode(self._mapper.to_packet(self._command))
+
+    def _send_current(self) -> None:
+        # Built and sent under one lock: a tick that read the command just before the
+        # operator stopped must not put its stale motion on the wire after the stop.
+        with self._send_lock:
+            self._send_rcp(self.current_packet_bytes())
+
+    def _send_zeros(self) -> None:
+        with self._lock:
+            zero = self._codec.encode(self._mapper.to_packet(self._command.stopped()))
+        self._send_rcp(zero)
+
+    def _send_rcp(self, data: bytes) -> None:
+        with self._send_lock:
+            sent_at = self._send_datagram(data, RCP)
+            if sent_at is None:
+                return
+            command = self.receiver.sent(data, sent_at)
+            with self._lock:
+                self._sent += 1
+                self._rcp_rate.add(sent_at)
+        if command is not None:
+            self.emit(CommandSent(command, sent_at))
+
+    def _send_hello(self) -> None:
+        if not self.extension_enabled or self._ext_codec is None:
+            return
+        with self._lock:
+            data = self._ext_codec.encode(self._hello)
+        if self._send_datagram(data, HELLO) is not None:
+            with self._lock:
+                self._hellos_sent += 1
+
+    def _send_datagram(self, data: bytes, kind: str) -> float | None:
+        """Put one datagram on the wire; its send time, or None if closed or it failed."""
+        with self._send_lock:
+            if self._closed:
+                return None
+            try:
+                self.transport.send(data, self.robot_address)
+            except OSError as err:
+                with self._lock:
+                    self._send_errors += 1
+                log.debug("send failed: %s", err)
+                return None
+            sent_at = self.clock()
+        self.emit(DatagramSent(data, sent_at, kind))
+        return sent_at
+
+    # ---- state and stats -------------------------------------------------------------------
+
+    def _set_state(self, state: LinkState, reason: str) -> None:
+        with self._lock:
+            if self._state == state:
+                return
+            self._state = state
+        log.info("link %s: %s", state.value, reason)
+        self.emit(LinkStateChanged(state, reason))
+
+    def stats(self) -> LinkStats:
+        """Counters and rates now."""
+        now = self.clock()
+        counts = self.receiver.counts(now)
+        with self._lock:
+            return LinkStats(
+                sent=self._sent,
+                received=counts.received,
+                telemetry=counts.telemetry,
+                video=counts.video,
+                malformed=counts.malformed,
+                foreign=counts.foreign,
+                send_errors=self._send_errors,
+                rcp_rate_hz=self._rcp_rate.rate(now),
+                telemetry_rate_hz=counts.telemetry_rate_hz,
+                video_rate_hz=counts.video_rate_hz,
+                loss_estimate=counts.loss_estimate,
+                duplicates=counts.duplicates,
+                reordered=counts.reordered,
+                last_valid_age_s=(
+                    None if counts.last_valid_at is None else now - counts.last_valid_at
+                ),
+                send_rate_hz=self._rate_hz,
+                estop_latched=self._estop_latched,
+                delay_s=counts.delay_s,
+                stale_telemetry=counts.stale_telemetry,
+            )
+
+    def _notify_safety(self, message: str) -> None:
+        log.warning("%s", message)
+        self.emit(SafetyEvent(message))
+
+    # ---- shutdown --------------------------------------------------------------------------
+
+    def shutdown(self, timeout_s: float = 2.0) -> None:
+        """Stop the loop, send zeros last and close the transport; safe to call twice."""
+        with self._send_lock:
+            if self._closed:
+                return
+        self.loop.stop(timeout_s)
+        with self._lock:
+            self._command = self._command.stopped()
+            self._estop_due = []
+        for _ in range(self.profile.link.estop_repeats):
+            self._send_zeros()
+        with self._send_lock:
+            self._closed = True
+            self.transport.close()
+        self.loop.close()
+        self._set_state(LinkState.CLOSED, "shut down")
+
+
+class LinkOptions(TypedDict, total=False):
+    """The live link's options, for the UdpLink and VirtualLink constructors."""
+
+    listener: Listener | None
+    link_lost_after_s: float | None
+    gui_alive_timeout_s: float | None
+    send_rate_hz: float | None
+    send_on_change: bool
+    extension: bool
+    clock: Callable[[], float]
+
+
+class UdpLink(LiveLink):
+    """The live link over UDP to a robot (or ocu-sim) at `robot_address`."""
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        robot_address: Address,
+        *,
+        bind_address: Address | None = None,
+        description: str | None = None,
+        **options: Unpack[LinkOptions],
+    ) -> None:
+        try:
+            robot = resolve(robot_address)
+        except TransportError as err:
+            raise LinkError(f"cannot resolve robot host {robot_address[0]!r}: {err}") from err
+        if bind_address is None:
+            bind_address = ("127.0.0.1" if is_loopback(robot[0]) else "0.0.0.0", 0)
+        try:
+            transport = UdpTransport(bind_address)
+        except TransportError as err:
+            raise LinkError(str(err)) from err
+        text = description or f"robot {robot[0]}:{robot[1]}"
+        super().__init__(profile, transport, robot, text, **options)
+
+
+class VirtualLink(LiveLink):
+    """The live link over an in-process virtual wire (ocu.net.transport.VirtualWire)."""
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        endpoint: VirtualEndpoint,
+        *,
+        description: str = "virtual robot",
+        **options: Unpack[LinkOptions],
+    ) -> None:
+        super().__init__(profile, endpoint, endpoint.peer, description, **options)

@@ -1,0 +1,320 @@
+"""The one receiver: robot datagrams to link events, and what the OCU sent to decoded commands.
+
+Every reader of the wire goes through it — the live link (UDP or virtual), a replayed
+recording, the recorder's decoded channels (through the link's events) and `ocu inspect` — so
+what a replay shows is what the OCU decoded live. It decodes vendor and extension packets,
+counts them (valid, malformed, rates, telemetry loss from the tick counter), drops telemetry
+that comes late or twice, judges each reading's plausibility, measures the round trip from
+the speed commands the robot echoes, detects the protocol extension and reassembles its video
+fragments. No Qt, no sockets, no clock of its own: every call carries its time.
+
+Thread-safe: the link's loop thread feeds received datagrams while the GUI thread's sends
+are noted with `sent()`; the lock is never held while an event is emitted.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+from ocu.control.commands import CommandMapper, commanded_motor_speeds, read_telemetry
+from ocu.control.plausibility import PlausibilityChecker
+from ocu.link.delay import DelayEstimator
+from ocu.link.reassembly import Reassembler, ReassemblyStats
+from ocu.link.stats import LossEstimator, RateMeter
+from ocu.profile import RobotProfile
+from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket, VideoFramePacket
+from ocu.protocol.extended import HelloPacket, StatusPacket, VideoFragment
+from ocu.protocol.wire import make_codec, make_extension_codec
+from ocu.records import (
+    OTHER,
+    STATUS,
+    TELEMETRY,
+    VIDEO,
+    VIDEO_FRAGMENT,
+    Command,
+    DatagramReceived,
+    ExtensionChanged,
+    LinkEvent,
+    StatusFrame,
+    TelemetryFrame,
+    VideoFrame,
+)
+
+log = logging.getLogger("ocu.link")
+
+# A telemetry tick this far (in seconds of ticks) below the newest one is a robot that
+# restarted, not a late packet.
+TICK_RESTART_S = 10.0
+
+
+@dataclass(frozen=True)
+class ReceiverCounts:
+    """What the receiver has counted, for the link's statistics."""
+
+    received: int
+    telemetry: int
+    video: int
+    malformed: int
+    foreign: int
+    telemetry_rate_hz: float
+    video_rate_hz: float
+    loss_estimate: float | None
+    duplicates: int
+    reordered: int
+    stale_telemetry: int
+    last_valid_at: float | None
+    delay_s: float | None
+
+
+class Receiver:
+    """Decodes one robot's datagrams into events for `emit` (see the module docstring).
+
+    `extension` says whether the OCU probes for the protocol extension: without it, extension
+    packets stay unknown types and count as malformed, as a vendor OCU would see them.
+    `link_lost_after_s` is how long the extension may stay silent before it counts as gone.
+    """
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        emit: Callable[[LinkEvent], None],
+        *,
+        extension: bool = False,
+        link_lost_after_s: float | None = None,
+    ) -> None:
+        self.profile = profile
+        self.emit = emit
+        self._codec = make_codec(profile)
+        ext_codec = make_extension_codec(profile)
+        self._ext_codec = ext_codec if extension else None
+        self._mapper = CommandMapper(profile)
+        self.extension_timeout_s = (
+            profile.link.link_lost_after_s if link_lost_after_s is None else link_lost_after_s
+        )
+        video = profile.video
+        self._reassembler = Reassembler(
+            video.reassembly_max_frames, video.reassembly_max_bytes, video.reassembly_timeout_s
+        )
+        self._lock = threading.Lock()
+        self._received = 0
+        self._telemetry = 0
+        self._video = 0
+        self._malformed = 0
+        self._foreign = 0
+        self._telemetry_rate = RateMeter()
+        self._video_rate = RateMeter(window_s=1.0)
+        self._loss = LossEstimator()
+        self._delay = DelayEstimator()
+        self._plausibility = PlausibilityChecker(profile)
+        self._last_tick: int | None = None
+        self._stale_telemetry = 0
+        self._last_valid_at: float | None = None
+        self._camera: int | None = None
+        self._ext_active = False
+        self._ext_last_at: float | None = None
+        self.ext_received = 0
+        self.ext_malformed = 0
+
+    # ---- what the OCU sent (any thread) -----------------------------------------------------
+
+    def sent(self, data: bytes, at: float) -> Command | None:
+        """A datagram the OCU put on the wire: the command it carried, if an RCP.
+
+        The camera it selected is where vendor video is shown; the motor speeds it asks for
+        are what the robot will echo (the delay measurement).
+        """
+        if not data or data[0] != self._codec.rcp_type:
+            return None
+        try:
+            packet = RemoteControlPacket.decode(data, data[0])
+        except ProtocolError:
+            return None
+        command = self._mapper.to_command(packet)
+        echoes = commanded_motor_speeds(self.profile, command)
+        with self._lock:
+            if command.camera is not None:
+                self._camera = command.camera
+            self._delay.on_sent(at, echoes)
+        return command
+
+    # ---- what the robot sent (the link's loop thread) -------------------------------------
+
+    def foreign(self) -> None:
+        """A datagram from somebody other than the robot arrived (counted, not decoded)."""
+        with self._lock:
+            self._foreign += 1
+
+    def received(self, data: bytes, at: float, wall: float) -> bool:
+        """Decode one datagram from the robot and emit what it holds; whether it was valid.
+
+        The raw datagram comes first (DatagramReceived, classified), then what it decoded to.
+        """
+        ext = self._ext_codec
+        if ext is not None and data and ext.handles(data[0]):
+            return self._extended(data, at, wall)
+        try:
+            packet = self._codec.decode(data)
+        except ProtocolError as err:
+            self.emit(DatagramReceived(data, at))
+            with self._lock:
+                self._malformed += 1
+            log.debug("malformed datagram (%d bytes): %s", len(data), err)
+            return False
+        if isinstance(packet, RemoteControlPacket):
+            self.emit(DatagramReceived(data, at))
+            self.foreign()  # an RCP never comes from the robot
+            return False
+        if isinstance(packet, TelemetryPacket):
+            robot_time_s = packet.tick / self.profile.link.telemetry_tick_hz
+            self.emit(DatagramReceived(data, at, TELEMETRY, robot_time_s))
+        else:
+            self.emit(DatagramReceived(data, at, VIDEO))
+        frame: TelemetryFrame | VideoFrame | None = None
+        with self._lock:
+            self._received += 1
+            self._last_valid_at = at
+            if isinstance(packet, TelemetryPacket):
+                self._telemetry += 1
+                self._telemetry_rate.add(at)
+                self._loss.add(packet.tick, at)
+                frame = self._telemetry_frame(packet, at, wall)
+            elif isinstance(packet, VideoFramePacket):
+                self._video += 1
+                self._video_rate.add(at)
+                frame = VideoFrame(packet.jpeg, self._camera, at, wall)
+        if frame is not None:
+            self.emit(frame)
+        return True
+
+    def _telemetry_frame(
+        self, packet: TelemetryPacket, at: float, wall: float
+    ) -> TelemetryFrame | None:
+        """Readings judged and the delay measured; None for an old packet (lock held).
+
+        A packet whose tick is not newer than the newest seen is a duplicate or came late
+        (reordered): its readings are older than what the OCU already knows, so it is counted
+        and goes no further.
+        """
+        last = self._last_tick
+        restart = self.profile.link.telemetry_tick_hz * TICK_RESTART_S
+        if last is not None and packet.tick <= last and last - packet.tick < restart:
+            self._stale_telemetry += 1
+            return None
+        if last is not None and packet.tick < last:
+            log.info("telemetry tick went back from %d to %d: robot restarted", last, packet.tick)
+            self._plausibility.reset()
+        self._last_tick = packet.tick
+        readings = read_telemetry(self.profile, packet)
+        for name, fault in self._plausibility.check(packet, readings).items():
+            readings[name] = replace(readings[name], fault=fault)
+        echoes = {record.device_id: record.speed_command for record in packet.motors}
+        return TelemetryFrame(packet, readings, at, wall, self._delay.on_telemetry(at, echoes))
+
+    def _extended(self, data: bytes, at: float, wall: float) -> bool:
+        assert self._ext_codec is not None
+        try:
+            packet = self._ext_codec.decode(data)
+        except ProtocolError as err:
+            self.emit(DatagramReceived(data, at))
+            with self._lock:
+                self._malformed += 1
+                self.ext_malformed += 1
+            log.debug("malformed extension datagram (%d bytes): %s", len(data), err)
+            return False
+        if isinstance(packet, HelloPacket):
+            self.emit(DatagramReceived(data, at, OTHER))
+            self.foreign()  # a hello never comes from the robot
+            return False
+        if isinstance(packet, VideoFragment):
+            self.emit(DatagramReceived(data, at, VIDEO_FRAGMENT, packet.capture_time_us / 1e6))
+        else:
+            self.emit(DatagramReceived(data, at, STATUS))
+        event: StatusFrame | VideoFrame | None = None
+        with self._lock:
+            self._received += 1
+            self.ext_received += 1
+            self._last_valid_at = at
+            self._ext_last_at = at
+            became_active = not self._ext_active
+            self._ext_active = True
+            if isinstance(packet, VideoFragment):
+                complete = self._reassembler.add(packet, at)
+                if complete is not None:
+                    self._video += 1
+                    self._video_rate.add(at)
+                    event = VideoFrame(
+                        complete.jpeg,
+                        complete.camera,
+                        at,
+                        wall,
+                        sequence=complete.sequence,
+                        capture_time_us=complete.capture_time_us,
+                    )
+            elif isinstance(packet, StatusPacket):
+                event = StatusFrame(packet, at, wall)
+        if became_active:
+            log.info("robot speaks the protocol extension")
+            self.emit(ExtensionChanged(True, "extension packets from the robot"))
+        if event is not None:
+            self.emit(event)
+        return True
+
+    def expire(self, now: float) -> None:
+        """Drop stale partial frames; notice an extension that went silent."""
+        reason = None
+        with self._lock:
+            self._reassembler.expire(now)
+            last = self._ext_last_at
+            if self._ext_active and last is not None and now - last > self.extension_timeout_s:
+                self._ext_active = False
+                reason = f"no extension packet for {now - last:.1f} s: vendor protocol"
+        if reason is not None:
+            log.info("extension lost: %s", reason)
+            self.emit(ExtensionChanged(False, reason))
+
+    def robot_silent(self) -> None:
+        """The link was lost: the robot may restart meanwhile (its ticks, its readings)."""
+        with self._lock:
+            self._last_tick = None
+            self._plausibility.reset()
+
+    # ---- state (any thread) ----------------------------------------------------------------
+
+    @property
+    def extension_active(self) -> bool:
+        """Whether the robot speaks the protocol extension (valid packets lately)."""
+        with self._lock:
+            return self._ext_active
+
+    @property
+    def last_valid_at(self) -> float | None:
+        """When the last valid packet from the robot arrived."""
+        with self._lock:
+            return self._last_valid_at
+
+    def counts(self, now: float) -> ReceiverCounts:
+        """Counters and rates now."""
+        with self._lock:
+            return ReceiverCounts(
+                received=self._received,
+                telemetry=self._telemetry,
+                video=self._video,
+                malformed=self._malformed,
+                foreign=self._foreign,
+                telemetry_rate_hz=self._telemetry_rate.rate(now),
+                video_rate_hz=self._video_rate.rate(now),
+                loss_estimate=self._loss.loss(now),
+                duplicates=self._loss.duplicates,
+                reordered=self._loss.reordered,
+                stale_telemetry=self._stale_telemetry,
+                last_valid_at=self._last_valid_at,
+                delay_s=self._delay.estimate_s,
+            )
+
+    def video_stats(self) -> ReassemblyStats:
+        """Counters of the extension's fragment reassembly."""
+        with self._lock:
+            return self._reassembler.stats()

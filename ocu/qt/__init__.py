@@ -1,0 +1,1 @@
+"""Qt adapters: the one place where the pure packages meet Qt (signals, timers, threads)."""
