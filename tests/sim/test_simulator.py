@@ -19,7 +19,7 @@ from ocu.profile import RobotProfile, load_profile
 from ocu.protocol import MotorRecord, Packet, TelemetryPacket, VideoFramePacket
 from ocu.sim import FaultConfig, RobotSimulator, SimState
 from ocu.sim.faults import DelayLine, Direction, make_injectors
-from ocu.sim.simulator import (
+from ocu.sim.robot import (
     DEVICE_STATE_OPERATIONAL,
     OPERATION_MODE_VELOCITY,
     STATUS_AT_LOWER_LIMIT,
