@@ -15,6 +15,7 @@ import sys
 import threading
 from collections.abc import Sequence
 
+from ocu.net.transport import TransportError
 from ocu.profile import ProfileError, load_profile
 from ocu.sim.extended import DEFAULT_DRAIN_PERCENT_PER_S, DEFAULT_STATUS_HZ
 from ocu.sim.faults import FaultConfig
@@ -239,8 +240,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 battery_drain_percent_per_s=args.battery_drain,
                 noise_deg=args.noise_deg,
             )
-        except OSError as err:
-            print(f"ocu-sim: cannot listen on {args.host}:{port}: {err}", file=sys.stderr)
+        except TransportError as err:
+            print(f"ocu-sim: cannot listen: {err}", file=sys.stderr)
             return 1
         for joint, raw in args.raw_position:
             try:

@@ -11,16 +11,17 @@ import cv2
 import numpy as np
 import pytest
 
-from ocu.control.commands import Command, CommandMapper, make_codec
+from ocu.control.commands import CommandMapper
 from ocu.link.reassembly import Reassembler
 from ocu.profile import RobotProfile
 from ocu.protocol.extended import (
     CameraRequest,
-    ExtendedCodec,
     HelloPacket,
     StatusPacket,
     VideoFragment,
 )
+from ocu.protocol.wire import make_codec, make_extension_codec
+from ocu.records import Command
 from ocu.sim.cli import build_parser
 from ocu.sim.extended import jpeg_comment
 from ocu.sim.simulator import RobotSimulator
@@ -33,9 +34,9 @@ class ExtendedClient:
     """A bare OCU: sends hellos and RCPs, reassembles what comes back."""
 
     def __init__(self, profile: RobotProfile, target: tuple[str, int]) -> None:
-        assert profile.extension is not None
-        types = profile.extension.frame_types
-        self.codec = ExtendedCodec(types.hello, types.video_fragment, types.status)
+        codec = make_extension_codec(profile)
+        assert codec is not None
+        self.codec = codec
         self.vendor = make_codec(profile)
         self.mapper = CommandMapper(profile)
         self.target = target

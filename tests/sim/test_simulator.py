@@ -4,22 +4,24 @@ from __future__ import annotations
 
 import io
 import math
+import select
 import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import replace
 from typing import Any, TypeVar
 
 import pytest
 from PIL import Image, ImageChops
 
-from ocu.control.commands import Command, CommandMapper, make_codec, read_telemetry
+from ocu.control.commands import CommandMapper, read_telemetry
+from ocu.net.transport import VIRTUAL_OCU, VIRTUAL_ROBOT, VirtualWire
 from ocu.profile import RobotProfile, load_profile
-from ocu.protocol import MotorRecord, Packet, TelemetryPacket, VideoFramePacket
+from ocu.protocol import Codec, MotorRecord, Packet, TelemetryPacket, VideoFramePacket
+from ocu.protocol.wire import make_codec
+from ocu.records import Command
 from ocu.sim import FaultConfig, RobotSimulator, SimState
-from ocu.sim.faults import DelayLine, Direction, make_injectors
-from ocu.sim.simulator import (
+from ocu.sim.robot import (
     DEVICE_STATE_OPERATIONAL,
     OPERATION_MODE_VELOCITY,
     STATUS_AT_LOWER_LIMIT,
@@ -222,21 +224,6 @@ def test_defaults_come_from_the_profile(profile: RobotProfile) -> None:
         sim.stop()
 
 
-def test_initial_joints_zero_or_nearest_limit(profile: RobotProfile) -> None:
-    neck = profile.motors["neck"]
-    shifted = replace(neck, limits_rad=(0.1, 0.5))
-    custom = replace(profile, motors={**profile.motors, "neck": shifted})
-    sim = RobotSimulator(custom, initial_joints={"elbow": 0.25})
-    try:
-        joints = sim.state().joints_rad
-        assert joints["neck"] == 0.1
-        assert joints["elbow"] == 0.25
-        assert joints["waist"] == 0.0
-        assert not any(profile.motors[name].track for name in joints)
-    finally:
-        sim.stop()
-
-
 @pytest.mark.parametrize(
     ("joints", "match"),
     [({"left_track": 0.0}, "not a motor with a position"), ({"neck": 10.0}, "outside")],
@@ -272,6 +259,56 @@ def test_nothing_is_sent_before_the_first_rcp(
     assert state.video_sent == 0
     assert state.datagrams_sent == 0
     assert client.receive(TelemetryPacket, 0.05) is None
+
+
+# ---- transports -------------------------------------------------------------------------------
+
+
+def receive_on_wire(
+    wire: VirtualWire, codec: Codec, predicate: Callable[[TelemetryPacket], bool]
+) -> TelemetryPacket:
+    """The first telemetry packet on the OCU end of a wire that satisfies predicate."""
+    buffer = bytearray(70_000)
+    deadline_s = time.monotonic() + WAIT_S
+    while (remaining_s := deadline_s - time.monotonic()) > 0.0:
+        readable, _, _ = select.select([wire.ocu.socket], [], [], remaining_s)
+        received = wire.ocu.receive(buffer) if readable else None
+        if received is None:
+            continue
+        size, sender = received
+        assert sender == VIRTUAL_ROBOT
+        packet = codec.decode(bytes(buffer[:size]))
+        if isinstance(packet, TelemetryPacket) and predicate(packet):
+            return packet
+    raise AssertionError("no matching telemetry packet arrived on the wire")
+
+
+def test_serves_a_virtual_wire_in_process(profile: RobotProfile) -> None:
+    wire = VirtualWire()
+    codec, mapper = make_codec(profile), CommandMapper(profile)
+    try:
+        sim = RobotSimulator(
+            profile, transport=wire.robot, telemetry_hz=50.0, video_fps=0.0, seed=1
+        )
+        with sim:
+            assert sim.address == VIRTUAL_ROBOT
+            rcp = codec.encode(mapper.to_packet(Command({"shoulder": 0.4})))
+            wire.ocu.send(rcp, VIRTUAL_ROBOT)
+            moved = wait_for(sim, lambda s: s.joints_rad["shoulder"] >= 0.04)
+            assert moved.client == VIRTUAL_OCU
+            assert sim.received_commands()[-1].address == VIRTUAL_OCU
+            packet = receive_on_wire(
+                wire, codec, lambda p: (read_telemetry(profile, p)["shoulder"].angle_rad or 0) > 0
+            )
+            assert record_of(profile, packet, "shoulder").speed > 0
+        state = sim.state()
+        assert state.datagrams_received == 1
+        assert state.datagrams_sent == state.telemetry_sent > 0
+        assert state.internal_errors == 0
+        # The wire is its owner's: still open after the simulator stopped.
+        wire.ocu.send(rcp, VIRTUAL_ROBOT)
+    finally:
+        wire.close()
 
 
 # ---- telemetry --------------------------------------------------------------------------------
@@ -399,28 +436,6 @@ def test_joints_stop_at_their_limits_with_status_bits(
     assert state.velocities["neck"] < 0.0
 
 
-def test_speed_below_min_speed_moves_nothing(
-    profile: RobotProfile,
-    make_sim: SimFactory,
-    make_client: Callable[[RobotSimulator], OcuClient],
-) -> None:
-    sim = make_sim()
-    client = make_client(sim)
-    waist_min = profile.channels["waist"].min_speed
-    drive_min = profile.channels["drive_linear"].min_speed
-    sent_s = client.send(Command({"waist": waist_min * 0.5, "drive_linear": drive_min * 0.75}))
-    state = wait_for(sim, lambda s: s.rcp_count == 1 and s.time_s >= sent_s + 0.3)
-    assert state.commanded_velocities["waist"] > 0.0
-    assert state.all_stopped
-    assert state.joints_rad["waist"] == 0.0
-    assert state.track_speeds_m_s == (0.0, 0.0)
-    assert state.pose == (0.0, 0.0, 0.0)
-
-    client.send(Command({"waist": waist_min}))
-    state = wait_for(sim, lambda s: s.joints_rad["waist"] > 0.0)
-    assert state.velocities["waist"] == pytest.approx(waist_min)
-
-
 def test_waist_is_ignored_while_the_chassis_moves(
     profile: RobotProfile,
     make_sim: SimFactory,
@@ -471,39 +486,6 @@ def test_watchdog_stops_every_motor_within_its_window(
     client.send(Command({"shoulder": 0.3}))
     resumed = wait_for(sim, lambda s: not s.all_stopped)
     assert not resumed.watchdog_stopped
-
-
-def test_pose_integrates_a_straight_drive_and_a_turn(
-    profile: RobotProfile,
-    make_sim: SimFactory,
-    make_client: Callable[[RobotSimulator], OcuClient],
-) -> None:
-    sim = make_sim()
-    client = make_client(sim)
-    client.send(Command({"drive_linear": 0.3}))
-    moving = wait_for(sim, lambda s: s.track_speeds_m_s != (0.0, 0.0))
-    later = wait_for(sim, lambda s: s.time_s >= moving.time_s + 0.4)
-    speed_m_s = moving.velocities["drive_linear"]
-    assert speed_m_s == pytest.approx(0.3, abs=1e-4)
-    assert moving.track_speeds_m_s == (speed_m_s, speed_m_s)
-    assert later.pose[0] - moving.pose[0] == pytest.approx(
-        speed_m_s * (later.time_s - moving.time_s), rel=1e-6
-    )
-    assert later.pose[1] == 0.0
-    assert later.pose[2] == 0.0
-
-    client.send(Command({"drive_turn": 0.5}))
-    turning = wait_for(sim, lambda s: s.velocities["drive_linear"] == 0.0)
-    later = wait_for(sim, lambda s: s.time_s >= turning.time_s + 0.4)
-    turn_rad_s = turning.velocities["drive_turn"]
-    half_width_m = profile.track_width_m / 2.0
-    left_m_s, right_m_s = turning.track_speeds_m_s
-    assert left_m_s == pytest.approx(-turn_rad_s * half_width_m)
-    assert right_m_s == pytest.approx(turn_rad_s * half_width_m)
-    assert later.pose[2] - turning.pose[2] == pytest.approx(
-        turn_rad_s * (later.time_s - turning.time_s), rel=1e-6
-    )
-    assert later.pose[:2] == pytest.approx(turning.pose[:2])
 
 
 # ---- video ------------------------------------------------------------------------------------
@@ -641,36 +623,6 @@ def test_fault_config_and_set_faults_validate(make_sim: SimFactory) -> None:
     sim.set_faults(loss=0.1, jitter_ms=5.0)
     sim.set_faults(latency_ms=20.0)
     assert sim.faults == FaultConfig(loss=0.1, latency_ms=20.0, jitter_ms=5.0)
-
-
-def test_injector_decisions_are_seeded_and_bounded() -> None:
-    config = FaultConfig(loss=0.2, latency_ms=100.0, jitter_ms=50.0, duplicate=0.1)
-    first = make_injectors(42)[Direction.TO_ROBOT]
-    second = make_injectors(42)[Direction.TO_ROBOT]
-    plans = [first.plan(config) for _ in range(500)]
-    assert plans == [second.plan(config) for _ in range(500)]
-    delays_s = [delay_s for plan in plans for delay_s in plan]
-    assert all(0.1 <= delay_s <= 0.15 for delay_s in delays_s)
-    assert len(set(delays_s)) > 100
-    assert any(len(plan) == 2 for plan in plans)
-    assert any(not plan for plan in plans)
-    to_ocu = make_injectors(42)[Direction.TO_OCU]
-    assert [to_ocu.plan(config) for _ in range(500)] != plans
-    assert make_injectors(1)[Direction.TO_OCU].plan(FaultConfig(loss=1.0)) == []
-
-
-def test_delay_line_releases_in_due_order() -> None:
-    line = DelayLine()
-    address = ("127.0.0.1", 1)
-    line.push(2.0, Direction.TO_OCU, b"late", address)
-    line.push(1.0, Direction.TO_ROBOT, b"early", address)
-    line.push(1.0, Direction.TO_ROBOT, b"early-second", address)
-    assert line.next_due_s() == 1.0
-    assert [d.data for d in line.pop_due(1.5)] == [b"early", b"early-second"]
-    assert len(line) == 1
-    assert line.pop_due(1.9) == []
-    assert [d.data for d in line.pop_due(2.0)] == [b"late"]
-    assert line.next_due_s() is None
 
 
 def test_loss_drops_about_the_configured_fraction(
