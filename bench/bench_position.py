@@ -37,9 +37,8 @@ from baseline_position import ResetPredictionController
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import ConstantSpeedController, PositionController
 from ocu.control.runner import Controller, PositionRunner
-from ocu.link.core import LinkCore, LinkListener
+from ocu.link.live import UdpLink
 from ocu.profile import load_profile
-from ocu.records import TelemetryFrame
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, StateRecorder
 
@@ -65,14 +64,6 @@ class Case:
     controller: str
     window_s: float
     seed: int
-
-
-class Forward(LinkListener):
-    def __init__(self, runner: PositionRunner) -> None:
-        self.runner = runner
-
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        self.runner.on_readings(frame.readings, frame.received_at, frame.delay_s)
 
 
 def run_case(case: Case) -> dict[str, Any]:
@@ -101,9 +92,9 @@ def run_case(case: Case) -> dict[str, Any]:
     else:
         speed = min(limits.get(profile.motors[j].channel or j) for j in targets)
         controller = ConstantSpeedController(profile, limits, speed)
-    link = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+    link = UdpLink(profile, sim.address, gui_alive_timeout_s=None)
     runner = PositionRunner(controller, link)
-    link.listener = Forward(runner)
+    link.subscribe(runner.on_link_event)
     link.start()
     recorder = StateRecorder(sim)
     try:

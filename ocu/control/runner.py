@@ -8,7 +8,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from ocu.records import JointReading
+from ocu.records import JointReading, LinkEvent, TelemetryFrame
 
 CONTROL_PERIOD_S = 0.02
 
@@ -68,6 +68,11 @@ class PositionRunner:
         self._telemetry: queue.Queue[tuple[Mapping[str, JointReading], float, float | None]] = (
             queue.Queue()
         )
+
+    def on_link_event(self, event: LinkEvent) -> None:
+        """A Link listener: telemetry frames go to the controller (any thread)."""
+        if isinstance(event, TelemetryFrame):
+            self.on_readings(event.readings, event.received_at, event.delay_s)
 
     def on_readings(
         self,

@@ -143,7 +143,8 @@ class LiveLink(Link):
         self._send_errors = 0
         self._hellos_sent = 0
         self._rcp_rate = RateMeter()
-        self._next_tick = self._next_stats = clock()
+        self._next_tick = clock()
+        self._next_stats = self._next_tick + STATS_PERIOD_S
         self._buffer = bytearray(RECV_BUFFER_BYTES)
         self.loop = SelectLoop("ocu-link", clock=clock, on_error=self._loop_failed)
         self.loop.add_reader(transport.socket, self._receive_all)
@@ -287,6 +288,9 @@ class LiveLink(Link):
 
     def start(self) -> None:
         """Run the loop in its named daemon thread ("ocu-link")."""
+        with self._lock:
+            self._next_tick = self.clock()
+            self._next_stats = self._next_tick + STATS_PERIOD_S
         self.loop.start(self._step)
 
     def run(self) -> None:

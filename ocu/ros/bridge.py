@@ -49,6 +49,15 @@ LOSS_WARNING = 0.2
 UNKNOWN_CAMERA = "unknown"
 
 
+# How diagnostics and messages name the link's state.
+LINK_STATE_TEXT = {
+    LinkState.CONNECTING: "connecting",
+    LinkState.CONNECTED: "connected",
+    LinkState.LOST: "LINK LOST",
+    LinkState.CLOSED: "closed",
+}
+
+
 class BridgeError(ValueError):
     """A bridge setting or a velocity command that cannot be used."""
 
@@ -250,7 +259,7 @@ def link_report(state: LinkState, stats: LinkStats, hardware_id: str) -> Diagnos
     else:
         level, message = DiagnosticLevel.ERROR, "link closed"
     values = (
-        ("state", state.value),
+        ("state", LINK_STATE_TEXT[state]),
         ("datagrams sent", str(stats.sent)),
         ("valid packets received", str(stats.received)),
         ("telemetry packets", str(stats.telemetry)),
@@ -600,7 +609,7 @@ class BridgeCore:
                 return {}
             if self._gate is LinkGate.LOST:
                 self._rejected += 1
-                raise PositionError(f"joint goal ignored: link {self._link_state.value}")
+                raise PositionError(f"joint goal ignored: {LINK_STATE_TEXT[self._link_state]}")
             try:
                 goals = parse_joint_goal(self.profile, self._limits, names, positions)
             except PositionError:

@@ -36,13 +36,13 @@ from ocu.console.model import ConsoleModel
 from ocu.hotkeys import KeyMap
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest
+from ocu.qt.console import ConsoleBinding
 from ocu.qt.link import QtLink
 from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
 from ocu.record.replay_link import ReplayLink
-from ocu.records import LinkState, TelemetryFrame
+from ocu.records import LinkState
 from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.model3d import Model3DWidget
 from ocu.widgets.replay import ReplayBanner, ReplayControls
@@ -57,8 +57,7 @@ from ocu.windows.velocity import VelocityPanel
 log = logging.getLogger("ocu.console")
 
 CONTROL_PERIOD_MS = 50
-# Views take telemetry at most this often (about 30 Hz): a robot flooding the link with
-# telemetry must not keep the GUI thread from the operator's keys.
+# The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
 LAYOUT_VERSION = 2  # 2: the Video dock
 EVENT_LOG_LENGTH = 500
@@ -184,9 +183,6 @@ class MainWindow(QMainWindow):
         app.focusWindowChanged.connect(self._on_focus_window)
 
         events = self.model.events
-        events.command_changed.connect(self._push_command)
-        events.stream_request_changed.connect(self._push_streams)
-        events.estop_requested.connect(self._link_estop)
         events.connection_changed.connect(self._on_connection)
         events.operator_acted.connect(self._on_operator_acted)
         events.message.connect(self.log_event)
@@ -206,7 +202,8 @@ class MainWindow(QMainWindow):
         self._control_timer.setInterval(CONTROL_PERIOD_MS)
         self._control_timer.timeout.connect(self._control_tick)
         self._control_timer.start()
-        self._last_view_at = 0.0
+        self.binding: ConsoleBinding | None = None
+        self.model.robot.events.telemetry_changed.connect(self.model_view.show_reading)
         self._view_timer = QTimer(self)
         self._view_timer.setInterval(VIEW_PERIOD_MS)
         self._view_timer.timeout.connect(self._view_tick)
@@ -320,24 +317,18 @@ class MainWindow(QMainWindow):
         else:
             assert self.link_factory is not None
             link = self.link_factory()
-        qt = QtLink(link, self)
-        robot = self.model.robot
-        qt.telemetry_ready.connect(self._on_telemetry_ready)
-        qt.link_state_changed.connect(self._on_link_state)
-        qt.stats_updated.connect(robot.on_stats)
-        qt.status_received.connect(robot.on_status)
-        qt.extension_changed.connect(robot.on_extension)
-        qt.safety_event.connect(self._on_safety_event)
-        self.link = qt
-        robot.on_link_state(LinkState.CONNECTING, "connecting")
-        self.video_panel.set_link(qt)
         if not link.read_only:
             # Subscribed before any datagram flows.
             if self.recorder is not None:
                 self.recorder.attach(link)
             self.ros.link_started(link)
-            link.set_command(self.model.command())
-            link.set_stream_request(self.model.stream_request)
+        qt = QtLink(link, self)
+        self.model.robot.on_link_state(LinkState.CONNECTING, "connecting")
+        self.binding = ConsoleBinding(self.model, qt, self)
+        qt.link_state_changed.connect(self._on_link_state)
+        qt.safety_event.connect(self._on_safety_event)
+        self.link = qt
+        self.video_panel.set_link(qt)
         qt.start()
         self.log_event("replay started" if link.read_only else "link started")
 
@@ -348,7 +339,10 @@ class MainWindow(QMainWindow):
         self.video_panel.set_link(None)
         if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
-        qt.shutdown()
+        qt.shutdown()  # zeros last
+        if self.binding is not None:
+            self.binding.unbind()
+            self.binding = None
         if self.recorder is not None:
             self.recorder.detach(qt.link)
         self.model.robot.on_link_state(LinkState.CLOSED, "disconnected by the operator")
@@ -359,20 +353,6 @@ class MainWindow(QMainWindow):
             self._start_link()
         else:
             self._stop_link()
-
-    def _push_command(self) -> None:
-        # The model owns the whole command (ROS's velocities too): the link is fed from it
-        # alone and never read back.
-        if self.link is not None:
-            self.link.link.set_command(self.model.command())
-
-    def _push_streams(self, streams: tuple[CameraRequest, ...]) -> None:
-        if self.link is not None:
-            self.link.link.set_stream_request(streams)
-
-    def _link_estop(self, reason: str) -> None:
-        if self.link is not None:
-            self.link.link.emergency_stop(reason)
 
     def _on_operator_acted(self) -> None:
         self.ros.override("operator")
@@ -386,34 +366,16 @@ class MainWindow(QMainWindow):
         # Queued signals of a link stopped meanwhile may still arrive; they are stale.
         return self.link is not None and self.sender() is self.link
 
-    def _on_telemetry_ready(self) -> None:
-        if not self._is_current_link():
-            return
-        elapsed_ms = (time.monotonic() - self._last_view_at) * 1000.0
-        if elapsed_ms >= VIEW_PERIOD_MS:
-            self._view_tick()
-        # Otherwise the view timer takes the newest frame within one view period.
-
     def _view_tick(self) -> None:
-        """Show the newest telemetry (if any came) and the predicted pose now."""
-        self._last_view_at = time.monotonic()
-        link = self.link
-        frame = link.take_telemetry() if link is not None else None
-        if frame is not None:
-            self._on_telemetry(frame)
+        """The 3D view: the pose predicted now, and where the last reading put the arm."""
         last = self.model.robot.last_telemetry_at
         if last is not None:
-            predicted = self.model.predicted_angles(self._last_view_at)
+            predicted = self.model.predicted_angles(time.monotonic())
             self.model_view.set_joint_angles(predicted, fresh_at=last)
-
-    def _on_telemetry(self, frame: TelemetryFrame) -> None:
-        self.model.on_telemetry(frame)
-        self.model_view.show_reading(frame)
 
     def _on_link_state(self, state: LinkState, reason: str) -> None:
         if not self._is_current_link():
             return
-        self.model.robot.on_link_state(state, reason)
         self.log_event(f"link {state.value}: {reason}")
         if state == LinkState.LOST:
             self.model.halt("link lost")

@@ -20,9 +20,9 @@ from ocu.control.position import (
     PositionError,
 )
 from ocu.control.runner import PositionRunner
-from ocu.link.core import LinkCore, LinkListener
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
-from ocu.records import JointReading, TelemetryFrame
+from ocu.records import JointReading, LinkEvent, TelemetryFrame
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, StateRecorder
 
@@ -323,14 +323,6 @@ def test_several_joints_and_cancel(controller: PositionController) -> None:
 # ---- against the real simulator -----------------------------------------------------------
 
 
-class Forward(LinkListener):
-    def __init__(self, runner: PositionRunner) -> None:
-        self.runner = runner
-
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        self.runner.on_readings(frame.readings, frame.received_at, frame.delay_s)
-
-
 @pytest.fixture
 def sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
     simulator = RobotSimulator(profile, telemetry_hz=1.0, video_fps=0.0)
@@ -343,9 +335,9 @@ def control_in_sim(
     profile: RobotProfile, sim: RobotSimulator, targets_deg: dict[str, float], timeout_s: float
 ) -> tuple[list[str], StateRecorder]:
     controller = PositionController(profile, VelocityLimits(profile))
-    link = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+    link = UdpLink(profile, sim.address, gui_alive_timeout_s=None)
     runner = PositionRunner(controller, link)
-    link.listener = Forward(runner)
+    link.subscribe(runner.on_link_event)
     link.start()
     truth = StateRecorder(sim)
     try:
@@ -397,7 +389,7 @@ def test_reaches_targets_over_a_slow_noisy_link(profile: RobotProfile) -> None:
         sim.stop()
 
 
-class InjectWhenMoving(LinkListener):
+class InjectWhenMoving:
     """Forwards telemetry; once the shoulder reads past an angle, its encoder breaks."""
 
     def __init__(self, runner: PositionRunner, sim: RobotSimulator, past_rad: float) -> None:
@@ -406,12 +398,14 @@ class InjectWhenMoving(LinkListener):
         self.past_rad = past_rad
         self.broken = False
 
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        shoulder = frame.readings.get("shoulder")
-        if not self.broken and shoulder is not None and (shoulder.angle_rad or 0) > self.past_rad:
-            self.broken = True
-            self.sim.set_raw_position("shoulder", 0)
-        self.runner.on_readings(frame.readings, frame.received_at, frame.delay_s)
+    def __call__(self, event: LinkEvent) -> None:
+        if isinstance(event, TelemetryFrame):
+            shoulder = event.readings.get("shoulder")
+            moved = shoulder is not None and (shoulder.angle_rad or 0) > self.past_rad
+            if not self.broken and moved:
+                self.broken = True
+                self.sim.set_raw_position("shoulder", 0)
+        self.runner.on_link_event(event)
 
 
 @pytest.mark.slow
@@ -421,10 +415,10 @@ def test_a_broken_encoder_never_drives_the_joint_the_wrong_way(profile: RobotPro
                          initial_joints={"shoulder": math.radians(30)})  # fmt: skip
     sim.start()
     controller = PositionController(profile, VelocityLimits(profile))
-    link = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+    link = UdpLink(profile, sim.address, gui_alive_timeout_s=None)
     runner = PositionRunner(controller, link)
     listener = InjectWhenMoving(runner, sim, math.radians(40))
-    link.listener = listener
+    link.subscribe(listener)
     link.start()
     truth = StateRecorder(sim)
     try:
@@ -468,9 +462,9 @@ def test_readings_too_noisy_to_confirm_end_the_target(profile: RobotProfile) -> 
     sim.start()
     try:
         controller = PositionController(profile, VelocityLimits(profile))
-        link = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+        link = UdpLink(profile, sim.address, gui_alive_timeout_s=None)
         runner = PositionRunner(controller, link)
-        link.listener = Forward(runner)
+        link.subscribe(runner.on_link_event)
         link.start()
         try:
             assert sim.wait_until(lambda s: s.telemetry_sent >= 2, 5.0)

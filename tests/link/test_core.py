@@ -71,9 +71,7 @@ def peer(profile: RobotProfile) -> Iterator[RobotPeer]:
     robot.close()
 
 
-def make_link(
-    profile: RobotProfile, peer: RobotPeer, **kwargs: Any
-) -> tuple[UdpLink, Recorder]:
+def make_link(profile: RobotProfile, peer: RobotPeer, **kwargs: Any) -> tuple[UdpLink, Recorder]:
     recorder = Recorder()
     link = UdpLink(profile, peer.address, listener=recorder, **kwargs)
     return link, recorder

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ocu.link.core import LinkCore
+from ocu.link.live import UdpLink
 from ocu.link.reassembly import (
     RESTART_GAP,
     Reassembler,
@@ -174,7 +174,7 @@ def test_real_simulator_with_loss_duplicates_and_reordering(profile: RobotProfil
     sim = RobotSimulator(profile, extended=True, video_fps=0.0, faults=faults, seed=11)
     sim.start()
     recorder = Recorder()
-    link = LinkCore(profile, sim.address, listener=recorder, extension=True)
+    link = UdpLink(profile, sim.address, listener=recorder, extension=True)
     link.set_stream_request([CameraRequest(k, 240, 180, 30) for k in range(4)])
     link.start()
     try:

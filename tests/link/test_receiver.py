@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import pytest
 
 from ocu.control.commands import rad_to_ticks
-from ocu.link.core import LinkCore
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket
 from ocu.records import LinkState
@@ -29,7 +29,7 @@ def peer(profile: RobotProfile) -> Iterator[RobotPeer]:
     robot.close()
 
 
-def send(peer: RobotPeer, link: LinkCore, tick: int, shoulder_raw: int) -> None:
+def send(peer: RobotPeer, link: UdpLink, tick: int, shoulder_raw: int) -> None:
     record = MotorRecord(device_id=SHOULDER_ID, position=shoulder_raw)
     peer.send_raw(peer.codec.encode(TelemetryPacket(tick=tick, motors=(record,))), link.address)
 
@@ -100,7 +100,7 @@ def test_the_round_trip_is_measured(profile: RobotProfile, latency_ms: float) ->
     )
     sim.start()
     recorder = Recorder()
-    link = LinkCore(profile, sim.address, listener=recorder, gui_alive_timeout_s=None)
+    link = UdpLink(profile, sim.address, listener=recorder, gui_alive_timeout_s=None)
     link.start()
     try:
         assert recorder.wait(lambda: len(recorder.telemetry) >= 2)

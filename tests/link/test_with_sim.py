@@ -5,10 +5,8 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
-from pytestqt.qtbot import QtBot
 
-from ocu.link.core import LinkCore
-from ocu.link.qt import DecodedVideoFrame, LinkThread
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.records import LinkState
 from ocu.sim.faults import FaultConfig
@@ -30,7 +28,7 @@ def test_estop_burst_stops_the_robot_under_30_percent_loss(
     profile: RobotProfile, lossy_sim: RobotSimulator
 ) -> None:
     # A slow tick, so only the burst itself can stop the robot within the deadline.
-    link = LinkCore(profile, lossy_sim.address, gui_alive_timeout_s=None, send_rate_hz=1.0)
+    link = UdpLink(profile, lossy_sim.address, gui_alive_timeout_s=None, send_rate_hz=1.0)
     link.start()
     stopped_by_burst = 0
     trials = 40
@@ -54,7 +52,7 @@ def test_cut_link_is_lost_then_recovers(profile: RobotProfile) -> None:
     sim = RobotSimulator(profile, telemetry_hz=20.0, video_fps=0.0)
     sim.start()
     recorder = Recorder()
-    link = LinkCore(
+    link = UdpLink(
         profile, sim.address, listener=recorder, link_lost_after_s=0.4, gui_alive_timeout_s=None
     )
     link.start()
@@ -74,36 +72,3 @@ def test_cut_link_is_lost_then_recovers(profile: RobotProfile) -> None:
     finally:
         link.shutdown()
         sim.stop()
-
-
-def test_qthread_adapter_emits_signals_and_stops(qtbot: QtBot, profile: RobotProfile) -> None:
-    sim = RobotSimulator(profile, telemetry_hz=20.0, video_fps=20.0)
-    sim.start()
-    thread = LinkThread(LinkCore(profile, sim.address))
-    try:
-        with (
-            qtbot.waitSignal(thread.telemetry_received, timeout=3000) as telemetry,
-            qtbot.waitSignal(thread.link_state_changed, timeout=3000) as state,
-        ):
-            thread.start_link()
-        assert "waist" in telemetry.args[0].readings
-        assert state.args[0] == LinkState.CONNECTED
-        with qtbot.waitSignal(thread.video_frame_received, timeout=3000) as video:
-            pass
-        frame = video.args[0]
-        assert isinstance(frame, DecodedVideoFrame)
-        assert not frame.image.isNull()
-        assert frame.image.width() == 320
-        with qtbot.waitSignal(thread.stats_updated, timeout=3000) as stats:
-            pass
-        assert stats.args[0].telemetry > 0
-        # The GUI thread's heartbeat keeps motion going past the 0.5 s watchdog.
-        thread.core.set_velocities(neck=0.3)
-        qtbot.wait(800)
-        assert thread.core.command.is_motion
-    finally:
-        thread.shutdown()
-        thread.shutdown()
-        sim.stop()
-    assert not thread.isRunning()
-    assert sim.received_commands()[-1].packet.axes == (0,) * 16

@@ -12,13 +12,23 @@ from typing import Any
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from ocu.link.core import LinkListener
-from ocu.records import LinkState, LinkStats, StatusFrame, TelemetryFrame, VideoFrame
+from ocu.records import (
+    DatagramReceived,
+    DatagramSent,
+    LinkEvent,
+    LinkState,
+    LinkStateChanged,
+    LinkStats,
+    SafetyEvent,
+    StatusFrame,
+    TelemetryFrame,
+    VideoFrame,
+)
 
 DEADLINE_S = 10.0
 
 
-class Collector(LinkListener):
+class Collector:
     """Keeps every event a link (or a replay) reports; tests wait on it with deadlines."""
 
     def __init__(self) -> None:
@@ -32,34 +42,25 @@ class Collector(LinkListener):
         self.stats: list[LinkStats] = []
         self.safety: list[str] = []
 
-    def _add(self, items: list[Any], item: object) -> None:
+    def __call__(self, event: LinkEvent) -> None:
         with self.cond:
-            items.append(item)
+            if isinstance(event, DatagramSent):
+                self.sent.append(event.data)
+            elif isinstance(event, DatagramReceived):
+                self.received.append(event.data)
+            elif isinstance(event, TelemetryFrame):
+                self.telemetry.append(event)
+            elif isinstance(event, VideoFrame):
+                self.video.append(event)
+            elif isinstance(event, StatusFrame):
+                self.status.append(event)
+            elif isinstance(event, LinkStateChanged):
+                self.states.append(event.state)
+            elif isinstance(event, LinkStats):
+                self.stats.append(event)
+            elif isinstance(event, SafetyEvent):
+                self.safety.append(event.message)
             self.cond.notify_all()
-
-    def datagram_sent(self, data: bytes, sent_at: float) -> None:
-        self._add(self.sent, data)
-
-    def datagram_received(self, data: bytes, received_at: float) -> None:
-        self._add(self.received, data)
-
-    def telemetry_received(self, frame: TelemetryFrame) -> None:
-        self._add(self.telemetry, frame)
-
-    def video_frame_received(self, frame: VideoFrame) -> None:
-        self._add(self.video, frame)
-
-    def status_received(self, frame: StatusFrame) -> None:
-        self._add(self.status, frame)
-
-    def link_state_changed(self, state: LinkState, reason: str) -> None:
-        self._add(self.states, state)
-
-    def stats_updated(self, stats: LinkStats) -> None:
-        self._add(self.stats, stats)
-
-    def safety_event(self, message: str) -> None:
-        self._add(self.safety, message)
 
     def wait(self, predicate: Callable[[], bool], timeout_s: float = DEADLINE_S) -> bool:
         with self.cond:

@@ -3,7 +3,7 @@
     python -m tests.record.record_session FILE --until-killed
     python -m tests.record.record_session FILE --file-size-limit BYTES
 
-Both record a simulator (in this process) through a LinkCore. --until-killed prints "recording"
+Both record a simulator (in this process) through a UdpLink. --until-killed prints "recording"
 and runs until it is killed. --file-size-limit caps this process's file size (RLIMIT_FSIZE,
 with SIGXFSZ ignored, so writes past it fail with EFBIG as on a full disk), waits for the
 recorder to report the error, checks that the link still sends commands afterwards and
@@ -21,7 +21,7 @@ import threading
 import time
 from pathlib import Path
 
-from ocu.link.core import LinkCore
+from ocu.link.live import UdpLink
 from ocu.profile import load_profile
 from ocu.record.recorder import Recorder
 from ocu.sim.simulator import RobotSimulator
@@ -48,7 +48,7 @@ def main() -> int:
     sim = RobotSimulator(profile, telemetry_hz=50.0, video_fps=20.0, video_size=(160, 120))
     sim.start()
     recorder = Recorder(profile, chunk_bytes=32 * 1024, flush_period_s=0.2, on_error=on_error)
-    link = LinkCore(profile, sim.address, gui_alive_timeout_s=None, send_rate_hz=20.0)
+    link = UdpLink(profile, sim.address, gui_alive_timeout_s=None, send_rate_hz=20.0)
     recorder.attach(link)
     if args.file_size_limit is not None:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from ocu.link.core import LinkCore
+from ocu.link.live import UdpLink
 from ocu.link.stats import tick_loss
 from ocu.profile import RobotProfile
 from ocu.record.inspect import main, summarize
@@ -38,7 +38,7 @@ def test_telemetry_loss_matches_the_simulator_drops(profile: RobotProfile, tmp_p
     sim.start()
     collector = Collector()
     recorder = Recorder(profile)
-    link = LinkCore(
+    link = UdpLink(
         profile, sim.address, listener=collector, gui_alive_timeout_s=None, send_rate_hz=20.0
     )
     recorder.attach(link)
@@ -81,7 +81,7 @@ def test_main_prints_text_json_and_says_truncated(
     sim.start()
     collector = Collector()
     recorder = Recorder(profile, chunk_bytes=8 * 1024)
-    link = LinkCore(profile, sim.address, listener=collector, gui_alive_timeout_s=None)
+    link = UdpLink(profile, sim.address, listener=collector, gui_alive_timeout_s=None)
     recorder.attach(link)
     path = tmp_path / "s.mcap"
     recorder.start(path)

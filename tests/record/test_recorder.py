@@ -20,7 +20,7 @@ from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 
 from ocu.control.commands import read_telemetry
-from ocu.link.core import LinkCore, LinkListener
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.protocol import TelemetryPacket
 from ocu.protocol.extended import CameraRequest
@@ -29,8 +29,8 @@ from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.inspect import main as inspect_main
 from ocu.record.reader import Recording
-from ocu.record.recorder import Recorder, TeeListener
-from ocu.records import Command, TelemetryFrame
+from ocu.record.recorder import Recorder
+from ocu.records import Command, DatagramSent, LinkEvent, SafetyEvent, TelemetryFrame
 from ocu.sim.simulator import RobotSimulator
 from tests.record.helpers import Collector, assert_monotonic, poll_until, read_finished
 
@@ -51,7 +51,7 @@ def test_session_is_in_the_file_raw_and_decoded(
 ) -> None:
     collector = Collector()
     recorder = Recorder(profile)
-    link = LinkCore(profile, vendor_sim.address, listener=collector, gui_alive_timeout_s=None)
+    link = UdpLink(profile, vendor_sim.address, listener=collector, gui_alive_timeout_s=None)
     recorder.attach(link)
     path = tmp_path / "session.mcap"
     wall_before = time.time_ns()
@@ -164,7 +164,7 @@ def test_extended_session_records_fragments_status_and_every_camera(
     sim.start()
     collector = Collector()
     recorder = Recorder(profile)
-    link = LinkCore(
+    link = UdpLink(
         profile, sim.address, listener=collector, gui_alive_timeout_s=None, extension=True
     )
     recorder.attach(link)
@@ -244,7 +244,7 @@ def test_full_queue_drops_and_counts_and_the_link_goes_on(
 ) -> None:
     collector = Collector()
     recorder = Recorder(profile, max_queue_bytes=1)
-    link = LinkCore(profile, vendor_sim.address, listener=collector, gui_alive_timeout_s=None)
+    link = UdpLink(profile, vendor_sim.address, listener=collector, gui_alive_timeout_s=None)
     recorder.attach(link)
     recorder.start(tmp_path / "dropped.mcap")
     link.start()
@@ -276,34 +276,40 @@ def test_start_stop_are_safe_to_repeat(profile: RobotProfile, tmp_path: Path) ->
             assert events == ["started", "stopped"]
 
 
-def test_tee_listener_spares_the_others_from_a_failing_one(profile: RobotProfile) -> None:
-    class Failing(LinkListener):
-        def telemetry_received(self, frame: TelemetryFrame) -> None:
-            raise RuntimeError("listener bug")
+def test_a_failing_listener_spares_the_others(profile: RobotProfile) -> None:
+    def failing(event: LinkEvent) -> None:
+        raise RuntimeError("listener bug")
 
     collector = Collector()
-    tee = TeeListener(Failing(), collector)
-    packet = TelemetryPacket(tick=1)
-    frame = TelemetryFrame(packet, read_telemetry(profile, packet), 0.0, 0.0)
-    tee.telemetry_received(frame)
-    tee.datagram_sent(b"\x01", 0.0)
-    assert collector.telemetry == [frame]
-    assert collector.sent == [b"\x01"]
-
-
-def test_attach_tees_and_detach_restores(profile: RobotProfile) -> None:
-    collector = Collector()
-    link = LinkCore(profile, ("127.0.0.1", 9), listener=collector)
+    link = UdpLink(profile, ("127.0.0.1", 9), listener=failing)
     try:
-        recorder = Recorder(profile)
-        recorder.attach(link)
-        assert isinstance(link.listener, TeeListener)
-        assert link.listener.listeners == (collector, recorder.listener)
-        Recorder.detach(link)
-        restored: LinkListener = link.listener
-        assert restored is collector
+        link.subscribe(collector)
+        packet = TelemetryPacket(tick=1)
+        frame = TelemetryFrame(packet, read_telemetry(profile, packet), 0.0, 0.0)
+        link.emit(frame)
+        link.emit(DatagramSent(b"\x01", 0.0))
+        assert collector.telemetry == [frame]
+        assert collector.sent == [b"\x01"]
     finally:
         link.shutdown()
+
+
+def test_attach_subscribes_and_detach_leaves(profile: RobotProfile, tmp_path: Path) -> None:
+    link = UdpLink(profile, ("127.0.0.1", 9))
+    recorder = Recorder(profile)
+    try:
+        recorder.attach(link)
+        recorder.start(tmp_path / "a.mcap")
+        link.emit(SafetyEvent("recorded"))
+        recorder.detach(link)
+        link.emit(SafetyEvent("not recorded"))
+        recorder.stop()
+    finally:
+        link.shutdown()
+    with Recording(tmp_path / "a.mcap") as recording:
+        messages = [recording.decode(m).message for m in recording.messages([s.EVENTS])]
+    assert "recorded" in messages
+    assert "not recorded" not in messages
 
 
 def _run_session(path: Path, *args: str) -> subprocess.Popen[str]:
@@ -403,7 +409,7 @@ def test_telemetry_frames_decode_the_same_from_the_raw_channel(
     # The raw bytes stored are enough to rebuild what the link decoded (replay relies on it).
     collector = Collector()
     recorder = Recorder(profile)
-    link = LinkCore(profile, vendor_sim.address, listener=collector, gui_alive_timeout_s=None)
+    link = UdpLink(profile, vendor_sim.address, listener=collector, gui_alive_timeout_s=None)
     recorder.attach(link)
     recorder.start(tmp_path / "t.mcap")
     link.start()

@@ -1,4 +1,4 @@
-"""Replay: the player without Qt, the Qt source against what a live LinkThread delivered."""
+"""Replay: the read-only link against what the live link delivered, then its Qt side."""
 
 from __future__ import annotations
 
@@ -8,82 +8,69 @@ from pathlib import Path
 import pytest
 from PySide6.QtCore import Qt
 from PySide6.QtTest import QTest
-from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
 
-from ocu.link.core import LinkCore
-from ocu.link.qt import LinkThread
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
-from ocu.record.player import ReplayCore, ReplayPlayer
-from ocu.record.reader import Recording
+from ocu.qt.link import QtLink
+from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
-from ocu.record.replay import ReplayBanner, ReplayControls, ReplaySource, format_time
-from ocu.records import Command, LinkState, LinkStats, TelemetryFrame
+from ocu.record.replay_link import ReplayLink
+from ocu.records import Command, LinkState, TelemetryFrame
 from ocu.sim.simulator import RobotSimulator
+from ocu.widgets.replay import ReplayBanner, ReplayControls, format_time
 from tests.record.helpers import Collector
 
 DEADLINE_MS = 10_000
 
 
 @pytest.fixture
-def live_session(
-    qtbot: QtBot, profile: RobotProfile, tmp_path: Path
-) -> tuple[Path, list[TelemetryFrame]]:
-    """A recording of a live LinkThread session and the telemetry its GUI side received."""
+def live_session(profile: RobotProfile, tmp_path: Path) -> tuple[Path, list[TelemetryFrame]]:
+    """A recording of a live link session and the telemetry the link delivered."""
     sim = RobotSimulator(profile, telemetry_hz=20.0, video_fps=10.0, video_size=(160, 120))
     sim.start()
-    thread = LinkThread(LinkCore(profile, sim.address))
+    live = Collector()
+    link = UdpLink(profile, sim.address, listener=live, gui_alive_timeout_s=None)
     recorder = Recorder(profile)
-    recorder.attach(thread.core)
-    seen: list[TelemetryFrame] = []
-    thread.telemetry_received.connect(seen.append)
+    recorder.attach(link)
     path = tmp_path / "live.mcap"
     recorder.start(path)
-    thread.start_link()
+    link.start()
     try:
-        qtbot.waitUntil(lambda: len(seen) >= 5, timeout=DEADLINE_MS)
-        thread.set_command(Command(velocities={"waist": 0.4, "shoulder": 0.3}))
-        qtbot.waitUntil(lambda: len(seen) >= 30, timeout=DEADLINE_MS)
-        thread.emergency_stop("test")
-        qtbot.waitUntil(lambda: len(seen) >= 40, timeout=DEADLINE_MS)
+        assert live.wait(lambda: len(live.telemetry) >= 5)
+        link.set_command(Command(velocities={"waist": 0.4, "shoulder": 0.3}))
+        assert live.wait(lambda: len(live.telemetry) >= 30)
+        link.emergency_stop("test")
+        assert live.wait(lambda: len(live.telemetry) >= 40)
     finally:
-        thread.shutdown()
+        link.shutdown()
         sim.stop()
     recorder.stop()
-    QApplication.processEvents()  # signals the link queued before it stopped
-    return path, seen
+    return path, live.telemetry
 
 
-def test_replay_reproduces_the_telemetry_the_gui_saw(
-    qtbot: QtBot, profile: RobotProfile, live_session: tuple[Path, list[TelemetryFrame]]
+def test_replay_reproduces_the_telemetry_the_live_link_delivered(
+    profile: RobotProfile, live_session: tuple[Path, list[TelemetryFrame]]
 ) -> None:
     path, seen = live_session
-    source = ReplaySource(path, profile)
-    replayed: list[TelemetryFrame] = []
-    states: list[LinkState] = []
-    stats: list[LinkStats] = []
-    safety: list[str] = []
-    source.telemetry_received.connect(replayed.append)
-    source.link_state_changed.connect(lambda state, _: states.append(state))
-    source.stats_updated.connect(stats.append)
-    source.safety_event.connect(safety.append)
-    frames_ready: list[int] = []
-    source.video_frame_ready.connect(frames_ready.append)
-    source.start_link()
+    finished: list[bool] = []
+    source = ReplayLink(path, profile, on_finished=lambda: finished.append(True))
+    collector = Collector()
+    source.subscribe(collector)
+    source.start()
     try:
         source.set_speed(4.0)
         started = time.monotonic()
-        with qtbot.waitSignal(source.finished, timeout=DEADLINE_MS):
-            source.play()
+        source.play()
+        assert collector.wait(lambda: bool(finished))
         took_s = time.monotonic() - started
-        qtbot.waitUntil(lambda: len(replayed) == len(seen), timeout=DEADLINE_MS)
-        qtbot.waitUntil(lambda: bool(frames_ready), timeout=DEADLINE_MS)
-        frame = source.take_video_frame(frames_ready[0])
-        assert frame is not None
-        assert not frame.image.isNull()
-        assert frame.image.width() == 160
+        assert collector.wait(lambda: len(collector.telemetry) == len(seen))
+        assert collector.video
+        assert source.read_only
     finally:
         source.shutdown()
+    replayed = collector.telemetry
+    states, stats, safety = collector.states, collector.stats, collector.safety
     assert [(f.packet, f.readings) for f in replayed] == [(f.packet, f.readings) for f in seen]
     # The recording's wall clock, not the replay's: each frame at its recorded moment. (The
     # live side read time.time() itself; a VM may step its wall clock meanwhile, so the
@@ -105,57 +92,71 @@ def test_replay_reproduces_the_telemetry_the_gui_saw(
     assert took_s < source.duration_s / 4.0 + 1.0
 
 
-def test_player_seeks_restores_the_link_state_and_honours_speed(
-    profile: RobotProfile, live_session: tuple[Path, list[TelemetryFrame]]
+def test_the_replay_seeks_restores_the_link_state_and_honours_speed(
+    live_session: tuple[Path, list[TelemetryFrame]],
 ) -> None:
     path, seen = live_session
     collector = Collector()
     finished: list[bool] = []
-    with Recording(path) as recording:
-        player = ReplayPlayer(
-            recording, recording.profile(), collector, on_finished=lambda: finished.append(True)
-        )
-        player.start()
-        try:
-            middle_s = player.duration_s / 2
-            player.seek(middle_s)
-            assert collector.wait(lambda: len(collector.stats) == 1)
-            assert collector.states == [LinkState.CONNECTED]
-            assert collector.telemetry == []
-            assert not player.playing
-            player.set_speed(2.0)
-            player.play()
-            assert collector.wait(lambda: bool(finished))
-            middle_wall = recording.start_ns / 1e9 + middle_s
-            assert collector.telemetry
-            assert all(f.wall_time >= middle_wall for f in collector.telemetry)
-            assert collector.telemetry[-1].packet == seen[-1].packet
-            assert player.position_s == pytest.approx(player.duration_s)
-            # What the console reads of the link, answered for the replayed moment.
-            core = ReplayCore(player)
-            assert core.state == LinkState.CLOSED
-            assert core.stats() == collector.stats[-1]
-            assert core.command == Command(video_bitrate=core.command.video_bitrate)
-            assert core.set_max_velocity("waist", 99.0) == profile.channels["waist"].hard_max
-            assert core.video_stats().fragments == 0  # a vendor-protocol recording
-            with pytest.raises(ValueError, match="speed"):
-                player.set_speed(8.0)
-        finally:
-            player.stop()
-            player.stop()
+    player = ReplayLink(path, on_finished=lambda: finished.append(True))
+    player.subscribe(collector)
+    player.start()
+    try:
+        middle_s = player.duration_s / 2
+        player.seek(middle_s)
+        assert collector.wait(lambda: len(collector.stats) == 1)
+        assert collector.states == [LinkState.CONNECTED]
+        assert collector.telemetry == []
+        assert not player.playing
+        player.set_speed(2.0)
+        player.play()
+        assert collector.wait(lambda: bool(finished))
+        middle_wall = player.start_ns / 1e9 + middle_s
+        assert collector.telemetry
+        assert all(f.wall_time >= middle_wall for f in collector.telemetry)
+        assert collector.telemetry[-1].packet == seen[-1].packet
+        assert player.position_s == pytest.approx(player.duration_s)
+        # The Link interface, answered for the replayed moment; commands go nowhere.
+        assert player.state == LinkState.CLOSED
+        assert player.stats() == collector.stats[-1]
+        assert player.command == Command(video_bitrate=player.command.video_bitrate)
+        assert player.video_stats().fragments == 0  # a vendor-protocol recording
+        player.set_command(Command(velocities={"waist": 0.5}))
+        player.emergency_stop()
+        assert not player.command.is_motion
+        with pytest.raises(ValueError, match="speed"):
+            player.set_speed(8.0)
+    finally:
+        player.shutdown()
+        player.shutdown()
 
 
 def test_controls_play_pause_speed_and_seek(
     qtbot: QtBot, live_session: tuple[Path, list[TelemetryFrame]]
 ) -> None:
     path, _ = live_session
-    source = ReplaySource(path)
+    replay = ReplayLink(path)
+    link = QtLink(replay)
+    source = ReplayController(replay)
     controls = ReplayControls(source)
     banner = ReplayBanner(path)
     qtbot.addWidget(controls)
     qtbot.addWidget(banner)
-    source.start_link()
+    frames_ready: list[int] = []
+    link.video_frame_ready.connect(frames_ready.append)
+    link.start()
     try:
+        # The video of a replay is decoded off the GUI thread like live video.
+        source.set_speed(4.0)
+        with qtbot.waitSignal(source.finished, timeout=DEADLINE_MS):
+            source.play()
+        qtbot.waitUntil(lambda: bool(frames_ready), timeout=DEADLINE_MS)
+        frame = link.take_video_frame(frames_ready[0])
+        assert frame is not None
+        assert not frame.image.isNull()
+        assert frame.image.width() == 160
+        source.set_speed(1.0)
+        source.seek(0.0)
         assert "REPLAY" in banner.text()
         assert controls.badge.text() == "REPLAY"
         assert controls.time_label.text() == f"0:00.0 / {format_time(source.duration_s)}"
@@ -174,12 +175,10 @@ def test_controls_play_pause_speed_and_seek(
         qtbot.waitUntil(
             lambda: controls.slider.value() == controls.slider.maximum(), timeout=DEADLINE_MS
         )
-        # A replay drives no robot: the command calls are accepted and do nothing.
-        source.set_command(Command(velocities={"waist": 0.5}))
-        source.emergency_stop()
     finally:
-        source.shutdown()
-        source.shutdown()
+        source.stop()
+        link.shutdown()
+        link.shutdown()
 
 
 def test_format_time() -> None:

@@ -67,7 +67,7 @@ def test_unknown_values_are_nan() -> None:
 
 _CHECK = """
 import sys
-import ocu.record, ocu.record.inspect, ocu.record.player, ocu.record.reader
+import ocu.record, ocu.record.inspect, ocu.record.replay_link, ocu.record.reader
 qt = sorted(n for n in sys.modules if n.split(".")[0] in ("PySide6", "shiboken6", "pyqtgraph"))
 print(",".join(qt))
 """

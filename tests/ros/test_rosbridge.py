@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from ocu.link.core import LinkCore, LinkListener
+from ocu.control.commands import VelocityLimits
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.records import Command, LinkState
 from ocu.ros.bridge import BridgeState
@@ -48,15 +49,15 @@ def sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
 
 
 @pytest.fixture
-def link(profile: RobotProfile, sim: RobotSimulator) -> Iterator[LinkCore]:
+def link(profile: RobotProfile, sim: RobotSimulator) -> Iterator[UdpLink]:
     # The console's GUI thread beats the heartbeat; here nothing does, so no GUI watchdog.
-    core = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+    core = UdpLink(profile, sim.address, gui_alive_timeout_s=None)
     yield core
     core.shutdown()
 
 
 def test_console_hosts_ros_control_and_the_operator_overrides_it(
-    profile: RobotProfile, sim: RobotSimulator, link: LinkCore, ros_client: None
+    profile: RobotProfile, sim: RobotSimulator, link: UdpLink, ros_client: None
 ) -> None:
     import rospy
     from geometry_msgs.msg import Twist
@@ -68,12 +69,11 @@ def test_console_hosts_ros_control_and_the_operator_overrides_it(
     bridge = RosBridge(
         profile, hardware_id="sim", on_state_changed=lambda state, _text: states.append(state)
     )
-    link.listener = bridge.wrap_listener(LinkListener())
     link.start()
     cmd_vel = rospy.Publisher("cmd_vel", Twist, queue_size=10)
     joint_states = Collector("joint_states", JointState)
     try:
-        bridge.start(link)
+        bridge.start(link, VelocityLimits(profile))
         assert wait_for(lambda: cmd_vel.impl.has_connection(rospy.get_caller_id()), 10.0)
         cmd_vel.publish(forward(0.1))
         assert sim.wait_until(lambda s: not drive_stopped(s), 5.0)
@@ -112,15 +112,15 @@ def test_console_hosts_ros_control_and_the_operator_overrides_it(
 
 
 def test_start_twice_is_refused_and_stop_is_idempotent(
-    profile: RobotProfile, link: LinkCore, ros_client: None
+    profile: RobotProfile, link: UdpLink, ros_client: None
 ) -> None:
     from ocu.ros.rosbridge import RosBridge
 
     bridge = RosBridge(profile)
-    bridge.start(link)
+    bridge.start(link, VelocityLimits(profile))
     try:
         with pytest.raises(RuntimeError, match="already started"):
-            bridge.start(link)
+            bridge.start(link, VelocityLimits(profile))
     finally:
         bridge.stop()
     bridge.stop()
@@ -128,7 +128,7 @@ def test_start_twice_is_refused_and_stop_is_idempotent(
 
 
 def test_a_failing_bridge_loop_stops_ros_control(
-    link: LinkCore,
+    link: UdpLink,
     sim: RobotSimulator,
     ros_client: None,
     monkeypatch: pytest.MonkeyPatch,
@@ -138,7 +138,7 @@ def test_a_failing_bridge_loop_stops_ros_control(
 
     bridge = RosBridge(link.profile)
     link.start()
-    bridge.start(link)
+    bridge.start(link, VelocityLimits(link.profile))
     try:
         bridge.core.on_cmd_vel(0.3, 0.0)
         assert sim.wait_until(lambda s: not drive_stopped(s), 5.0)
@@ -155,7 +155,7 @@ def test_a_failing_bridge_loop_stops_ros_control(
         bridge.stop()
 
 
-def test_hosted_bridge_learns_link_loss_and_recovery_through_the_tee(
+def test_hosted_bridge_learns_link_loss_and_recovery_from_the_link(
     profile: RobotProfile, sim: RobotSimulator, ros_client: None
 ) -> None:
     from ocu.ros.bridge import LinkGate
@@ -165,24 +165,23 @@ def test_hosted_bridge_learns_link_loss_and_recovery_through_the_tee(
         return bridge.core.link_gate
 
     # LINK LOST after 0.5 s instead of 3 s, to keep the test short.
-    link = LinkCore(profile, sim.address, gui_alive_timeout_s=None, link_lost_after_s=0.5)
+    link = UdpLink(profile, sim.address, gui_alive_timeout_s=None, link_lost_after_s=0.5)
     bridge = RosBridge(profile)
     link.start()
     try:
         assert wait_for(lambda: link.state is LinkState.CONNECTED, 5.0)
         sim.cut_link()
         assert wait_for(lambda: link.state is LinkState.LOST, 5.0)
-        # The console turns ROS control on while the link is already lost: it wraps the
-        # running link's listener, then starts the bridge, which never saw the LOST event.
-        link.listener = bridge.wrap_listener(link.listener)
-        bridge.start(link)
+        # The console turns ROS control on while the link is already lost: the bridge
+        # subscribes to the running link and never saw the LOST event.
+        bridge.start(link, VelocityLimits(profile))
         assert gate() is LinkGate.LOST
         assert bridge.core.on_cmd_vel(0.3, 0.0) is None
         assert link.command.velocity("drive_linear") == 0.0
 
         restored_at = time.monotonic()
         sim.restore_link()
-        assert wait_for(lambda: gate() is LinkGate.RECOVERING, 5.0)  # CONNECTED via the tee
+        assert wait_for(lambda: gate() is LinkGate.RECOVERING, 5.0)  # CONNECTED, subscribed
         assert bridge.core.on_cmd_vel(0.3, 0.0) is None  # the planner's old command
         assert wait_for(lambda: gate() is LinkGate.OPEN, 5.0)  # quiet for 0.5 s
         assert bridge.core.on_cmd_vel(0.3, 0.0) == {"drive_linear": 0.3, "drive_turn": 0.0}

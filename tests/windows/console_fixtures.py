@@ -7,14 +7,15 @@ import subprocess
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
 
-from ocu.link.core import LinkCore
-from ocu.link.qt import LinkThread
+from ocu.link.base import Link
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.record.recorder import Recorder
 from ocu.records import LinkState
@@ -56,10 +57,10 @@ def make_console(
         *,
         connected: bool = True,
         recorder: Recorder | None = None,
-        **link_kwargs: object,
+        **link_kwargs: Any,
     ) -> MainWindow:
-        def link_factory() -> LinkThread:
-            return LinkThread(LinkCore(profile, sim.address, **link_kwargs))  # type: ignore[arg-type]
+        def link_factory() -> Link:
+            return UdpLink(profile, sim.address, **link_kwargs)
 
         window = MainWindow(
             profile, link_factory, "simulator", settings, connect=connected, recorder=recorder

@@ -9,10 +9,12 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from ocu.console.events import Event
+from ocu.console.model import ChannelCommand, ConsoleModel, Source
 from ocu.control.position import PositionError
-from ocu.console.model import ChannelCommand, Event, Source, ConsoleModel
 from ocu.profile import RobotProfile, load_profile
-from ocu.records import Command, CommandError, JointReading
+from ocu.protocol import TelemetryPacket
+from ocu.records import Command, CommandError, JointReading, TelemetryFrame
 
 
 class Recorder:
@@ -37,6 +39,13 @@ class Recorder:
 @pytest.fixture
 def model(profile: RobotProfile) -> ConsoleModel:
     return ConsoleModel(profile)
+
+
+def frame(
+    readings: dict[str, JointReading], received_at: float, delay_s: float | None = None
+) -> TelemetryFrame:
+    """A telemetry frame as the link makes it (the packet itself does not matter here)."""
+    return TelemetryFrame(TelemetryPacket(tick=0), readings, received_at, 0.0, delay_s)
 
 
 def reading(profile: RobotProfile, name: str, angle_rad: float) -> JointReading:
@@ -203,14 +212,23 @@ def test_manual_command_drops_held_keys_of_that_channel(model: ConsoleModel) -> 
     assert model.channel("waist") == ChannelCommand(-0.1, Source.SLIDER)
 
 
-def test_torch_is_part_of_the_command_and_survives_an_estop(model: ConsoleModel) -> None:
+def test_the_model_owns_the_whole_command_and_switches_survive_an_estop(
+    model: ConsoleModel,
+) -> None:
+    commands: list[Command] = []
+    model.events.command_changed.connect(lambda: commands.append(model.command()))
     model.set_torch(True)
+    model.select_camera(2)
+    model.set_video_bitrate(5.0)
     model.set_velocity("waist", 0.2)
-    base = Command(camera=2, video_bitrate=5.0)
-    command = model.command(base)
-    assert command == Command({"waist": 0.2}, torch=True, camera=2, video_bitrate=5.0)
+    assert model.command() == Command({"waist": 0.2}, torch=True, camera=2, video_bitrate=5.0)
+    assert len(commands) == 4  # each change is published
     model.emergency_stop()
-    assert model.command(base) == Command({}, torch=True, camera=2, video_bitrate=5.0)
+    assert model.command() == Command({}, torch=True, camera=2, video_bitrate=5.0)
+    with pytest.raises(CommandError, match="camera 9"):
+        model.select_camera(9)
+    with pytest.raises(CommandError, match="bit-rate"):
+        model.set_video_bitrate(-1.0)
 
 
 def test_connection_request_halts_before_disconnecting(model: ConsoleModel) -> None:
@@ -231,7 +249,7 @@ def test_position_targets_drive_their_channels_and_several_move_at_once(
 ) -> None:
     log = Recorder(model)
     model.on_telemetry(
-        {name: reading(profile, name, 0.0) for name in ("waist", "shoulder")}, received_at=0.0
+        frame({name: reading(profile, name, 0.0) for name in ("waist", "shoulder")}, 0.0)
     )
     model.set_targets({"waist": 0.5, "shoulder": -0.1})
     model.update(0.01)
@@ -253,10 +271,10 @@ def test_reached_target_stops_its_channel_with_a_message(
     model: ConsoleModel, profile: RobotProfile
 ) -> None:
     log = Recorder(model)
-    model.on_telemetry({"neck": reading(profile, "neck", 0.0)}, received_at=0.0)
+    model.on_telemetry(frame({"neck": reading(profile, "neck", 0.0)}, 0.0))
     model.set_target("neck", 0.0005)
     model.update(0.01)
-    model.on_telemetry({"neck": reading(profile, "neck", 0.0005)}, received_at=0.05)
+    model.on_telemetry(frame({"neck": reading(profile, "neck", 0.0005)}, 0.05))
     model.update(0.06)
     assert model.targets == {}
     assert model.channel("neck") == ChannelCommand()
@@ -272,7 +290,7 @@ def test_bad_target_applies_nothing(model: ConsoleModel) -> None:
 
 
 def test_cancel_targets_stops_the_channels(model: ConsoleModel, profile: RobotProfile) -> None:
-    model.on_telemetry({"elbow": reading(profile, "elbow", 0.0)}, received_at=0.0)
+    model.on_telemetry(frame({"elbow": reading(profile, "elbow", 0.0)}, 0.0))
     model.set_target("elbow", 1.0)
     model.update(0.01)
     assert model.is_moving
@@ -382,10 +400,8 @@ def test_fine_drive_keys_keep_the_ratio_of_their_speeds(model: ConsoleModel) -> 
 
 
 def test_what_is_sent_feeds_the_prediction(model: ConsoleModel) -> None:
-    from ocu.control.commands import JointReading
-
     reading = JointReading("shoulder", 5, 1, 2, 0.1, 0.0, 0.0, 0, 0.1, 0.0, 0.0)
-    model.on_telemetry({"shoulder": reading}, model.clock(), delay_s=0.0)
+    model.on_telemetry(frame({"shoulder": reading}, model.clock(), 0.0))
     start = model.clock()
     model.set_velocity("shoulder", 0.2)
     predicted = model.predicted_angles(start + 1.0)["shoulder"]

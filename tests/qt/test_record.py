@@ -9,7 +9,7 @@ from PySide6.QtTest import QTest
 from pytestqt.qtbot import QtBot
 
 from ocu.profile import RobotProfile
-from ocu.record.qt import RecordButton
+from ocu.qt.record import RecordButton
 from ocu.record.reader import Recording
 from ocu.record.recorder import Recorder
 

@@ -1,0 +1,105 @@
+"""The console model bound to a link: the wiring, in one place, between a QtLink and the model.
+
+Link events go into the model's robot state — telemetry at most ~30 times a second, from the
+link's one-frame mailbox, so a robot flooding the link cannot queue work in front of the
+operator's keys. The model's command goes to the link whenever it changes, and nothing is
+ever read back from the link. A read-only link (a replay) gets no commands.
+"""
+
+from __future__ import annotations
+
+import time
+
+from PySide6.QtCore import QObject, QTimer
+
+from ocu.console.model import ConsoleModel
+from ocu.protocol.extended import CameraRequest
+from ocu.qt.link import QtLink
+from ocu.records import LinkState, LinkStats, StatusFrame
+
+# Telemetry reaches the model at most this often (about 30 Hz).
+VIEW_PERIOD_MS = 33
+
+
+class ConsoleBinding(QObject):
+    """Feeds `model` from `link` and `link` from `model` until unbind()."""
+
+    def __init__(self, model: ConsoleModel, link: QtLink, parent: QObject | None = None) -> None:
+        super().__init__(parent)
+        self.model = model
+        self.link = link
+        self._last_take_at = 0.0
+        self._bound = True
+        # Methods of this QObject: the signals, emitted on the link's threads, are queued to
+        # the GUI thread, where the model lives.
+        link.telemetry_ready.connect(self._on_telemetry_ready)
+        link.link_state_changed.connect(self._on_link_state)
+        link.stats_updated.connect(self._on_stats)
+        link.status_received.connect(self._on_status)
+        link.extension_changed.connect(self._on_extension)
+        events = model.events
+        if not link.read_only:
+            events.command_changed.connect(self._push_command)
+            events.stream_request_changed.connect(self._push_streams)
+            events.estop_requested.connect(self._estop)
+            link.link.set_command(model.command())
+            link.link.set_stream_request(model.stream_request)
+        # Takes the newest frame within one period when telemetry came faster than that.
+        self._timer = QTimer(self)
+        self._timer.setInterval(VIEW_PERIOD_MS)
+        self._timer.timeout.connect(self.take_telemetry)
+        self._timer.start()
+
+    def take_telemetry(self) -> None:
+        """Hand the newest telemetry frame, if any came, to the model."""
+        self._last_take_at = time.monotonic()
+        frame = self.link.take_telemetry()
+        if frame is not None and self._bound:
+            self.model.on_telemetry(frame)
+
+    def _on_telemetry_ready(self) -> None:
+        if (time.monotonic() - self._last_take_at) * 1000.0 >= VIEW_PERIOD_MS:
+            self.take_telemetry()
+
+    def _on_link_state(self, state: LinkState, reason: str) -> None:
+        if self._bound:
+            self.model.robot.on_link_state(state, reason)
+
+    def _on_stats(self, stats: LinkStats) -> None:
+        if self._bound:
+            self.model.robot.on_stats(stats)
+
+    def _on_status(self, status: StatusFrame) -> None:
+        if self._bound:
+            self.model.robot.on_status(status)
+
+    def _on_extension(self, active: bool, reason: str) -> None:
+        if self._bound:
+            self.model.robot.on_extension(active, reason)
+
+    def _push_command(self) -> None:
+        self.link.link.set_command(self.model.command())
+
+    def _push_streams(self, streams: tuple[CameraRequest, ...]) -> None:
+        self.link.link.set_stream_request(streams)
+
+    def _estop(self, reason: str) -> None:
+        self.link.link.emergency_stop(reason)
+
+    def unbind(self) -> None:
+        """Stop the wiring (the link is shutting down); idempotent."""
+        if not self._bound:
+            return
+        self._bound = False
+        self._timer.stop()
+        link = self.link
+        link.telemetry_ready.disconnect(self._on_telemetry_ready)
+        link.link_state_changed.disconnect(self._on_link_state)
+        link.stats_updated.disconnect(self._on_stats)
+        link.status_received.disconnect(self._on_status)
+        link.extension_changed.disconnect(self._on_extension)
+        if not link.read_only:
+            events = self.model.events
+            events.command_changed.disconnect(self._push_command)
+            events.stream_request_changed.disconnect(self._push_streams)
+            events.estop_requested.disconnect(self._estop)
