@@ -15,29 +15,27 @@ from __future__ import annotations
 import argparse
 import os
 import random
+import sys
 import tempfile
 import time
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-import numpy as np
 from PySide6.QtCore import QSettings, Qt
 from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
 
-from ocu.link.core import LinkCore
-from ocu.link.qt import LinkThread
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from common import percentile
+
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile, load_profile
 from ocu.records import LinkState
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator
 from ocu.windows.main_window import MainWindow
 
 WAIT_S = 2.0
-
-
-def percentile(values: list[float], q: float) -> float:
-    """The q-th percentile (0-100) by linear interpolation."""
-    return float(np.percentile(values, q))
 
 
 def pump(app: QApplication, seconds: float) -> None:
@@ -82,8 +80,8 @@ def measure(
     ):
         settings = QSettings(os.path.join(config, "ocu.ini"), QSettings.Format.IniFormat)
 
-        def make_link() -> LinkThread:
-            return LinkThread(LinkCore(profile, sim.address, send_on_change=at_once))
+        def make_link() -> UdpLink:
+            return UdpLink(profile, sim.address, send_on_change=at_once)
 
         window = MainWindow(profile, make_link, "simulator", settings)
         window.show()

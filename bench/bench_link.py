@@ -13,76 +13,38 @@ import dataclasses
 import logging
 import os
 import random
-import socket
+import sys
 import threading
 import time
 
-import numpy as np
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from ocu.link.core import LinkCore
+from common import StampingRobot, percentile
+
+from ocu.link.base import Link
+from ocu.link.live import LinkOptions, UdpLink, VirtualLink
+from ocu.net.transport import VirtualWire
 from ocu.profile import RobotProfile, load_profile
-from ocu.protocol import RemoteControlPacket
-from ocu.protocol.wire import make_codec
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator
 
 
-def percentile(values: list[float], q: float) -> float:
-    """The q-th percentile (0-100) by linear interpolation."""
-    return float(np.percentile(values, q))
-
-
-class Receiver:
-    """A socket on 127.0.0.1 that timestamps every RCP by the waist axis value it carries."""
-
-    def __init__(self, profile: RobotProfile) -> None:
-        self.codec = make_codec(profile)
-        self.axis = profile.channels["waist"].axis
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(0.2)
-        self.address = self.sock.getsockname()
-        self.first_seen: dict[int, float] = {}
-        self.cond = threading.Condition()
-        self._stop = False
-        self.thread = threading.Thread(target=self._run, name="bench-receiver")
-        self.thread.start()
-
-    def _run(self) -> None:
-        while not self._stop:
-            try:
-                data = self.sock.recv(65536)
-            except TimeoutError:
-                continue
-            arrived = time.perf_counter()
-            packet = self.codec.decode(data)
-            assert isinstance(packet, RemoteControlPacket)
-            with self.cond:
-                self.first_seen.setdefault(packet.axes[self.axis], arrived)
-                self.cond.notify_all()
-
-    def wait_for(self, axis_value: int, timeout_s: float) -> float:
-        with self.cond:
-            if not self.cond.wait_for(lambda: axis_value in self.first_seen, timeout_s):
-                raise TimeoutError(f"axis value {axis_value} never arrived")
-            return self.first_seen[axis_value]
-
-    def close(self) -> None:
-        self._stop = True
-        self.thread.join()
-        self.sock.close()
-
-
-def command_latency(profile: RobotProfile, count: int, send_on_change: bool) -> list[float]:
+def command_latency(
+    profile: RobotProfile, count: int, send_on_change: bool, backend: str = "udp"
+) -> list[float]:
     """Seconds from set_velocities() to the datagram's arrival, per change."""
-    receiver = Receiver(profile)
-    link = LinkCore(
-        profile,
-        receiver.address,
-        gui_alive_timeout_s=None,
-        link_lost_after_s=3600.0,
-        send_on_change=send_on_change,
-    )
+    wire = VirtualWire() if backend == "virtual" else None
+    robot = StampingRobot(profile, "waist", transport=wire.robot if wire else None)
+    options: LinkOptions = {
+        "gui_alive_timeout_s": None,
+        "link_lost_after_s": 3600.0,
+        "send_on_change": send_on_change,
+    }
+    link: Link
+    if wire is not None:
+        link = VirtualLink(profile, wire.ocu, **options)
+    else:
+        link = UdpLink(profile, robot.address, **options)
     link.start()
     per_unit = profile.channels["waist"].axis_per_unit
     rng = random.Random(7)
@@ -96,20 +58,27 @@ def command_latency(profile: RobotProfile, count: int, send_on_change: bool) -> 
                 time.sleep(rng.uniform(0.0, 1.0 / link.rate_hz))
             changed = time.perf_counter()
             link.set_velocities(waist=value)
-            latencies.append(receiver.wait_for(axis_value, 2.0) - changed)
+            latencies.append(robot.wait_for(axis_value, 2.0) - changed)
     finally:
         link.shutdown()
-        receiver.close()
+        robot.close()
+        if wire is not None:
+            wire.close()
     return latencies
 
 
 def bench_latency(profile: RobotProfile) -> None:
     immediate = command_latency(profile, 1000, send_on_change=True)
+    virtual = command_latency(profile, 1000, send_on_change=True, backend="virtual")
     tick_only = command_latency(profile, 100, send_on_change=False)
     p50, p99 = percentile(immediate, 50) * 1e3, percentile(immediate, 99) * 1e3
     tick_p50 = percentile(tick_only, 50) * 1e3
     print("command change -> datagram on 127.0.0.1")
     print(f"  send at once : p50 {p50:.3f} ms  p99 {p99:.3f} ms  (1000 changes)")
+    print(
+        f"  virtual wire : p50 {percentile(virtual, 50) * 1e3:.3f} ms  "
+        f"p99 {percentile(virtual, 99) * 1e3:.3f} ms  (1000 changes, VirtualLink)"
+    )
     print(
         f"  5 Hz tick only: p50 {tick_p50:.1f} ms  p99 "
         f"{percentile(tick_only, 99) * 1e3:.1f} ms  (100 changes)"
@@ -129,7 +98,7 @@ def estop_times(profile: RobotProfile, trials: int, repeats: int, seed: int) -> 
         seed=seed,
     )
     sim.start()
-    link = LinkCore(bench_profile, sim.address, gui_alive_timeout_s=None, link_lost_after_s=3600.0)
+    link = UdpLink(bench_profile, sim.address, gui_alive_timeout_s=None, link_lost_after_s=3600.0)
     link.start()
     times = []
     try:
@@ -171,11 +140,10 @@ def thread_cpu_s(native_id: int) -> float:
 def bench_cpu(profile: RobotProfile, seconds: float = 20.0) -> None:
     sim = RobotSimulator(profile, video_fps=0.0)
     sim.start()
-    link = LinkCore(profile, sim.address, gui_alive_timeout_s=None)
+    link = UdpLink(profile, sim.address, gui_alive_timeout_s=None)
     link.start()
     try:
-        thread = link._thread
-        assert thread is not None
+        thread = next(t for t in threading.enumerate() if t.name == "ocu-link")
         assert thread.native_id is not None
         tid = thread.native_id
         before = thread_cpu_s(tid)

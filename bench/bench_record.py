@@ -21,6 +21,7 @@ import argparse
 import os
 import resource
 import statistics
+import sys
 import tempfile
 import threading
 import time
@@ -32,8 +33,12 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 from PySide6.QtCore import QEventLoop, QTimer
 from PySide6.QtWidgets import QApplication
 
-from ocu.link.core import LinkCore
-from ocu.link.qt import LinkThread
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from common import percentile, video_console
+
+from ocu.link.base import Link
+from ocu.link.live import UdpLink
 from ocu.profile import load_profile
 from ocu.record.recorder import Recorder
 from ocu.sim.launcher import SimulatorProcess
@@ -104,16 +109,8 @@ def run_for(seconds: float) -> None:
     loop.exec()
 
 
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    if not ordered:
-        return float("nan")
-    index = min(round((len(ordered) - 1) * q / 100), len(ordered) - 1)
-    return ordered[index]
-
-
 def measure(
-    ages: PaintAges, core: LinkCore, seconds: float, recorder: Recorder | None, path: Path
+    ages: PaintAges, core: Link, seconds: float, recorder: Recorder | None, path: Path
 ) -> Phase:
     if recorder is not None:
         recorder.start(path)
@@ -154,17 +151,16 @@ def main() -> None:
     app = QApplication.instance() or QApplication([])
     sim_args = ["--extended", "--video-fps", "0", "--telemetry-hz", "20", "--log-level", "WARNING"]
     with SimulatorProcess(None, sim_args) as sim:
-        core = LinkCore(profile, sim.address, extension=True)
-        link = LinkThread(core)
+        core = UdpLink(profile, sim.address, extension=True)
         recorder = Recorder(profile, decoded_video=not args.raw_only)
         recorder.attach(core)
-        panel = VideoPanel(profile, link)
+        _model, link, panel = video_console(profile, core)
         for camera in range(cameras):
             panel.set_correction(camera, CorrectionSettings(colour="off", undistort=False))
         panel.resize(*PANEL_SIZE)
         panel.show()
         ages = PaintAges(panel)
-        link.start_link()
+        link.start()
         phases: list[Phase] = []
         with tempfile.TemporaryDirectory() as tmp:
             try:

@@ -8,7 +8,7 @@ on 127.0.0.1 that plays the robot: it answers with an empty telemetry packet twi
 so the link stays connected (the node refuses cmd_vel while the link is LOST). Each message
 carries a new linear speed, so the node's link sends it at once; its arrival is matched by
 the drive axis value. The baseline, measured in
-the same run against the same socket, is LinkCore.set_velocities called directly.
+the same run against the same socket, is UdpLink.set_velocities called directly.
 """
 
 from __future__ import annotations
@@ -17,22 +17,20 @@ import argparse
 import logging
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from ocu.link.core import LinkCore
+from common import StampingRobot, percentile
+
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile, load_profile
-from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket
-from ocu.protocol.wire import make_codec
 from ocu.ros.environment import missing_ros
 from ocu.ros.master import RosMaster
 
@@ -45,77 +43,13 @@ TELEMETRY_PERIOD_S = 0.5
 MAX_LINEAR_M_S = 0.45
 
 
-def percentile(values: list[float], q: float) -> float:
-    """The q-th percentile (0-100) by linear interpolation."""
-    return float(np.percentile(values, q))
-
-
-class Robot:
-    """A bare socket on 127.0.0.1: timestamps the first RCP carrying each drive axis value
-    and keeps its sender's link connected with empty telemetry packets."""
-
-    def __init__(self, profile: RobotProfile) -> None:
-        self.codec = make_codec(profile)
-        self.axis = profile.channels["drive_linear"].axis
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(0.2)
-        self.address: tuple[str, int] = self.sock.getsockname()
-        self.first_seen: dict[int, float] = {}
-        self._telemetry_due: dict[tuple[str, int], float] = {}
-        self._tick = 0
-        self.cond = threading.Condition()
-        self._stop = False
-        self.thread = threading.Thread(target=self._run, name="bench-robot")
-        self.thread.start()
-
-    def _run(self) -> None:
-        while not self._stop:
-            try:
-                data, sender = self.sock.recvfrom(65536)
-            except TimeoutError:
-                continue
-            arrived = time.perf_counter()
-            try:
-                packet = self.codec.decode(data)
-            except ProtocolError:
-                continue  # the node's link may probe with extension hellos
-            if isinstance(packet, RemoteControlPacket):
-                with self.cond:
-                    self.first_seen.setdefault(packet.axes[self.axis], arrived)
-                    self.cond.notify_all()
-                self._answer(sender, arrived)
-
-    def _answer(self, sender: tuple[str, int], now: float) -> None:
-        if now < self._telemetry_due.get(sender, 0.0):
-            return
-        self._telemetry_due[sender] = now + TELEMETRY_PERIOD_S
-        self._tick += 1
-        self.sock.sendto(self.codec.encode(TelemetryPacket(tick=self._tick)), sender)
-
-    def wait_for(self, axis_value: int) -> float:
-        with self.cond:
-            if not self.cond.wait_for(lambda: axis_value in self.first_seen, ARRIVAL_TIMEOUT_S):
-                raise TimeoutError(f"axis value {axis_value} never arrived")
-            return self.first_seen[axis_value]
-
-    def forget(self) -> None:
-        with self.cond:
-            self.first_seen.clear()
-
-    def close(self) -> None:
-        self._stop = True
-        self.thread.join()
-        self.sock.close()
-
-
 def speeds(count: int) -> list[float]:
     """Distinct linear speeds at or above the 0.2 m/s minimum, so none is lifted."""
     return [0.2 + 0.2 * i / count for i in range(count)]
 
 
 def measure(
-    profile: RobotProfile, robot: Robot, count: int, send: Callable[[float], None]
+    profile: RobotProfile, robot: StampingRobot, count: int, send: Callable[[float], None]
 ) -> list[float]:
     """Latency (s) of each send to its datagram's arrival, after a warm-up."""
     per_unit = profile.channels["drive_linear"].axis_per_unit
@@ -124,17 +58,16 @@ def measure(
         axis_value = round(speed * per_unit)
         start = time.perf_counter()
         send(speed)
-        arrived = robot.wait_for(axis_value)
+        arrived = robot.wait_for(axis_value, ARRIVAL_TIMEOUT_S)
         if index >= WARMUP:
             latencies.append(arrived - start)
         time.sleep(PAUSE_S)
     return latencies
 
 
-def direct(profile: RobotProfile, robot: Robot, count: int) -> list[float]:
-    """The baseline: LinkCore.set_velocities in this process."""
-    link = LinkCore(profile, robot.address, gui_alive_timeout_s=None)
-    link.set_max_velocity("drive_linear", MAX_LINEAR_M_S)
+def direct(profile: RobotProfile, robot: StampingRobot, count: int) -> list[float]:
+    """The baseline: the link's set_velocities in this process."""
+    link = UdpLink(profile, robot.address, gui_alive_timeout_s=None)
     link.start()
     try:
         return measure(profile, robot, count, lambda v: link.set_velocities(drive_linear=v))
@@ -142,7 +75,9 @@ def direct(profile: RobotProfile, robot: Robot, count: int) -> list[float]:
         link.shutdown()
 
 
-def through_ros(profile: RobotProfile, robot: Robot, count: int, work_dir: Path) -> list[float]:
+def through_ros(
+    profile: RobotProfile, robot: StampingRobot, count: int, work_dir: Path
+) -> list[float]:
     """cmd_vel published here, through the ocu-ros node child, to the socket."""
     with RosMaster(work_dir) as master:
         os.environ.update(master.env)
@@ -200,10 +135,10 @@ def main() -> int:
     if reason is not None:
         print(f"bench_ros: {reason}", file=sys.stderr)
         return 1
-    # The bare socket never answers: both links report LINK LOST after 3 s, which is harmless.
+    # The bare robot answers with empty telemetry only: the links stay CONNECTED.
     logging.basicConfig(level=logging.ERROR)
     profile = load_profile()
-    robot = Robot(profile)
+    robot = StampingRobot(profile, "drive_linear", telemetry_period_s=TELEMETRY_PERIOD_S)
     try:
         baseline = direct(profile, robot, args.count)
         robot.forget()
@@ -212,7 +147,7 @@ def main() -> int:
     finally:
         robot.close()
     print(f"{args.count} messages each, {WARMUP} warm-up messages discarded")
-    report("LinkCore.set_velocities -> datagram", baseline)
+    report("UdpLink.set_velocities -> datagram", baseline)
     report("cmd_vel -> ocu-ros node -> datagram", ros)
     return 0
 

@@ -9,10 +9,11 @@ Modes (the simulator runs as a separate `ocu-sim` process on 127.0.0.1, 640x480 
 - corrected: the same with gray-world colour correction and undistortion on every camera;
 - vendor:    the vendor protocol, one camera at 30 fps.
 
-The OCU side is the real thing: LinkCore in a LinkThread, the ocu-video decoder thread and a
-VideoPanel shown (offscreen) at 1280x1000, run by the Qt event loop. Age is paint time minus
-arrival time (time.monotonic) of each frame's first paint. CPU is this process only (user +
-system, percent of one core); RSS growth is measured from the end of the warm-up.
+The OCU side is the real thing: a UdpLink in a QtLink bound to a ConsoleModel, the ocu-video
+decoder thread and a VideoPanel shown (offscreen) at 1280x1000, run by the Qt event loop. Age
+is paint time minus arrival time (time.monotonic) of each frame's first paint. CPU is this
+process only (user + system, percent of one core); RSS growth is measured from the end of the
+warm-up.
 """
 
 from __future__ import annotations
@@ -30,9 +31,13 @@ import cv2
 from PySide6.QtCore import QEventLoop, QTimer
 from PySide6.QtWidgets import QApplication
 
-from ocu.link.core import LinkCore
-from ocu.link.qt import LinkThread
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from common import video_console
+
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile, load_profile
+from ocu.qt.link import QtLink
 from ocu.sim.launcher import SimulatorProcess
 from ocu.video.correction import CorrectionSettings
 from ocu.widgets.video import VideoPanel, percentile
@@ -80,7 +85,7 @@ def wait(app: QApplication, seconds: float) -> None:
     loop.exec()
 
 
-def drops(panel: VideoPanel, link: LinkThread, camera: int) -> int:
+def drops(panel: VideoPanel, link: QtLink, camera: int) -> int:
     """Frames of a camera that arrived whole but were never painted."""
     decoded = link.decoder.stats(camera)
     return decoded.skipped + link.frames.replaced(camera) + panel.view.stats(camera).not_shown
@@ -94,8 +99,9 @@ def run_mode(
     args = ["--telemetry-hz", "1", "--video-size", SIZE, "--log-level", "WARNING"]
     args += ["--extended", "--video-fps", "0"] if extended else ["--video-fps", str(FPS)]
     with SimulatorProcess(extra_args=args) as sim:
-        link = LinkThread(LinkCore(profile, sim.address, extension=extended))
-        panel = VideoPanel(profile, link)
+        _model, link, panel = video_console(
+            profile, UdpLink(profile, sim.address, extension=extended)
+        )
         panel.resize(*PANEL_SIZE)
         panel.show()
         cameras = list(range(len(profile.link.camera_names))) if extended else [0]
@@ -107,7 +113,7 @@ def run_mode(
             panel.set_correction(camera, settings)
         if not extended:
             panel.select_camera(0)
-        link.start_link()
+        link.start()
         try:
             wait(app, warmup_s)
             if extended and not panel.extension_active:
@@ -123,7 +129,7 @@ def run_mode(
                         run.correction_ms.append(frame.decoded.correction.total_ms)
 
             drops_before = {camera: drops(panel, link, camera) for camera in cameras}
-            video_before = link.core.video_stats()
+            video_before = link.link.video_stats()
             rss_before = rss_mb()
             cpu_before = cpu_s()
             start = time.monotonic()
@@ -134,7 +140,7 @@ def run_mode(
             run.cpu_percent = (cpu_s() - cpu_before) / elapsed * 100.0
             run.rss_end_mb = rss_mb()
             run.rss_growth_mb = run.rss_end_mb - rss_before
-            video_after = link.core.video_stats()
+            video_after = link.link.video_stats()
             run.lost_frames = (video_after.truncated + video_after.expired) - (
                 video_before.truncated + video_before.expired
             )

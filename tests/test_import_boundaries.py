@@ -15,7 +15,12 @@ PURE_MODULES = (
     "ocu.control.position",
     "ocu.console.model",
     "ocu.hotkeys",
-    "ocu.link.core",
+    "ocu.console.robot",
+    "ocu.records",
+    "ocu.link.live",
+    "ocu.link.receiver",
+    "ocu.net.loop",
+    "ocu.record.replay_link",
     "ocu.sim.simulator",
     "ocu.model.tree",
 )

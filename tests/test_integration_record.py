@@ -21,7 +21,7 @@ from ocu.profile import RobotProfile
 from ocu.protocol import RemoteControlPacket
 from ocu.protocol.wire import make_codec
 from ocu.record.recorder import Recorder
-from ocu.record.replay import ReplaySource
+from ocu.record.replay_link import ReplayLink
 from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
 from ocu.windows.main_window import MainWindow
@@ -148,7 +148,7 @@ def test_record_button_records_the_console_link(
 def test_console_replays_a_recording_with_commands_disabled(
     recorded_session: Path, qtbot: QtBot, profile: RobotProfile, settings: QSettings
 ) -> None:
-    source = ReplaySource(recorded_session, profile)
+    source = ReplayLink(recorded_session, profile)
     window = MainWindow(
         source.profile, None, f"replay {recorded_session.name}", settings, replay=source
     )
@@ -161,7 +161,9 @@ def test_console_replays_a_recording_with_commands_disabled(
         assert window.replay_banner.isVisible()
         assert window.replay_banner.text().startswith("REPLAY")
         assert window.replay_controls.isVisible()
-        assert window.video_panel.link is source
+        assert window.link is not None
+        assert window.link.link is source
+        assert window.video_panel.link is window.link
         for widget in (
             window.velocity_panel,
             window.max_panel,
@@ -170,20 +172,20 @@ def test_console_replays_a_recording_with_commands_disabled(
             window.velocity_panel.stop_button,
         ):
             assert not widget.isEnabled()
-        assert not window.video_panel.bitrate_box.isEnabled()  # it would go to the robot
+        assert not window.video_panel.controls.bitrate_box.isEnabled()  # it would go to the robot
         assert window.link_status.estop_label.text().startswith("REPLAY")
         assert not window.ros.action.isEnabled()
         assert window.record_button is None
         assert window.key_filter is None
 
         # No link exists and a key drives nothing: the model stays still, nothing is sent.
-        command_before = source.core.command
+        command_before = source.command
         QTest.keyPress(window, Qt.Key.Key_W)
         assert window.model.held_keys == frozenset()
         assert window.model.velocities() == {}
         QTest.keyRelease(window, Qt.Key.Key_W)
-        assert source.core.command == command_before
-        assert isinstance(window.link, ReplaySource)
+        assert source.command == command_before
+        assert window.link.read_only
         assert not [t for t in threading.enumerate() if t.name == "ocu-link"]
 
         # Played, it shows what was recorded: the waist where the recorded robot stood.

@@ -556,6 +556,10 @@ class ConsoleModel:
         for channel in self._channels:
             if self._requested(channel).source is Source.ROS:
                 self._set_channel(channel, 0.0, Source.NONE)
+        self.release_estop()
+
+    def release_estop(self) -> None:
+        """The operator acts again: the e-stop latch lets commands through once more."""
         if self._estopped:
             self._estopped = False
             self._estop_reason = ""

@@ -457,30 +457,17 @@ class LiveLink(Link):
     def stats(self) -> LinkStats:
         """Counters and rates now."""
         now = self.clock()
-        counts = self.receiver.counts(now)
         with self._lock:
-            return LinkStats(
-                sent=self._sent,
-                received=counts.received,
-                telemetry=counts.telemetry,
-                video=counts.video,
-                malformed=counts.malformed,
-                foreign=counts.foreign,
-                send_errors=self._send_errors,
-                rcp_rate_hz=self._rcp_rate.rate(now),
-                telemetry_rate_hz=counts.telemetry_rate_hz,
-                video_rate_hz=counts.video_rate_hz,
-                loss_estimate=counts.loss_estimate,
-                duplicates=counts.duplicates,
-                reordered=counts.reordered,
-                last_valid_age_s=(
-                    None if counts.last_valid_at is None else now - counts.last_valid_at
-                ),
-                send_rate_hz=self._rate_hz,
-                estop_latched=self._estop_latched,
-                delay_s=counts.delay_s,
-                stale_telemetry=counts.stale_telemetry,
-            )
+            sent, send_errors, estop = self._sent, self._send_errors, self._estop_latched
+            rcp_rate_hz, send_rate_hz = self._rcp_rate.rate(now), self._rate_hz
+        return self.receiver.link_stats(
+            now,
+            sent=sent,
+            send_errors=send_errors,
+            rcp_rate_hz=rcp_rate_hz,
+            send_rate_hz=send_rate_hz,
+            estop_latched=estop,
+        )
 
     def _notify_safety(self, message: str) -> None:
         log.warning("%s", message)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 from ocu.control.commands import CommandMapper, commanded_motor_speeds, read_telemetry
 from ocu.control.plausibility import PlausibilityChecker
@@ -38,6 +38,7 @@ from ocu.records import (
     DatagramReceived,
     ExtensionChanged,
     LinkEvent,
+    LinkStats,
     StatusFrame,
     TelemetryFrame,
     VideoFrame,
@@ -48,25 +49,6 @@ log = logging.getLogger("ocu.link")
 # A telemetry tick this far (in seconds of ticks) below the newest one is a robot that
 # restarted, not a late packet.
 TICK_RESTART_S = 10.0
-
-
-@dataclass(frozen=True)
-class ReceiverCounts:
-    """What the receiver has counted, for the link's statistics."""
-
-    received: int
-    telemetry: int
-    video: int
-    malformed: int
-    foreign: int
-    telemetry_rate_hz: float
-    video_rate_hz: float
-    loss_estimate: float | None
-    duplicates: int
-    reordered: int
-    stale_telemetry: int
-    last_valid_at: float | None
-    delay_s: float | None
 
 
 class Receiver:
@@ -295,23 +277,37 @@ class Receiver:
         with self._lock:
             return self._last_valid_at
 
-    def counts(self, now: float) -> ReceiverCounts:
-        """Counters and rates now."""
+    def link_stats(
+        self,
+        now: float,
+        *,
+        sent: int,
+        send_errors: int,
+        rcp_rate_hz: float,
+        send_rate_hz: float,
+        estop_latched: bool,
+    ) -> LinkStats:
+        """The link's statistics now: the receiver's counters with the sender's given."""
         with self._lock:
-            return ReceiverCounts(
+            return LinkStats(
+                sent=sent,
                 received=self._received,
                 telemetry=self._telemetry,
                 video=self._video,
                 malformed=self._malformed,
                 foreign=self._foreign,
+                send_errors=send_errors,
+                rcp_rate_hz=rcp_rate_hz,
                 telemetry_rate_hz=self._telemetry_rate.rate(now),
                 video_rate_hz=self._video_rate.rate(now),
                 loss_estimate=self._loss.loss(now),
                 duplicates=self._loss.duplicates,
                 reordered=self._loss.reordered,
-                stale_telemetry=self._stale_telemetry,
-                last_valid_at=self._last_valid_at,
+                last_valid_age_s=None if self._last_valid_at is None else now - self._last_valid_at,
+                send_rate_hz=send_rate_hz,
+                estop_latched=estop_latched,
                 delay_s=self._delay.estimate_s,
+                stale_telemetry=self._stale_telemetry,
             )
 
     def video_stats(self) -> ReassemblyStats:

@@ -111,29 +111,3 @@ class LossEstimator:
         limit = now - self.window_s
         while self._events and self._events[0][0] < limit:
             self._events.popleft()
-
-
-@dataclass(frozen=True)
-class LinkStats:
-    """A snapshot of the link's counters and rates."""
-
-    sent: int
-    received: int
-    telemetry: int
-    video: int
-    malformed: int
-    foreign: int
-    send_errors: int
-    rcp_rate_hz: float
-    telemetry_rate_hz: float
-    video_rate_hz: float
-    loss_estimate: float | None
-    duplicates: int
-    reordered: int
-    last_valid_age_s: float | None
-    send_rate_hz: float
-    estop_latched: bool
-    # Round trip measured from the robot's echoed speed commands (ocu.link.delay); None:
-    # nothing measured yet. Telemetry packets dropped for coming late or twice.
-    delay_s: float | None = None
-    stale_telemetry: int = 0

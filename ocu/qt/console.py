@@ -9,9 +9,12 @@ ever read back from the link. A read-only link (a replay) gets no commands.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from typing import Any
 
 from PySide6.QtCore import QObject, QTimer
 
+from ocu.console.events import Event
 from ocu.console.model import ConsoleModel
 from ocu.protocol.extended import CameraRequest
 from ocu.qt.link import QtLink
@@ -32,16 +35,27 @@ class ConsoleBinding(QObject):
         self._bound = True
         # Methods of this QObject: the signals, emitted on the link's threads, are queued to
         # the GUI thread, where the model lives.
-        link.telemetry_ready.connect(self._on_telemetry_ready)
-        link.link_state_changed.connect(self._on_link_state)
-        link.stats_updated.connect(self._on_stats)
-        link.status_received.connect(self._on_status)
-        link.extension_changed.connect(self._on_extension)
+        self._wiring = (
+            (link.telemetry_ready, self._on_telemetry_ready),
+            (link.link_state_changed, self._on_link_state),
+            (link.stats_updated, self._on_stats),
+            (link.status_received, self._on_status),
+            (link.extension_changed, self._on_extension),
+        )
+        for signal, slot in self._wiring:
+            signal.connect(slot)
         events = model.events
+        # What goes to the robot: nothing for a read-only link (a replay).
+        self._commands: tuple[tuple[Event[Any], Callable[..., None]], ...] = ()
         if not link.read_only:
-            events.command_changed.connect(self._push_command)
-            events.stream_request_changed.connect(self._push_streams)
-            events.estop_requested.connect(self._estop)
+            self._commands = (
+                (events.command_changed, self._push_command),
+                (events.stream_request_changed, self._push_streams),
+                (events.estop_requested, self._estop),
+            )
+        for event, callback in self._commands:
+            event.connect(callback)
+        if not link.read_only:
             link.link.set_command(model.command())
             link.link.set_stream_request(model.stream_request)
         # Takes the newest frame within one period when telemetry came faster than that.
@@ -92,14 +106,7 @@ class ConsoleBinding(QObject):
             return
         self._bound = False
         self._timer.stop()
-        link = self.link
-        link.telemetry_ready.disconnect(self._on_telemetry_ready)
-        link.link_state_changed.disconnect(self._on_link_state)
-        link.stats_updated.disconnect(self._on_stats)
-        link.status_received.disconnect(self._on_status)
-        link.extension_changed.disconnect(self._on_extension)
-        if not link.read_only:
-            events = self.model.events
-            events.command_changed.disconnect(self._push_command)
-            events.stream_request_changed.disconnect(self._push_streams)
-            events.estop_requested.disconnect(self._estop)
+        for signal, slot in self._wiring:
+            signal.disconnect(slot)
+        for event, callback in self._commands:
+            event.disconnect(callback)

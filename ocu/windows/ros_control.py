@@ -215,6 +215,9 @@ class RosControl(QObject):
         bridge = self.bridge
         if bridge is None:
             bridge = self.bridge = self._make_bridge()
+        # Turning ROS on is the operator's deliberate act: it releases a latched e-stop, as
+        # any other input of theirs does (ROS velocities are held at zero while latched).
+        self.model.release_estop()
         if bridge.started:
             bridge.enable()  # back after an override
             return

@@ -35,6 +35,7 @@ SOURCE_TEXT = {
     Source.HOTKEY: "key",
     Source.SWITCH: "switch",
     Source.POSITION: "position",
+    Source.ROS: "ROS",
 }
 STOP_ALL_STYLE = (
     "QPushButton { background: #c62828; color: white; font-size: 16pt; font-weight: bold;"

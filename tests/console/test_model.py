@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 
 import pytest
 from hypothesis import given
@@ -406,3 +407,83 @@ def test_what_is_sent_feeds_the_prediction(model: ConsoleModel) -> None:
     model.set_velocity("shoulder", 0.2)
     predicted = model.predicted_angles(start + 1.0)["shoulder"]
     assert predicted == pytest.approx(0.1 + 0.2 * 1.0, abs=0.02)
+
+
+def test_a_planner_drives_free_channels_and_the_operator_always_wins(
+    model: ConsoleModel,
+) -> None:
+    model.set_velocity("shoulder", 0.1)  # the operator's
+    applied = model.set_external_velocities({"waist": 99.0, "shoulder": 0.3})
+    # Bounded like every input; a channel the operator drives stays the operator's.
+    assert applied == {"waist": model.limits.get("waist")}
+    assert model.channel("waist").source is Source.ROS
+    assert model.channel("shoulder") == ChannelCommand(0.1, Source.SLIDER)
+    assert model.external_channels == ["waist"]
+    with pytest.raises(CommandError, match="unknown velocity channel"):
+        model.set_external_velocities({"tail": 0.1})
+    with pytest.raises(CommandError):
+        model.set_external_velocities({"waist": math.nan})
+    # Focus lost (halt keeping the planner): the operator's motion stops, the planner's not.
+    model.halt("focus lost", keep_external=True)
+    assert model.velocities() == {"waist": model.limits.get("waist")}
+    # Any manual input overrides the planner on every channel at once.
+    model.hotkey_down("Y", "shoulder", 1)
+    assert model.external_channels == []
+    assert "waist" not in model.velocities()
+    # The e-stop holds planner velocities at zero until the operator releases it.
+    model.hotkey_up("Y")
+    model.emergency_stop("test")
+    model.set_external_velocities({"waist": 0.2})
+    assert model.velocities() == {}
+    model.release_estop()
+    assert model.velocities() == {"waist": 0.2}
+    model.clear_external()
+    assert model.velocities() == {}
+
+
+def test_stream_requests_are_the_models_and_checked(model: ConsoleModel) -> None:
+    from ocu.protocol.extended import CameraRequest
+
+    seen: list[tuple[CameraRequest, ...]] = []
+    model.events.stream_request_changed.connect(seen.append)
+    wanted = CameraRequest(2, 320, 240, 15)
+    model.set_stream_request(wanted)
+    assert model.stream_request[2] == wanted
+    model.set_stream_request(wanted)  # no change, no event
+    assert len(seen) == 1
+    with pytest.raises(CommandError, match="camera 7"):
+        model.set_stream_request(CameraRequest(7, 320, 240, 15))
+
+
+def test_the_robot_state_is_the_one_copy_views_read(
+    model: ConsoleModel, profile: RobotProfile
+) -> None:
+    from ocu.protocol.extended import StatusPacket
+    from ocu.records import LinkState, StatusFrame
+
+    robot = model.robot
+    frames: list[TelemetryFrame] = []
+    robot.events.telemetry_changed.connect(frames.append)
+    bad = replace(reading(profile, "elbow", 40.0), fault="outside its limits")
+    model.on_telemetry(frame({"waist": reading(profile, "waist", 0.5), "elbow": bad}, 10.0))
+    assert len(frames) == 1
+    assert robot.frame is frames[0]
+    assert robot.angles() == {"waist": 0.5}  # an implausible reading is not believed
+    assert robot.faults() == {"elbow": "outside its limits"}
+    assert robot.fresh_at("waist") == 10.0
+    assert robot.telemetry_age(now=12.5) == 2.5
+    assert robot.history["waist"][-1][1] == pytest.approx(math.degrees(0.5))
+    assert robot.history["elbow"][-1][1] is None  # not plotted at -11796480°
+    # History is trimmed to its window.
+    model.on_telemetry(frame({"waist": reading(profile, "waist", 0.6)}, 10.0 + robot.history_s + 1))
+    assert len(robot.history["waist"]) == 1
+    # Link state: CONNECTING forgets the last telemetry's time; the status goes with the
+    # extension.
+    robot.on_link_state(LinkState.CONNECTING, "reconnect")
+    assert robot.last_telemetry_at is None
+    robot.on_extension(True, "hello answered")
+    status = StatusFrame(StatusPacket(charge_permille=550), 11.0, 0.0)
+    robot.on_status(status)
+    assert robot.status is status
+    robot.on_extension(False, "silent")
+    assert robot.status is None

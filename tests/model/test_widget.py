@@ -234,18 +234,18 @@ def test_telemetry_frames_set_the_pose(widget: Model3DWidget, profile: RobotProf
 def test_widget_follows_the_simulator_through_the_link(
     qtbot: QtBot, widget: Model3DWidget, profile: RobotProfile
 ) -> None:
-    from ocu.link.core import LinkCore
-    from ocu.link.qt import LinkThread
+    from ocu.link.live import UdpLink
+    from ocu.qt.link import QtLink
     from ocu.sim.simulator import RobotSimulator
 
     simulator = RobotSimulator(
         profile, telemetry_hz=20.0, video_fps=0.0, initial_joints={"shoulder": 0.3, "elbow": -0.5}
     )
     simulator.start()
-    link = LinkThread(LinkCore(profile, simulator.address))
+    link = QtLink(UdpLink(profile, simulator.address))
     link.telemetry_received.connect(widget.on_telemetry)
     try:
-        link.start_link()
+        link.start()
         qtbot.waitUntil(
             lambda: (
                 abs(widget.live.position("shoulder") - 0.3) < 1e-3
@@ -254,9 +254,9 @@ def test_widget_follows_the_simulator_through_the_link(
             timeout=DEADLINE_MS,
         )
         assert widget.stale_joints() == frozenset()
-        link.set_command(Command(velocities={"shoulder": 0.4}))
+        link.link.set_command(Command(velocities={"shoulder": 0.4}))
         qtbot.waitUntil(lambda: widget.live.position("shoulder") > 0.45, timeout=DEADLINE_MS)
-        link.set_command(Command())
+        link.link.set_command(Command())
         assert simulator.wait_until(lambda s: s.velocities["shoulder"] == 0.0, timeout=3.0)
         settled = simulator.state().joints_rad["shoulder"]
         qtbot.waitUntil(

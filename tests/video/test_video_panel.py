@@ -3,17 +3,18 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from PySide6.QtGui import QImage
 from pytestqt.qtbot import QtBot
 
-from ocu.link.core import LinkCore
-from ocu.link.qt import DecodedVideoFrame, LinkThread
+from ocu.console.model import ConsoleModel
+from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.protocol.extended import CameraRequest
+from ocu.qt.console import ConsoleBinding
+from ocu.qt.link import DecodedVideoFrame, QtLink
 from ocu.sim.extended import jpeg_comment
 from ocu.sim.simulator import RobotSimulator
 from ocu.sim.video import parse_comment, quality_for_bitrate
@@ -32,16 +33,18 @@ def facts(frame: DecodedVideoFrame | None) -> dict[str, str]:
 
 @pytest.fixture
 def start_panel(qtbot: QtBot, profile: RobotProfile, tmp_path: Path) -> Iterator[object]:
-    links: list[LinkThread] = []
+    links: list[QtLink] = []
 
-    def start(core: LinkCore) -> VideoPanel:
-        link = LinkThread(core)
+    def start(model: ConsoleModel, udp: UdpLink) -> VideoPanel:
+        link = QtLink(udp)
         links.append(link)
-        panel = VideoPanel(profile, link, snapshot_dir=tmp_path / "snapshots")
+        ConsoleBinding(model, link, link)
+        panel = VideoPanel(model, snapshot_dir=tmp_path / "snapshots")
+        panel.set_link(link)
         qtbot.addWidget(panel)
         panel.resize(960, 720)
         panel.show()
-        link.start_link()
+        link.start()
         return panel
 
     yield start
@@ -60,7 +63,9 @@ def vendor_sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
 def test_vendor_robot_one_camera_switched_through_the_rcp(
     qtbot: QtBot, profile: RobotProfile, vendor_sim: RobotSimulator, start_panel: object
 ) -> None:
-    panel: VideoPanel = start_panel(LinkCore(profile, vendor_sim.address, extension=True))  # type: ignore[operator]
+    model = ConsoleModel(profile)
+    udp = UdpLink(profile, vendor_sim.address, extension=True)
+    panel: VideoPanel = start_panel(model, udp)  # type: ignore[operator]
     view = panel.view
     qtbot.waitUntil(lambda: view.stats(0).shown >= 3, timeout=WAIT_MS)
     assert facts(view.current_frame(0))["index"] == "0"
@@ -99,9 +104,11 @@ def test_extended_robot_four_streams_status_and_faults(
     )
     sim.start()
     try:
-        core = LinkCore(profile, sim.address, extension=True, link_lost_after_s=1.0)
-        core.set_stream_request([CameraRequest(k, 320, 240, 15) for k in range(4)])
-        panel: VideoPanel = start_panel(core)  # type: ignore[operator]
+        model = ConsoleModel(profile)
+        for k in range(4):
+            model.set_stream_request(CameraRequest(k, 320, 240, 15))
+        udp = UdpLink(profile, sim.address, extension=True, link_lost_after_s=1.0)
+        panel: VideoPanel = start_panel(model, udp)  # type: ignore[operator]
         view = panel.view
         qtbot.waitUntil(lambda: panel.extension_active, timeout=WAIT_MS)
         assert view.grid  # the extension shows every camera at once
@@ -119,7 +126,7 @@ def test_extended_robot_four_streams_status_and_faults(
         assert not panel.battery.is_low
         assert panel.headlight.text() == "Headlight: off"
         assert panel.attitude.text() == "Roll +0.0°\nPitch +0.0°"
-        core.set_command(replace(core.command, torch=True))
+        model.set_torch(True)
         qtbot.waitUntil(lambda: panel.headlight.text() == "Headlight: ON", timeout=WAIT_MS)
         assert sim.extension is not None
         sim.extension.set_battery(12.0)
@@ -161,7 +168,7 @@ def test_snapshot_names_and_no_picture(qtbot: QtBot, profile: RobotProfile, tmp_
     assert snapshot_name("front", datetime(2026, 1, 2, 3, 4, 5, 678_000)) == (
         "ocu-front-20260102-030405-678.png"
     )
-    panel = VideoPanel(profile, None, snapshot_dir=tmp_path)
+    panel = VideoPanel(ConsoleModel(profile), snapshot_dir=tmp_path)
     qtbot.addWidget(panel)
     with qtbot.waitSignal(panel.snapshot_failed, timeout=1000):
         assert panel.save_snapshot() is None

@@ -93,4 +93,4 @@ def test_a_camera_switch_survives_hotkeys(
     assert any(drive_axis(profile, r, "drive_linear") > 0 for r in after)
     assert {mapper.to_command(r.packet).camera for r in after} == {2}
     assert console.link is not None
-    assert console.link.core.command.camera == 2
+    assert console.link.link.command.camera == 2

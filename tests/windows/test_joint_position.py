@@ -131,7 +131,7 @@ def test_every_motor_shown_in_the_table_and_the_plots(console: MainWindow, qtbot
     assert xs is not None
     assert len(xs) >= 2
     assert ("position", "left_track") not in panel.plots.curves  # no position for tracks
-    assert all(-panel.plots.window_s <= x <= 0 for x in xs)
+    assert all(-console.model.robot.history_s <= x <= 0 for x in xs)
 
 
 def test_the_limits_themselves_can_be_typed(
