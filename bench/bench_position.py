@@ -36,8 +36,8 @@ from baseline_position import ResetPredictionController
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import ConstantSpeedController, PositionController
-from ocu.control.runner import Controller, PositionRunner
 from ocu.link.live import UdpLink
+from ocu.link.runner import Controller, PositionRunner
 from ocu.profile import load_profile
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, StateRecorder

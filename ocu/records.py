@@ -180,6 +180,11 @@ class LinkState(Enum):
     LOST = "lost"
     CLOSED = "closed"
 
+    @property
+    def label(self) -> str:
+        """How messages and diagnostics name the state ("LINK LOST" stands out)."""
+        return "LINK LOST" if self is LinkState.LOST else self.value
+
     @classmethod
     def parse(cls, text: str) -> LinkState | None:
         """A state from its value; also the display text older recordings stored."""

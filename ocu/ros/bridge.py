@@ -1,10 +1,10 @@
 """What the ROS bridge decides, without ROS or Qt: drive scaling, timeouts, link loss, goals.
 
 `BridgeCore` turns velocity commands (cmd_vel) and joint position goals into channel
-velocities for a command sink (a `LinkCore`), and stops what it started when cmd_vel stops
-coming or the link is lost. The rospy wrapper (`ocu.ros.rosbridge`) only converts messages
-and calls it; the console can host the same core and take control back from ROS at once
-(`override`).
+velocities for a velocity sink (a `Link`, or the console model), and stops what it started
+when cmd_vel stops coming or the link is lost. The rospy wrapper (`ocu.ros.rosbridge`) only
+converts messages and calls it; the console can host the same core and take control back
+from ROS at once (`override`).
 
 cmd_vel mapping: `linear.x` drives `drive_linear` (m/s, forward positive) and `angular.z`
 drives `drive_turn` (rad/s, counter-clockwise positive). A crawler cannot move sideways, up,
@@ -47,15 +47,6 @@ RATE_RANGE_HZ = (5.0, 500.0)
 # Telemetry loss above this fraction makes the link diagnostics a warning.
 LOSS_WARNING = 0.2
 UNKNOWN_CAMERA = "unknown"
-
-
-# How diagnostics and messages name the link's state.
-LINK_STATE_TEXT = {
-    LinkState.CONNECTING: "connecting",
-    LinkState.CONNECTED: "connected",
-    LinkState.LOST: "LINK LOST",
-    LinkState.CLOSED: "closed",
-}
 
 
 class BridgeError(ValueError):
@@ -259,7 +250,7 @@ def link_report(state: LinkState, stats: LinkStats, hardware_id: str) -> Diagnos
     else:
         level, message = DiagnosticLevel.ERROR, "link closed"
     values = (
-        ("state", LINK_STATE_TEXT[state]),
+        ("state", state.label),
         ("datagrams sent", str(stats.sent)),
         ("valid packets received", str(stats.received)),
         ("telemetry packets", str(stats.telemetry)),
@@ -297,8 +288,8 @@ STATE_TEXT = {
 }
 
 
-class CommandSink(Protocol):
-    """Where the bridge sends velocities (LinkCore satisfies it)."""
+class VelocitySink(Protocol):
+    """Where the bridge sends velocities: a Link (ocu-ros), or the console model (the window)."""
 
     def set_velocities(self, **velocities: float) -> None: ...
 
@@ -307,7 +298,7 @@ StateCallback = Callable[[BridgeState, str], None]
 
 
 class LinkGate(Enum):
-    """Whether the link lets ROS move the robot (LinkCore's state, seen by the bridge)."""
+    """Whether the link lets ROS move the robot (the Link's state, seen by the bridge)."""
 
     OPEN = "open"
     # LOST or CLOSED: zeros whatever cmd_vel says; joint goals cancelled and refused.
@@ -393,7 +384,7 @@ class BridgeCore:
         # Runs under the bridge's lock on the calling thread: it must not block.
         self.on_state_changed = on_state_changed
         self._lock = threading.RLock()
-        self._sink: CommandSink | None = None
+        self._sink: VelocitySink | None = None
         self._limits = VelocityLimits(profile)
         self._controller = PositionController(profile, self._limits)
         self._timeout = CmdVelTimeout(self.settings.cmd_vel_timeout_s)
@@ -416,7 +407,7 @@ class BridgeCore:
 
     def attach(
         self,
-        sink: CommandSink,
+        sink: VelocitySink,
         limits: VelocityLimits | None = None,
         *,
         link_state: Callable[[], LinkState] | None = None,
@@ -609,7 +600,7 @@ class BridgeCore:
                 return {}
             if self._gate is LinkGate.LOST:
                 self._rejected += 1
-                raise PositionError(f"joint goal ignored: {LINK_STATE_TEXT[self._link_state]}")
+                raise PositionError(f"joint goal ignored: {self._link_state.label}")
             try:
                 goals = parse_joint_goal(self.profile, self._limits, names, positions)
             except PositionError:

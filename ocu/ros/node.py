@@ -19,7 +19,7 @@ import signal
 import sys
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import FrameType
 from typing import Any, Protocol
 
@@ -343,6 +343,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.control.commands import VelocityLimits
     from ocu.link.base import LinkError
     from ocu.link.live import UdpLink
+    from ocu.records import Command
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
 
@@ -376,7 +377,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
                     "%s maximum %.3f above the profile's hard maximum: %.3f", channel, value, kept
                 )
         if config.camera is not None:
-            link.set_command(replace(link.command, camera=config.camera))
+            link.set_command(Command(camera=config.camera))  # before anything is sent
         bridge = RosBridge(
             profile, config.bridge, hardware_id=f"{robot[0]}:{robot[1]}", heartbeat=True
         )

@@ -31,9 +31,9 @@ from ocu.ros.bridge import (
     BridgeError,
     BridgeSettings,
     BridgeState,
-    CommandSink,
     DiagnosticReport,
     StateCallback,
+    VelocitySink,
     bridge_report,
     camera_name,
     joint_state,
@@ -166,7 +166,7 @@ class RosBridge:
 
     # ---- life --------------------------------------------------------------------------
 
-    def start(self, link: Link, limits: VelocityLimits, sink: CommandSink | None = None) -> None:
+    def start(self, link: Link, limits: VelocityLimits, sink: VelocitySink | None = None) -> None:
         """Subscribe to `link`, advertise and command it; rospy.init_node must have run.
 
         Commands go to `sink` when given (the console's model), else to the link itself;

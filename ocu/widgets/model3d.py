@@ -45,7 +45,7 @@ SOFTWARE_FRAME_INTERVAL_MS = 33  # at most ~30 OSMesa frames per second
 
 
 class TelemetryFrameLike(Protocol):
-    """What on_telemetry reads from a telemetry frame (ocu.link.core.TelemetryFrame)."""
+    """What on_telemetry reads from a telemetry frame (ocu.records.TelemetryFrame)."""
 
     @property
     def readings(self) -> Mapping[str, JointReading]: ...

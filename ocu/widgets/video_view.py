@@ -143,7 +143,7 @@ class VideoView(QWidget):
     # ---- model ----------------------------------------------------------------------------
 
     def set_source(self, source: FrameSource | None) -> None:
-        """Where on_frame_ready takes frames from (a LinkThread's take_video_frame)."""
+        """Where on_frame_ready takes frames from (a QtLink's take_video_frame)."""
         self._source = source
         self._cameras = [_CameraState() for _ in self.camera_names]
         self.update()

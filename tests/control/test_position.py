@@ -19,8 +19,8 @@ from ocu.control.position import (
     PositionController,
     PositionError,
 )
-from ocu.control.runner import PositionRunner
 from ocu.link.live import UdpLink
+from ocu.link.runner import PositionRunner
 from ocu.profile import RobotProfile
 from ocu.records import JointReading, LinkEvent, TelemetryFrame
 from ocu.sim.faults import FaultConfig

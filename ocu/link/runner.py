@@ -1,4 +1,4 @@
-"""Run a position controller against a link without Qt (tests, benchmarks, the ROS node)."""
+"""Run a position controller against a Link without Qt (tests and benchmarks)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from ocu.link.base import Link
 from ocu.records import JointReading, LinkEvent, TelemetryFrame
 
 CONTROL_PERIOD_S = 0.02
@@ -35,14 +36,6 @@ class Controller(Protocol):
     def pop_messages(self) -> list[str]: ...
 
 
-class CommandSink(Protocol):
-    """What the runner needs of a link (LinkCore satisfies it)."""
-
-    def set_velocities(self, **velocities: float) -> None: ...
-
-    def heartbeat(self) -> None: ...
-
-
 @dataclass
 class RunResult:
     """What happened during one run: messages and the measured angle trace."""
@@ -62,9 +55,9 @@ class PositionRunner:
     thread, so the controller itself needs no locking.
     """
 
-    def __init__(self, controller: Controller, sink: CommandSink) -> None:
+    def __init__(self, controller: Controller, link: Link) -> None:
         self.controller = controller
-        self.sink = sink
+        self.link = link
         self._telemetry: queue.Queue[tuple[Mapping[str, JointReading], float, float | None]] = (
             queue.Queue()
         )
@@ -112,8 +105,8 @@ class PositionRunner:
             velocities = self.controller.update(now)
             for channel in channels:
                 velocities.setdefault(channel, 0.0)
-            self.sink.heartbeat()
-            self.sink.set_velocities(**velocities)
+            self.link.heartbeat()
+            self.link.set_velocities(**velocities)
             self.controller.note_sent(now, velocities)
             for message in self.controller.pop_messages():
                 result.messages.append(message)
@@ -124,6 +117,6 @@ class PositionRunner:
                     result.finished = True
                     break
         result.elapsed_s = clock() - start
-        self.sink.set_velocities(**dict.fromkeys(channels, 0.0))
+        self.link.set_velocities(**dict.fromkeys(channels, 0.0))
         self.controller.note_sent(clock(), {})
         return result
