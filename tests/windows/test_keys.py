@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Iterator
 
+import pytest
 from PySide6.QtCore import QEvent, Qt
 from PySide6.QtGui import QKeyEvent
 from PySide6.QtTest import QTest
@@ -76,6 +79,26 @@ def moving(readings: dict[str, JointReading], channel: str, direction: int) -> b
 
 def still(readings: dict[str, JointReading]) -> bool:
     return bool(readings) and all(r.speed_rad_s == 0.0 for r in readings.values())
+
+
+@pytest.fixture
+def sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
+    """The simulator with every bounded joint mid-range: each key has room both ways.
+
+    At a limit (the gripper starts closed) a key's move back is over within one
+    telemetry period and the telemetry may never show it.
+    """
+    middle = {
+        motor.name: (motor.limits_rad[0] + motor.limits_rad[1]) / 2.0
+        for motor in profile.motors.values()
+        if motor.has_position
+        and motor.limits_rad is not None
+        and all(math.isfinite(v) for v in motor.limits_rad)
+    }
+    simulator = RobotSimulator(profile, telemetry_hz=10.0, video_fps=0.0, initial_joints=middle)
+    simulator.start()
+    yield simulator
+    simulator.stop()
 
 
 def test_each_hotkey_moves_its_joint_and_stops_on_release(
