@@ -208,6 +208,24 @@ class ArmKinematics:
             return self.camera_chain.forward(values)[:3, :3]
         raise ArmError(f"unknown jog frame {frame!r}; one of {', '.join(FRAMES)}")
 
+    def elbow_bend(self, q: Vector) -> float:
+        """Angle between the forearm and the upper arm in the arm's plane (0: stretched).
+
+        Only for the yaw + three-pitch structure (0 otherwise).
+        """
+        arm = self.analytic
+        if arm is None:
+            return 0.0
+        return math.remainder(
+            arm.signs[1] * float(q[2]) + arm.fore_angle - arm.upper_angle, math.tau
+        )
+
+    def wrist_radius(self, q: Vector) -> float:
+        """Horizontal distance from the yaw axis to the last joint's axis (the wrist)."""
+        axes, _ = self.chain.axes(q)
+        point = axes[-1][0]
+        return float(np.hypot(point[0] - self.axis_xy[0], point[1] - self.axis_xy[1]))
+
     # ---- inverse -----------------------------------------------------------------------
 
     def solve(

@@ -4,8 +4,9 @@ Every collision primitive of the URDF becomes a capsule (a segment swept by a ba
 spheres, and on the arm the boxes too, along their longest side) or, on the body, stays a box.
 All are conservative: the capsule contains its primitive. The checked pairs are the arm's links
 against the body's (the chassis, tracks, flippers, cameras), and arm links against each other
-where an arm joint moves them apart, except neighbours (one moving joint between them) and
-pairs already touching in the zero pose (MoveIt's "adjacent" and "default" rules). An optional
+where at least two arm joints lie between them, except neighbours (one moving joint between
+them: the joint's limits keep them apart) and pairs already touching in the zero pose
+(MoveIt's "adjacent" and "default" rules). An optional
 ground plane keeps the arm above the floor.
 
 Distances are exact for the shapes: segment to segment (Ericson, Real-Time Collision Detection
@@ -222,7 +223,12 @@ class CollisionModel:
         for name in moving:
             mimic = self.tree.joint(name).mimic
             sources.add(mimic.joint if mimic is not None else name)
-        return bool(sources & self._arm_joints)
+        arm = sources & self._arm_joints
+        if a in self.arm_links and b in self.arm_links:
+            # One arm joint between two arm links: its limits keep them apart (the forearm
+            # and the gripper across the neck), as they keep neighbours apart.
+            return len(arm) >= 2
+        return bool(arm)
 
     @property
     def pair_count(self) -> int:
