@@ -59,9 +59,14 @@ class ToolPose:
 
     def describe(self) -> str:
         """'x 512 y -3 z 280 mm, pitch -12.0°'."""
+
+        def number(value: float, decimals: int) -> str:
+            text = f"{value:.{decimals}f}"
+            return text[1:] if text.startswith("-") and float(text) == 0.0 else text
+
         return (
-            f"x {self.x * 1000:.0f} y {self.y * 1000:.0f} z {self.z * 1000:.0f} mm, "
-            f"pitch {math.degrees(self.pitch):.1f}°"
+            f"x {number(self.x * 1000, 0)} y {number(self.y * 1000, 0)} "
+            f"z {number(self.z * 1000, 0)} mm, pitch {number(math.degrees(self.pitch), 1)}°"
         )
 
 
