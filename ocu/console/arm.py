@@ -326,10 +326,14 @@ class ArmConsole:
             raise ArmError("no goal to accept: type one, pick one in the 3D view or choose a pose")
         if goal.accepted and self.controller.moving_to == goal.label:
             return goal
+        return self._start(goal)
+
+    def _start(self, goal: ArmGoal) -> ArmGoal:
         now = self.host.clock()
-        self.controller.plan_move(goal.joints, now)  # ArmError before anything changes
+        # Planned again from where the arm is now: ArmError before anything changes.
+        move = self.controller.plan_move(goal.joints, now)
         self.host.arm_starting(move=True)
-        move = self.controller.move_to(goal.joints, now, goal.label)
+        self.controller.start(move, now, goal.label)
         accepted = ArmGoal(goal.label, goal.joints, goal.pose, move.duration_s, accepted=True)
         self._set_goal(accepted)
         self.events.message.emit(f"arm: moving to {goal.label} ({move.duration_s:.1f} s)")
@@ -338,8 +342,12 @@ class ArmConsole:
 
     def go_to(self, name: str) -> ArmGoal:
         """Move to a stored pose at once (a key or a button)."""
-        self.preview_named(name)
-        return self.accept()
+        try:
+            angles = self.poses.get(name)
+        except PoseError as err:
+            raise ArmError(str(err)) from err
+        q = self.kinematics.vector(angles)
+        return self._start(ArmGoal(name, angles, self.kinematics.tool_pose(q), 0.0))
 
     def cancel_goal(self) -> None:
         """Drop the goal shown; a move to it stops."""

@@ -26,12 +26,22 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 ARM_POSES_NAME = "arm_poses.toml"
+CONFIG_DIR_ENV = "OCU_CONFIG_DIR"
 MAX_NAME_LENGTH = 40
 _NAME = re.compile(r"^[\w][\w .\-]*$")
 HEADER = (
     "# Arm poses saved from the ocu console (docs/arm.md): joint angles in degrees.\n"
     "# Written by the program; edits by hand are read at the next start.\n"
 )
+
+
+def default_config_dir() -> Path:
+    """The console's config directory: $OCU_CONFIG_DIR, else $XDG_CONFIG_HOME/ocu, else
+    ~/.config/ocu (the hotkey file, the layout and the stored poses live there)."""
+    if os.environ.get(CONFIG_DIR_ENV):
+        return Path(os.environ[CONFIG_DIR_ENV])
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    return Path(base) / "ocu"
 
 
 class PoseError(ValueError):

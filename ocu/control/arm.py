@@ -290,12 +290,16 @@ class ArmController:
         return move
 
     def move_to(self, goal: Mapping[str, float] | Vector, now: float, label: str) -> SyncMove:
-        """Start a synchronized move (see plan_move); stops any jog."""
+        """Plan a synchronized move (see plan_move) and start it; stops any jog."""
         move = self.plan_move(goal, now)
+        self.start(move, now, label)
+        return move
+
+    def start(self, move: SyncMove, now: float, label: str) -> None:
+        """Start a move planned by plan_move just now; stops any jog."""
         self._jog = None
         self._move = _Move(move, now, label, self.kinematics.tool_pose(move.goal))
         self._set_status(ArmStatus(state="moving", goal=label))
-        return move
 
     # ---- the control step --------------------------------------------------------------
 

@@ -271,9 +271,11 @@ class ArmKinematics:
         self, points: list[Vector], others: Mapping[str, float]
     ) -> tuple[int, Contact] | None:
         """The first pose along a path closer than the clearance (its index), else None."""
+        if not self.has_collision_model:
+            return None
         clearance = self.settings.clearance_m
-        for index, q in enumerate(points):
-            contact = self.contact(q, others)
+        poses = [{**others, **self.mapping(q)} for q in points]
+        for index, contact in enumerate(self.collision.closest_along(poses)):
             if contact is not None and contact.distance_m < clearance:
                 return index, contact
         return None

@@ -242,54 +242,86 @@ class CollisionModel:
         out += [(self.capsules[i].link, self.boxes[j].link) for i, j in self._box_pairs]
         return out
 
-    def _world_capsules(self, angles: Mapping[str, float]) -> tuple[Array, Array, Array]:
-        # Joints not given (no reading yet) sit at zero, whatever an earlier call said.
-        values = dict.fromkeys(self.tree.actuated_joints, 0.0)
-        values.update({k: v for k, v in angles.items() if k in values and math.isfinite(v)})
-        self.tree.set_positions(values)
-        world = self.tree.world_transforms()
-        starts = np.array([_transform(world[c.link], c.start[None, :])[0] for c in self.capsules])
-        ends = np.array([_transform(world[c.link], c.end[None, :])[0] for c in self.capsules])
-        radii = np.array([c.radius_m for c in self.capsules])
-        return starts.reshape(-1, 3), ends.reshape(-1, 3), radii
+    def _prepare(self) -> None:
+        """Index arrays for the batched measurement (built once, after the pairs are known)."""
+        index = {name: i for i, name in enumerate(self.tree.links)}
+        self._capsule_link = np.array([index[c.link] for c in self.capsules], dtype=np.int64)
+        self._capsule_start = np.array([c.start for c in self.capsules]).reshape(-1, 3)
+        self._capsule_end = np.array([c.end for c in self.capsules]).reshape(-1, 3)
+        self._radii = np.array([c.radius_m for c in self.capsules])
+        self._ci = np.array([p[0] for p in self._capsule_pairs], dtype=np.int64)
+        self._cj = np.array([p[1] for p in self._capsule_pairs], dtype=np.int64)
+        self._bi = np.array([p[0] for p in self._box_pairs], dtype=np.int64)
+        self._box_link = np.array(
+            [index[self.boxes[j].link] for _, j in self._box_pairs], dtype=np.int64
+        )
+        self._box_pose = np.array([self.boxes[j].pose for _, j in self._box_pairs]).reshape(
+            -1, 4, 4
+        )
+        self._box_half = np.array([self.boxes[j].half for _, j in self._box_pairs]).reshape(-1, 3)
+        self._ground_index = np.array(self._ground, dtype=np.int64)
 
-    def _distances(self, angles: Mapping[str, float]) -> tuple[Array, Array]:
-        return self._measure(angles)[:2]
+    def _worlds(self, poses: Sequence[Mapping[str, float]]) -> Array:
+        """(poses, links, 4, 4): every link's transform in each pose."""
+        worlds = np.empty((len(poses), len(self.tree.links), 4, 4))
+        for k, angles in enumerate(poses):
+            # Joints not given (no reading yet) sit at zero, whatever an earlier call said.
+            values = dict.fromkeys(self.tree.actuated_joints, 0.0)
+            values.update({n: v for n, v in angles.items() if n in values and math.isfinite(v)})
+            self.tree.set_positions(values)
+            worlds[k] = self.tree.world_array()
+        return worlds
 
-    def _measure(self, angles: Mapping[str, float]) -> tuple[Array, Array, Array]:
-        """Capsule-pair gaps, capsule-box gaps and the arm's heights above the ground."""
-        starts, ends, radii = self._world_capsules(angles)
-        capsule_d = np.zeros(0)
-        if self._capsule_pairs:
-            ci = np.array([p[0] for p in self._capsule_pairs])
-            cj = np.array([p[1] for p in self._capsule_pairs])
+    def _measure(self, poses: Sequence[Mapping[str, float]]) -> tuple[Array, Array, Array]:
+        """Per pose: capsule-pair gaps, capsule-box gaps and the arm's heights above the ground."""
+        if not hasattr(self, "_capsule_link"):
+            self._prepare()
+        count = len(poses)
+        worlds = self._worlds(poses)
+        frames = worlds[:, self._capsule_link]  # (P, C, 4, 4)
+        rotations, origins = frames[..., :3, :3], frames[..., :3, 3]
+        starts = np.einsum("pcij,cj->pci", rotations, self._capsule_start) + origins
+        ends = np.einsum("pcij,cj->pci", rotations, self._capsule_end) + origins
+        radii = self._radii
+        capsule_d = np.zeros((count, 0))
+        if self._ci.size:
+            ci, cj = self._ci, self._cj
             capsule_d = (
-                segment_distances(starts[ci], ends[ci], starts[cj], ends[cj])
+                segment_distances(
+                    starts[:, ci].reshape(-1, 3),
+                    ends[:, ci].reshape(-1, 3),
+                    starts[:, cj].reshape(-1, 3),
+                    ends[:, cj].reshape(-1, 3),
+                ).reshape(count, -1)
                 - radii[ci]
                 - radii[cj]
             )
-        box_d = np.zeros(0)
-        if self._box_pairs:
-            world = self.tree.world_transforms()
-            bi = np.array([p[0] for p in self._box_pairs])
-            poses = np.array(
-                [world[self.boxes[j].link] @ self.boxes[j].pose for _, j in self._box_pairs]
+        box_d = np.zeros((count, 0))
+        if self._bi.size:
+            boxes = worlds[:, self._box_link] @ self._box_pose  # (P, B, 4, 4)
+            box_rotations, box_origins = boxes[..., :3, :3], boxes[..., :3, 3]
+            local_start = np.einsum(
+                "pnji,pnj->pni", box_rotations, starts[:, self._bi] - box_origins
             )
-            rotations = poses[:, :3, :3]
-            origins = poses[:, :3, 3]
-            local_start = np.einsum("nji,nj->ni", rotations, starts[bi] - origins)
-            local_end = np.einsum("nji,nj->ni", rotations, ends[bi] - origins)
-            halves = np.array([self.boxes[j].half for _, j in self._box_pairs])
-            box_d = segment_box_distances(local_start, local_end, halves) - radii[bi]
-        ground = np.zeros(0)
-        if self.ground_z_m is not None and self._ground:
-            index = np.array(self._ground)
-            ground = np.minimum(starts[index, 2], ends[index, 2]) - radii[index] - self.ground_z_m
+            local_end = np.einsum("pnji,pnj->pni", box_rotations, ends[:, self._bi] - box_origins)
+            halves = np.broadcast_to(self._box_half, local_start.shape)
+            box_d = (
+                segment_box_distances(
+                    local_start.reshape(-1, 3), local_end.reshape(-1, 3), halves.reshape(-1, 3)
+                ).reshape(count, -1)
+                - radii[self._bi]
+            )
+        ground = np.zeros((count, 0))
+        if self.ground_z_m is not None and self._ground_index.size:
+            g = self._ground_index
+            ground = np.minimum(starts[:, g, 2], ends[:, g, 2]) - radii[g] - self.ground_z_m
         return capsule_d, box_d, ground
 
-    def closest(self, angles: Mapping[str, float]) -> Contact | None:
-        """The closest checked pair (or the ground) in a pose; None when nothing is checked."""
-        capsule_d, box_d, ground = self._measure(angles)
+    def _distances(self, angles: Mapping[str, float]) -> tuple[Array, Array]:
+        capsule_d, box_d, _ = self._measure([angles])
+        return capsule_d[0], box_d[0]
+
+    def _contact(self, capsule_d: Array, box_d: Array, ground: Array) -> Contact | None:
         best: Contact | None = None
         if capsule_d.size:
             k = int(np.argmin(capsule_d))
@@ -305,6 +337,18 @@ class CollisionModel:
             if best is None or ground[k] < best.distance_m:
                 best = Contact(float(ground[k]), self.capsules[self._ground[k]].link, GROUND)
         return best
+
+    def closest(self, angles: Mapping[str, float]) -> Contact | None:
+        """The closest checked pair (or the ground) in a pose; None when nothing is checked."""
+        capsule_d, box_d, ground = self._measure([angles])
+        return self._contact(capsule_d[0], box_d[0], ground[0])
+
+    def closest_along(self, poses: Sequence[Mapping[str, float]]) -> list[Contact | None]:
+        """`closest` for many poses at once (a path), in one batched computation."""
+        if not poses:
+            return []
+        capsule_d, box_d, ground = self._measure(poses)
+        return [self._contact(capsule_d[k], box_d[k], ground[k]) for k in range(len(poses))]
 
 
 def _path_joints(tree: KinematicTree, a: str, b: str) -> list[str]:
