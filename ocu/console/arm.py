@@ -340,6 +340,15 @@ class ArmConsole:
         self.step(now)
         return accepted
 
+    def move_to_joints(self, label: str, joints: Mapping[str, float]) -> ArmGoal:
+        """Move to a joint goal (every arm joint, rad) by the same synchronized move."""
+        missing = [j for j in self.kinematics.joints if j not in joints]
+        if missing:
+            raise ArmError(f"the goal gives no angle for {', '.join(missing)}")
+        angles = {j: float(joints[j]) for j in self.kinematics.joints}
+        q = self.kinematics.vector(angles)
+        return self._start(ArmGoal(label, angles, self.kinematics.tool_pose(q), 0.0))
+
     def go_to(self, name: str) -> ArmGoal:
         """Move to a stored pose at once (a key or a button)."""
         try:

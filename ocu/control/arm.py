@@ -43,11 +43,11 @@ from ocu.kinematics.trajectory import SyncMove, plan
 from ocu.profile import RobotProfile
 from ocu.records import JointReading
 
-# Joint tolerance of a move's arrival: 0.15° on each of four joints keeps tool0 within a few
-# millimetres at the Engineer's reach.
-MOVE_TOLERANCE_RAD = math.radians(0.15)
+# Joint tolerance of a move's arrival: 0.1° on each of four joints keeps tool0 within a few
+# millimetres at the Engineer's reach (the position controller's 0.3° would allow 7 mm).
+MOVE_TOLERANCE_RAD = math.radians(0.1)
 # Share of each channel's maximum a move plans with: the rest is room for the feedback.
-MOVE_SPEED_SHARE = 0.9
+MOVE_SPEED_SHARE = 0.95
 # Damping of the Jacobian's pseudo-inverse (lengths in units of the arm's longest link).
 JOG_DAMPING = 0.02
 # A step along the motion this long (s) tells whether it approaches a singularity.

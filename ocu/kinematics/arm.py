@@ -37,6 +37,8 @@ from ocu.profile import ArmSettings
 FRAMES = ("base", "tool", "camera")
 WORKSPACE_CELL_M = 0.02
 WORKSPACE_SAMPLES = (48, 48, 16)
+# Green: the ghost is light blue, stale joints amber, implausible ones red.
+WORKSPACE_RGBA = (120, 220, 120, 255)
 
 
 class ArmError(ValueError):
@@ -335,6 +337,6 @@ class ArmKinematics:
         mesh = MeshData(
             positions=positions,
             normals=np.tile(normal, (len(positions), 1)),
-            colors=np.tile(np.array([90, 200, 255, 255], dtype=np.uint8), (len(positions), 1)),
+            colors=np.tile(np.array(WORKSPACE_RGBA, dtype=np.uint8), (len(positions), 1)),
         )
         return yaw_link, mesh

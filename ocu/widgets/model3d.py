@@ -50,9 +50,9 @@ from ocu.render.scene import OverlayDraw, RenderFrame, build_frame, model_bounds
 
 FRESHNESS_CHECK_MS = 250
 SOFTWARE_FRAME_INTERVAL_MS = 33  # at most ~30 OSMesa frames per second
-WORKSPACE_ALPHA = 0.16
+WORKSPACE_ALPHA = 0.13
 # The jog arrow: this long at the jog's full speed, never shorter than the minimum.
-ARROW_M_PER_M_S = 2.0
+ARROW_M_PER_M_S = 3.0
 ARROW_MIN_M = 0.08
 
 
