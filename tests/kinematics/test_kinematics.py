@@ -250,3 +250,19 @@ def test_chain_mimic_held_joints_and_errors() -> None:
         Chain(tree, "base_link", "tool0", variables=["flippers"])
     with pytest.raises(ChainError, match="expected 4 values"):
         tool.forward([0.0, 0.0])
+
+
+def test_jog_frames_are_the_tree_frames(arm: ArmKinematics) -> None:
+    """base, tool (tool0) and camera (head_cameras, the head's pan as read) orientations."""
+    q = np.radians([35.0, 50.0, 80.0, -25.0])
+    others = {"head_pan": math.radians(20.0), "gripper_roll": math.radians(10.0)}
+    arm.hold(others)
+    tree = arm.tree.copy()
+    tree.set_positions({**others, **arm.mapping(q)})
+    assert np.allclose(arm.frame_rotation("base", q, others), np.eye(3))
+    assert np.allclose(arm.frame_rotation("tool", q, others), tree.world_transform("tool0")[:3, :3])
+    camera = tree.world_transform("head_cameras")[:3, :3]
+    assert np.allclose(arm.frame_rotation("camera", q, others), camera)
+    with pytest.raises(ArmError, match="unknown jog frame 'world'"):
+        arm.frame_rotation("world", q, others)
+    arm.hold({"head_pan": 0.0, "gripper_roll": 0.0})
