@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ocu.console.poses import CONFIG_DIR_ENV, default_config_dir
 from ocu.profile import ProfileError, RobotProfile, load_profile
 
 if TYPE_CHECKING:
@@ -26,17 +26,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("ocu")
 
-CONFIG_DIR_ENV = "OCU_CONFIG_DIR"
 SETTINGS_FILE = "ocu.ini"
 SIGNAL_POLL_MS = 100
-
-
-def default_config_dir() -> Path:
-    """$OCU_CONFIG_DIR, else $XDG_CONFIG_HOME/ocu, else ~/.config/ocu."""
-    if os.environ.get(CONFIG_DIR_ENV):
-        return Path(os.environ[CONFIG_DIR_ENV])
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "ocu"
 
 
 def parse_robot(text: str, default_port: int) -> tuple[str, int]:

@@ -15,13 +15,24 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from ocu.console.arm import ArmConsole
 from ocu.console.model import DEFAULT_FINE_FACTOR, ConsoleModel
+from ocu.console.poses import PoseError
+from ocu.kinematics.arm import ArmError
 from ocu.profile import RobotProfile, did_you_mean
 
 USER_KEY_MAP_NAME = "hotkeys.toml"
 ESTOP_KEY = "Space"
 CLOSE_HELP_KEY = "Escape"
-TABLES = ("options", "hold", "commands")
+TABLES = ("options", "hold", "commands", "cartesian")
+# What a [cartesian] key moves: tool0 along an axis of the jog frame, or its pitch.
+CARTESIAN_AXES = ("x", "y", "z", "pitch")
+CARTESIAN_WORDS = {
+    "x": ("forward", "back"),
+    "y": ("left", "right"),
+    "z": ("up", "down"),
+    "pitch": ("pitch up", "pitch down"),
+}
 OPTIONS = ("fine_factor",)
 
 # Linux evdev key codes (the PC set-1 scan codes of the main block) of the US positions.
@@ -70,6 +81,18 @@ class HoldBinding:
 
 
 @dataclass(frozen=True)
+class JogBinding:
+    """In Cartesian mode, hold a key to move tool0 along an axis (or pitch it) one way."""
+
+    axis: str
+    direction: int
+
+    def describe(self) -> str:
+        """'x +' as written in the key map file."""
+        return f"{self.axis} {'+' if self.direction > 0 else '-'}"
+
+
+@dataclass(frozen=True)
 class KeyMap:
     """Key name to hold binding or command name, and the Shift fine factor."""
 
@@ -79,10 +102,12 @@ class KeyMap:
     sources: tuple[str, ...] = ()
     # Words for each channel's + and - (the profile's `directions`), for the help.
     directions: Mapping[str, tuple[str, str]] = field(default_factory=dict)
+    # Cartesian mode: these keys jog tool0 instead of what [hold] says.
+    cartesian: Mapping[str, JogBinding] = field(default_factory=dict)
 
     def is_bound(self, key: str) -> bool:
         """Whether pressing this key does something."""
-        return key in self.hold or key in self.commands or key == ESTOP_KEY
+        return key in self.hold or key in self.commands or key in self.cartesian or key == ESTOP_KEY
 
     def keys_for(self, command: str) -> list[str]:
         """Keys bound to a command, Space first for the emergency stop."""
@@ -104,6 +129,18 @@ class KeyMap:
             what = " / ".join(words[i] for i, d in enumerate((1, -1)) if directions[d])
             lines.append((keys, f"{channel.replace('_', ' ')}: {what}"))
         lines.append(("Shift + key", f"fine: {self.fine_factor:g} of the hotkey speed"))
+        if self.cartesian:
+            by_axis: dict[str, dict[int, list[str]]] = {}
+            for key, jog in self.cartesian.items():
+                by_axis.setdefault(jog.axis, {1: [], -1: []})[jog.direction].append(key_label(key))
+            for axis in CARTESIAN_AXES:
+                if axis not in by_axis:
+                    continue
+                keys = " / ".join(" ".join(by_axis[axis][d]) for d in (1, -1) if by_axis[axis][d])
+                what = " / ".join(
+                    CARTESIAN_WORDS[axis][i] for i, d in enumerate((1, -1)) if by_axis[axis][d]
+                )
+                lines.append((f"{keys} (Cartesian)", f"gripper {what}"))
         for command in dict.fromkeys(self.commands.values()):
             keys = " or ".join(key_label(k) for k in self.keys_for(command))
             lines.append((keys, COMMAND_TITLES[command]))
@@ -161,6 +198,7 @@ def parse_key_map(
             raise KeyMapError(f"{source}: {name}: unknown table; {did_you_mean(name, TABLES)}")
     hold = dict(base.hold) if base else {}
     commands = dict(base.commands) if base else {}
+    cartesian = dict(base.cartesian) if base else {}
     fine_factor = base.fine_factor if base else DEFAULT_FINE_FACTOR
 
     options = _table(data, "options", source)
@@ -207,8 +245,29 @@ def parse_key_map(
         if name not in COMMANDS:
             raise KeyMapError(f"{where}: unknown command {name!r}; {did_you_mean(name, COMMANDS)}")
         commands[key] = name
-    if ESTOP_KEY in hold:
+    for key, text in _table(data, "cartesian", source).items():
+        where = f"{source}: cartesian.{key}"
+        _check_key(key, where)
+        if not isinstance(text, str):
+            raise KeyMapError(f'{where}: must be a string like "x +"')
+        if not text.strip():
+            cartesian.pop(key, None)
+            continue
+        parts = text.split()
+        if len(parts) != 2 or parts[1] not in ("+", "-") or parts[0] not in CARTESIAN_AXES:
+            raise KeyMapError(
+                f'{where}: {text!r} must be "AXIS +" or "AXIS -" with AXIS one of '
+                f"{', '.join(CARTESIAN_AXES)}"
+            )
+        cartesian[key] = JogBinding(parts[0], 1 if parts[1] == "+" else -1)
+    if ESTOP_KEY in hold or ESTOP_KEY in cartesian:
         raise KeyMapError(f"{source}: {ESTOP_KEY} is the emergency stop and cannot move a joint")
+    for key in cartesian:
+        if key in commands:
+            raise KeyMapError(
+                f"{source}: {key} is bound to the command {commands[key]!r} and to a Cartesian "
+                "jog; free one of them"
+            )
     sources = (*base.sources, source) if base else (source,)
     directions = {name: channel.directions for name, channel in profile.channels.items()}
     return KeyMap(
@@ -217,6 +276,7 @@ def parse_key_map(
         fine_factor=fine_factor,
         sources=sources,
         directions=directions,
+        cartesian=cartesian,
     )
 
 
@@ -242,13 +302,67 @@ def toggle_help(model: ConsoleModel) -> None:
     model.set_help_visible(not model.help_visible)
 
 
+def _with_arm(action: Callable[[ArmConsole], None]) -> Callable[[ConsoleModel], None]:
+    """A command on the arm; says why when the console has no Cartesian arm control."""
+
+    def run(model: ConsoleModel) -> None:
+        if model.arm is None:
+            model.events.message.emit(model.arm_error or "this robot has no arm profile")
+            return
+        try:
+            action(model.arm)
+        except (ArmError, PoseError) as err:
+            model.events.message.emit(f"arm: {err}")
+
+    run.__doc__ = action.__doc__
+    return run
+
+
+def _go(name: str) -> Callable[[ArmConsole], None]:
+    def go(arm: ArmConsole) -> None:
+        arm.go_to(name)
+
+    go.__doc__ = f"Move the arm to its stored pose {name!r}."
+    return go
+
+
+def _accept(arm: ArmConsole) -> None:
+    """Move the arm to the goal shown."""
+    arm.accept()
+
+
+def _toggle_workspace(arm: ArmConsole) -> None:
+    """Show or hide the reachable workspace in the 3D view."""
+    arm.set_show_workspace(not arm.show_workspace)
+
+
 COMMANDS: dict[str, Callable[[ConsoleModel], None]] = {
     "emergency_stop": emergency_stop,
     "help": toggle_help,
+    "cartesian_mode": _with_arm(ArmConsole.toggle_cartesian),
+    "jog_frame": _with_arm(ArmConsole.cycle_frame),
+    "jog_faster": _with_arm(ArmConsole.faster),
+    "jog_slower": _with_arm(ArmConsole.slower),
+    "arm_accept": _with_arm(_accept),
+    "arm_workspace": _with_arm(_toggle_workspace),
+    "pose_stow": _with_arm(_go("stow")),
+    "pose_ready": _with_arm(_go("ready")),
+    "pose_look_forward": _with_arm(_go("look_forward")),
+    "pose_look_back": _with_arm(_go("look_back")),
 }
 COMMAND_TITLES = {
     "emergency_stop": "EMERGENCY STOP (also the StopAll button)",
     "help": "show / hide this help",
+    "cartesian_mode": "arm: joint / Cartesian mode (the driving keys move the gripper)",
+    "jog_frame": "arm: jog frame base → tool → camera",
+    "jog_faster": "arm: jog faster (×1.5)",
+    "jog_slower": "arm: jog slower (÷1.5)",
+    "arm_accept": "arm: go to the goal shown (Accept)",
+    "arm_workspace": "arm: show / hide the reachable workspace",
+    "pose_stow": "arm: stored pose stow",
+    "pose_ready": "arm: stored pose ready",
+    "pose_look_forward": "arm: stored pose look forward",
+    "pose_look_back": "arm: stored pose look back",
 }
 
 
@@ -256,6 +370,10 @@ def press(model: ConsoleModel, key_map: KeyMap, key: str) -> bool:
     """A key went down (auto-repeat already filtered out); True if it is bound."""
     if key == ESTOP_KEY:
         emergency_stop(model, ESTOP_KEY)
+        return True
+    jog = key_map.cartesian.get(key)
+    if jog is not None and model.arm is not None and model.arm.cartesian:
+        model.arm_jog_down(key, jog.axis, jog.direction)
         return True
     binding = key_map.hold.get(key)
     if binding is not None:

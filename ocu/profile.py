@@ -37,6 +37,7 @@ TOP_KEYS = (
     "buttons",
     "channels",
     "motors",
+    "arm",
 )
 LINK_KEYS = (
     "address",
@@ -107,6 +108,26 @@ CHANNEL_KEYS = (
 # A motor's position keys only mean something with ticks_per_rad.
 MOTOR_POSITION_KEYS = ("zero_offset_ticks", "limits_deg")
 MOTOR_KEYS = ("device_id", "channel", "track", "ticks_per_rad", *MOTOR_POSITION_KEYS)
+
+ARM_KEYS = (
+    "base_link",
+    "tool_link",
+    "camera_link",
+    "joints",
+    "linear_speed_m_s",
+    "max_linear_speed_m_s",
+    "pitch_speed_deg_s",
+    "max_pitch_speed_deg_s",
+    "acceleration_deg_s2",
+    "joint_limit_margin_deg",
+    "singularity_slow",
+    "singularity_stop",
+    "clearance_m",
+    "slow_distance_m",
+    "ground_z_m",
+    "twist_timeout_s",
+    "poses",
+)
 
 CAMERA_MODELS = ("fisheye", "standard")
 COLOUR_MODES = ("off", "gray_world", "fixed")
@@ -260,6 +281,33 @@ class Motor:
 
 
 @dataclass(frozen=True)
+class ArmSettings:
+    """The arm in Cartesian space (docs/arm.md): its frames, jog speeds, safety margins.
+
+    The links are the URDF's; `joints` are the motors that move the arm, from the base to the
+    tool. `poses` are the stored poses every robot of this kind has (joint name -> rad).
+    """
+
+    base_link: str
+    tool_link: str
+    camera_link: str | None
+    joints: tuple[str, ...]
+    linear_speed_m_s: float
+    max_linear_speed_m_s: float
+    pitch_speed_rad_s: float
+    max_pitch_speed_rad_s: float
+    acceleration_rad_s2: float
+    joint_limit_margin_rad: float
+    singularity_slow: float
+    singularity_stop: float
+    clearance_m: float
+    slow_distance_m: float
+    ground_z_m: float | None
+    twist_timeout_s: float
+    poses: dict[str, dict[str, float]]
+
+
+@dataclass(frozen=True)
 class RobotProfile:
     """Everything the OCU knows about one robot model."""
 
@@ -279,6 +327,7 @@ class RobotProfile:
     extension: ExtensionSettings | None = None
     video: VideoSettings = VideoSettings()
     cameras: tuple[CameraSettings, ...] = ()
+    arm: ArmSettings | None = None
 
     def channel_with_role(self, role: str) -> str | None:
         """The channel that plays a role (e.g. "drive_linear"), or None."""
@@ -615,6 +664,66 @@ def _parse_cameras(root: _Reader, names: tuple[str, ...]) -> tuple[CameraSetting
     )
 
 
+def _parse_arm(reader: _Reader, motors: dict[str, Motor]) -> ArmSettings:
+    joints = reader.table.get("joints")
+    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
+        raise ProfileError(f"{reader.where}.joints: must be a non-empty list of motor names")
+    for name in joints:
+        motor = motors.get(name)
+        if motor is None:
+            raise ProfileError(
+                f"{reader.where}.joints: unknown motor {name!r}; {did_you_mean(name, motors)}"
+            )
+        if not motor.has_position or motor.channel is None:
+            raise ProfileError(
+                f"{reader.where}.joints: {name!r} must report a position and have a channel"
+            )
+    if len(set(joints)) != len(joints):
+        raise ProfileError(f"{reader.where}.joints: a joint is named twice")
+    linear = reader.number("linear_speed_m_s", low=1e-6)
+    pitch = reader.number("pitch_speed_deg_s", low=1e-6)
+    slow = reader.number("singularity_slow", low=1.0)
+    poses: dict[str, dict[str, float]] = {}
+    if reader.optional("poses"):
+        table = reader.sub("poses", None)
+        for name in table.table:
+            pose = table.sub(name, joints, unknown="not one of arm.joints")
+            angles = {}
+            for joint in pose.table:
+                degrees = pose.number(joint)
+                low, high = motors[joint].limits_deg or (-math.inf, math.inf)
+                if not low <= degrees <= high:
+                    raise ProfileError(
+                        f"{pose.where}.{joint}: {degrees}° outside the limits [{low}, {high}]"
+                    )
+                angles[joint] = math.radians(degrees)
+            if set(angles) != set(joints):
+                missing = ", ".join(j for j in joints if j not in angles)
+                raise ProfileError(f"{pose.where}: every arm joint needs an angle ({missing})")
+            poses[name] = angles
+    return ArmSettings(
+        base_link=reader.string("base_link"),
+        tool_link=reader.string("tool_link"),
+        camera_link=reader.string("camera_link") if reader.optional("camera_link") else None,
+        joints=tuple(joints),
+        linear_speed_m_s=linear,
+        max_linear_speed_m_s=reader.number("max_linear_speed_m_s", low=linear),
+        pitch_speed_rad_s=math.radians(pitch),
+        max_pitch_speed_rad_s=math.radians(reader.number("max_pitch_speed_deg_s", low=pitch)),
+        acceleration_rad_s2=math.radians(reader.number("acceleration_deg_s2", low=1e-3)),
+        joint_limit_margin_rad=math.radians(
+            reader.number("joint_limit_margin_deg", low=0.0, high=45.0)
+        ),
+        singularity_slow=slow,
+        singularity_stop=reader.number("singularity_stop", low=slow),
+        clearance_m=reader.number("clearance_m", low=0.0),
+        slow_distance_m=reader.number("slow_distance_m", low=0.0),
+        ground_z_m=reader.number("ground_z_m") if reader.optional("ground_z_m") else None,
+        twist_timeout_s=reader.number("twist_timeout_s", low=0.01, high=2.0),
+        poses=poses,
+    )
+
+
 def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfile:
     """Validate a decoded TOML document and build the profile."""
     root = _Reader(data, "profile", TOP_KEYS)
@@ -724,4 +833,5 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
             else VideoSettings()
         ),
         cameras=_parse_cameras(root, tuple(cameras)),
+        arm=_parse_arm(root.sub("arm", ARM_KEYS), motors) if root.optional("arm") else None,
     )

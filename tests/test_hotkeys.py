@@ -42,8 +42,37 @@ def model(profile: RobotProfile) -> ConsoleModel:
 
 def test_default_map_is_table_4(key_map: KeyMap) -> None:
     assert {k: (b.channel, b.direction) for k, b in key_map.hold.items()} == TABLE_4
-    assert key_map.commands == {"Space": "emergency_stop", "F1": "help", "Slash": "help"}
+    table_4 = {k: v for k, v in key_map.commands.items() if v in ("emergency_stop", "help")}
+    assert table_4 == {"Space": "emergency_stop", "F1": "help", "Slash": "help"}
     assert key_map.fine_factor == 0.25
+
+
+def test_arm_keys_use_only_their_own_keys(key_map: KeyMap) -> None:
+    """The arm's commands sit on C V B N M I and F2-F8; Cartesian mode re-reads hold keys."""
+    arm = {k: v for k, v in key_map.commands.items() if v not in ("emergency_stop", "help")}
+    assert set(arm) <= {"C", "V", "B", "N", "M", "I", *(f"F{n}" for n in range(2, 9))}
+    assert arm["C"] == "cartesian_mode"
+    assert arm["F2"] == "pose_stow"
+    jog = {k: b.describe() for k, b in key_map.cartesian.items()}
+    assert jog == {
+        "W": "x +", "S": "x -", "A": "y +", "D": "y -",
+        "R": "z +", "F": "z -", "Y": "pitch +", "H": "pitch -",
+    }  # fmt: skip
+    assert set(jog) <= set(key_map.hold)  # only keys that already move something
+    rows = dict(key_map.help_rows())
+    assert rows["W / S (Cartesian)"] == "gripper forward / back"
+    assert rows["Y / H (Cartesian)"] == "gripper pitch up / pitch down"
+    assert rows["C"].startswith("arm: joint / Cartesian mode")
+
+
+def test_cartesian_table_errors(profile: RobotProfile) -> None:
+    with pytest.raises(KeyMapError, match=r'cartesian\.W: \'roll \+\' must be "AXIS \+"'):
+        hotkeys.parse_key_map({"cartesian": {"W": "roll +"}}, profile)
+    with pytest.raises(KeyMapError, match="Space is the emergency stop"):
+        hotkeys.parse_key_map({"cartesian": {"Space": "x +"}}, profile)
+    with pytest.raises(KeyMapError, match="bound to the command 'cartesian_mode' and to a"):
+        hotkeys.parse_key_map({"commands": {"C": "cartesian_mode"}, "cartesian": {"C": "z +"}},
+                              profile)  # fmt: skip
 
 
 def test_key_positions_are_the_us_scan_codes() -> None:
@@ -98,7 +127,7 @@ def test_missing_user_file_means_the_default(profile: RobotProfile, tmp_path: Pa
         ('[hold]\nK = "waist up"\n', "must be"),
         ("[hold]\nK = 3\n", "must be a string"),
         ('[hold]\nSpace = "waist +"\n', "emergency stop"),
-        ('[commands]\nK = "dance"\n', "unknown command 'dance'; known: emergency_stop, help$"),
+        ('[commands]\nK = "dance"\n', "unknown command 'dance'; known: emergency_stop, help, "),
         (
             '[commands]\nK = "halp"\n',
             r"commands\.K: unknown command 'halp'; did you mean 'help'\?$",
@@ -110,7 +139,7 @@ def test_missing_user_file_means_the_default(profile: RobotProfile, tmp_path: Pa
         ("[options]\nspeed = 0.5\n", r"options\.speed: unknown option; known: fine_factor$"),
         ("[options]\nfine_factor = 0\n", r"\(0, 1\]"),
         ('[options]\nfine_factor = "x"\n', "must be a number"),
-        ("[keys]\n", r"toml: keys: unknown table; known: options, hold, commands$"),
+        ("[keys]\n", r"toml: keys: unknown table; known: options, hold, commands, cartesian$"),
         ('[holds]\nK = "waist +"\n', r"toml: holds: unknown table; did you mean 'hold'\?$"),
         ("hold = 3\n", "must be a table"),
         ("[hold\n", "not valid TOML"),
@@ -186,4 +215,5 @@ def test_help_rows_list_every_binding(key_map: KeyMap) -> None:
     assert rows["Space"].startswith("EMERGENCY STOP")
     assert rows["F1 or ?"] == "show / hide this help"
     assert "Shift + key" in rows
-    assert len(rows) == 10
+    arm = [k for k, v in rows.items() if v.startswith(("arm:", "gripper ")) or "Cartesian" in k]
+    assert len(rows) - len(arm) == 10

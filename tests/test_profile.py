@@ -507,13 +507,38 @@ def test_every_unknown_key_of_a_table_is_named() -> None:
 
 def test_optional_keys_stay_optional() -> None:
     data = copy.deepcopy(SHIPPED_DATA)
-    for key in ("assumptions", "extension", "video", "cameras"):
+    for key in ("assumptions", "extension", "video", "cameras", "arm"):
         del data[key]
     del data["motors"]["waist"]["channel"]
     profile = parse_profile(data)
     assert profile.assumptions == ()
     assert profile.motors["waist"].channel is None
     assert not profile.motors["left_track"].has_position  # a motor without ticks_per_rad
+    assert profile.arm is None
+
+
+def test_arm_table_is_checked(profile: RobotProfile) -> None:
+    assert profile.arm is not None
+    assert profile.arm.joints == ("waist", "shoulder", "elbow", "neck")
+    assert set(profile.arm.poses) == {"stow", "ready", "look_forward", "look_back"}
+    assert profile.arm.joint_limit_margin_rad == pytest.approx(0.1, abs=1e-3)
+    cases = {
+        ("arm", "joints"): (["waist", "knee"], r"arm\.joints: unknown motor 'knee'"),
+        ("arm", "singularity_stop"): (5.0, r"arm\.singularity_stop: must be >= 17"),
+        ("arm", "poses", "ready", "elbow"): (170.0, r"poses\.ready\.elbow: 170\.0° outside"),
+        ("arm", "poses", "ready", "tail"): (1.0, r"poses\.ready\.tail: not one of arm\.joints"),
+        ("arm", "speed"): (1.0, r"arm\.speed: unknown key"),
+    }
+    for path, (value, message) in cases.items():
+        with pytest.raises(ProfileError, match=message):
+            parse_profile(_edited(path, value))
+    data = copy.deepcopy(SHIPPED_DATA)
+    del data["arm"]["poses"]["stow"]["neck"]
+    with pytest.raises(ProfileError, match=r"poses\.stow: every arm joint needs an angle \(neck\)"):
+        parse_profile(data)
+    data["motors"]["waist"].pop("channel")
+    with pytest.raises(ProfileError, match="'waist' must report a position and have a channel"):
+        parse_profile(data)
 
 
 @pytest.mark.parametrize("key", ["zero_offset_ticks", "limits_deg"])

@@ -13,6 +13,7 @@ Run from the repository root; the output is byte-for-byte reproducible:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import struct
 import sys
@@ -238,11 +239,26 @@ def jaw_mesh(side: float) -> trimesh.Trimesh:
 
 
 @dataclass(frozen=True)
+class Collision:
+    """A collision primitive in its link's frame: a box (size), cylinder (radius, length along
+    its z) or sphere (radius)."""
+
+    kind: str
+    dims: tuple[float, ...]
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+ALONG_X = (0.0, math.pi / 2, 0.0)  # a cylinder's z turned onto the link's x
+
+
+@dataclass(frozen=True)
 class LinkSpec:
-    """A link to write: its mesh file, colour and (except the root) its parent joint."""
+    """A link to write: its mesh file (None: a bare frame such as tool0), colour, collision
+    primitives and (except the root) its parent joint."""
 
     name: str
-    mesh: trimesh.Trimesh
+    mesh: trimesh.Trimesh | None
     color: str
     joint: str | None = None
     joint_type: str = "fixed"
@@ -251,10 +267,94 @@ class LinkSpec:
     axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
     limits: tuple[float, float] | None = None
     mimic: tuple[str, float] | None = None
+    collisions: tuple[Collision, ...] = ()
+
+
+# Where the jaws close, in the gripper_base frame: tool0, the frame the arm is steered by.
+TOOL0_XYZ = (0.175, 0.0, 0.0)
+
+
+def collision_shapes(profile: RobotProfile) -> dict[str, tuple[Collision, ...]]:
+    """Boxes and cylinders around each link's mesh (the self-collision check uses them)."""
+    hull_height = HULL_TOP + 0.03 - HULL_BOTTOM
+    camera_z = HULL_TOP + 0.055
+    track_height = 2 * WHEEL_RADIUS + 0.01
+    jaw = (0.125, 0.03, 0.035)
+    return {
+        "base_link": (
+            Collision(
+                "box",
+                (HULL_LENGTH + 0.04, 0.42, hull_height),
+                (0.0, 0.0, HULL_BOTTOM + hull_height / 2),
+            ),
+        ),
+        "chassis_cameras": (
+            Collision("box", (0.04, 0.08, 0.05), (0.25, 0.0, camera_z)),
+            Collision("box", (0.04, 0.08, 0.05), (-0.27, 0.0, camera_z)),
+        ),
+        "left_track": (
+            Collision(
+                "box",
+                (WHEEL_BASE + 2 * WHEEL_RADIUS, TRACK_BELT_WIDTH, track_height),
+                (0.0, 0.0, track_height / 2),
+            ),
+        ),
+        "right_track": (
+            Collision(
+                "box",
+                (WHEEL_BASE + 2 * WHEEL_RADIUS, TRACK_BELT_WIDTH, track_height),
+                (0.0, 0.0, track_height / 2),
+            ),
+        ),
+        "left_flipper": (
+            Collision(
+                "box",
+                (FLIPPER_LENGTH + 0.14, FLIPPER_WIDTH, 2 * WHEEL_RADIUS),
+                (FLIPPER_LENGTH / 2 - 0.02, 0.0, 0.0),
+            ),
+        ),
+        "right_flipper": (
+            Collision(
+                "box",
+                (FLIPPER_LENGTH + 0.14, FLIPPER_WIDTH, 2 * WHEEL_RADIUS),
+                (FLIPPER_LENGTH / 2 - 0.02, 0.0, 0.0),
+            ),
+        ),
+        "turret": (
+            Collision(
+                "cylinder",
+                (0.10, SHOULDER_HEIGHT + 0.045),
+                (0.0, 0.0, (SHOULDER_HEIGHT + 0.045) / 2),
+            ),
+        ),
+        "upper_arm": (
+            Collision(
+                "cylinder", (0.05, UPPER_ARM_LENGTH), (UPPER_ARM_LENGTH / 2, 0.0, 0.0), ALONG_X
+            ),
+        ),
+        "forearm": (
+            Collision("cylinder", (0.045, FOREARM_LENGTH), (FOREARM_LENGTH / 2, 0.0, 0.0), ALONG_X),
+        ),
+        "neck_link": (Collision("box", (0.125, 0.10, 0.115), (0.019, 0.0, -0.014)),),
+        "head": (Collision("box", (0.13, 0.22, 0.16), (0.04, 0.0, 0.07)),),
+        "head_cameras": (Collision("box", (0.04, 0.19, 0.07), (0.12, 0.0, 0.08)),),
+        "gripper_base": (Collision("box", (0.10, 0.11, 0.07), (0.045, 0.0, 0.0)),),
+        "left_jaw": (Collision("box", jaw, (0.06, -0.008, 0.0)),),
+        "right_jaw": (Collision("box", jaw, (0.06, 0.008, 0.0)),),
+    }
 
 
 def engineer_links(profile: RobotProfile) -> list[LinkSpec]:
-    """Every link of the model, parents first."""
+    """Every link of the model, parents first, with its collision primitives."""
+    shapes = collision_shapes(profile)
+    return [
+        dataclasses.replace(link, collisions=shapes.get(link.name, ()))
+        for link in _engineer_links(profile)
+    ]
+
+
+def _engineer_links(profile: RobotProfile) -> list[LinkSpec]:
+    """The links without their collision primitives."""
 
     def limits(name: str) -> tuple[float, float]:
         motor_limits = profile.motors[name].limits_rad
@@ -409,6 +509,7 @@ def engineer_links(profile: RobotProfile) -> list[LinkSpec]:
             (-high, -low),
             mimic=("gripper", -1.0),
         ),
+        LinkSpec("tool0", None, "", "tool0_fixed_joint", parent="gripper_base", xyz=TOOL0_XYZ),
     ]
 
 
@@ -419,6 +520,15 @@ def _number(value: float) -> str:
 
 def _triple(values: Sequence[float]) -> str:
     return " ".join(_number(v) for v in values)
+
+
+def _geometry(shape: Collision) -> str:
+    if shape.kind == "box":
+        return f'<box size="{_triple(shape.dims)}"/>'
+    if shape.kind == "cylinder":
+        radius, length = shape.dims
+        return f'<cylinder radius="{_number(radius)}" length="{_number(length)}"/>'
+    return f'<sphere radius="{_number(shape.dims[0])}"/>'
 
 
 def urdf_text(profile: RobotProfile, links: list[LinkSpec]) -> str:
@@ -433,14 +543,25 @@ def urdf_text(profile: RobotProfile, links: list[LinkSpec]) -> str:
     for name, rgba in COLORS.items():
         lines.append(f'  <material name="{name}"><color rgba="{_triple(rgba)}"/></material>')
     for link in links:
-        lines += [
-            f'  <link name="{link.name}">',
-            "    <visual>",
-            f'      <geometry><mesh filename="meshes/{link.name}.stl"/></geometry>',
-            f'      <material name="{link.color}"/>',
-            "    </visual>",
-            "  </link>",
-        ]
+        if link.mesh is None and not link.collisions:
+            lines.append(f'  <link name="{link.name}"/>')
+            continue
+        lines.append(f'  <link name="{link.name}">')
+        if link.mesh is not None:
+            lines += [
+                "    <visual>",
+                f'      <geometry><mesh filename="meshes/{link.name}.stl"/></geometry>',
+                f'      <material name="{link.color}"/>',
+                "    </visual>",
+            ]
+        for shape in link.collisions:
+            lines += [
+                "    <collision>",
+                f'      <origin xyz="{_triple(shape.xyz)}" rpy="{_triple(shape.rpy)}"/>',
+                f"      <geometry>{_geometry(shape)}</geometry>",
+                "    </collision>",
+            ]
+        lines.append("  </link>")
     for link in links:
         if link.joint is None:
             continue
@@ -486,6 +607,8 @@ def write_model(out_dir: Path, profile: RobotProfile) -> list[Path]:
     mesh_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for link in links:
+        if link.mesh is None:
+            continue
         path = mesh_dir / f"{link.name}.stl"
         path.write_bytes(binary_stl(link.mesh))
         written.append(path)

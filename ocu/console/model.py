@@ -9,6 +9,11 @@ back from ROS. Views subscribe to `events` and `robot.events` and write the oper
 back through the methods below; the window sends `command()` to the link whenever
 `events.command_changed` fires and never reads a command back from the link.
 
+The arm (`arm`, ocu.console.arm) moves its joints' channels as one more automatic source,
+`ARM`: Cartesian jogs, pose goals and stored poses. Space, a lost link and any manual input on
+an arm channel stop it at once; a move (not a jog, which is the operator's own keys) also
+stops for any other operator motion input.
+
 Stops come in two strengths. `emergency_stop()` asks the link for its e-stop burst, zeroes
 everything and latches: the model commands nothing until the operator acts again (a key
 press, a slider move, Accept, a switch, a new target). `halt()` zeroes everything without the
@@ -23,12 +28,17 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from enum import Enum
+from pathlib import Path
 
+from ocu.console.arm import ArmConsole
 from ocu.console.events import Event
 from ocu.console.robot import RobotState
+from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
 from ocu.control.drive import DriveBounds, scale_drive
 from ocu.control.position import PositionController
+from ocu.kinematics.arm import ArmError, ArmKinematics
+from ocu.model.urdf import UrdfError, load_urdf
 from ocu.profile import RobotProfile
 from ocu.protocol.extended import CameraRequest
 from ocu.records import Command, CommandError, TelemetryFrame
@@ -49,6 +59,8 @@ class Source(Enum):
     POSITION = "position"
     # A planner through the ROS bridge: any manual input on the channel overrides it.
     ROS = "ros"
+    # The arm in Cartesian space (ocu.console.arm): jogs, pose goals, stored poses.
+    ARM = "arm"
 
 
 MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH)
@@ -104,6 +116,8 @@ class ConsoleModel:
         *,
         fine_factor: float = DEFAULT_FINE_FACTOR,
         clock: Callable[[], float] = time.monotonic,
+        arm: ArmKinematics | None = None,
+        arm_poses_path: Path | None = None,
     ) -> None:
         if not 0.0 < fine_factor <= 1.0:
             raise ValueError(f"fine_factor must be in (0, 1], got {fine_factor!r}")
@@ -152,6 +166,20 @@ class ConsoleModel:
             None,
             self._bitrate,
         )
+        # The arm in Cartesian space; None when the profile has no [arm] table, or its URDF
+        # cannot carry it (`arm_error` says why).
+        self.arm: ArmConsole | None = None
+        self.arm_error = ""
+        if profile.arm is not None:
+            try:
+                kinematics = arm or ArmKinematics(load_urdf(meshes=False), profile.arm)
+                controller = ArmController(profile, self.limits, kinematics, self.controller)
+            except (ArmError, UrdfError) as err:
+                self.arm_error = f"the arm's Cartesian control is off: {err}"
+                log.warning("%s", self.arm_error)
+            else:
+                self.arm = ArmConsole(controller, self, arm_poses_path)
+                self.arm.events.message.connect(self.events.message.emit)
 
     # ---- state -----------------------------------------------------------------------------
 
@@ -221,8 +249,9 @@ class ConsoleModel:
 
     @property
     def held_keys(self) -> frozenset[str]:
-        """Names of the hotkeys held now."""
-        return frozenset(self._held)
+        """Names of the hotkeys held now (the arm's jog keys included)."""
+        jog = self.arm.held_keys if self.arm is not None else frozenset()
+        return frozenset(self._held) | jog
 
     @property
     def targets(self) -> dict[str, float]:
@@ -315,8 +344,20 @@ class ConsoleModel:
         self.events.held_changed.emit(self.held_keys)
         return True
 
+    def arm_jog_down(self, key: str, axis: str, direction: int) -> bool:
+        """A Cartesian jog key went down (Cartesian mode); False if it was already held."""
+        if self.arm is None or key in self._held:
+            return False
+        if not self.arm.jog_key_down(key, axis, direction):
+            return False
+        self.events.held_changed.emit(self.held_keys)
+        return True
+
     def hotkey_up(self, key: str) -> bool:
         """A hold-to-move key went up; its channel stops unless another key still holds it."""
+        if self.arm is not None and self.arm.jog_key_up(key):
+            self.events.held_changed.emit(self.held_keys)
+            return True
         held = self._held.pop(key, None)
         if held is None:
             return False
@@ -327,6 +368,12 @@ class ConsoleModel:
 
     def release_hotkeys(self, reason: str = "") -> bool:
         """Release every held key (focus lost); True if any was held."""
+        jogging = self.arm is not None and self.arm.release_keys()
+        if jogging and not self._held:
+            self.events.held_changed.emit(self.held_keys)
+            if reason:
+                self.events.message.emit(f"keys released: {reason}")
+            return True
         if not self._held:
             return False
         channels = {channel for channel, _ in self._held.values()}
@@ -346,6 +393,8 @@ class ConsoleModel:
         self._fine = fine
         for channel in {channel for channel, _ in self._held.values()}:
             self._apply_hotkeys(channel)
+        if self.arm is not None:
+            self.arm.refresh()
         self._publish()
         self.events.fine_changed.emit(fine)
 
@@ -445,7 +494,7 @@ class ConsoleModel:
         """Link e-stop at once, everything to zero, targets cancelled, latched until acted."""
         self.events.operator_acted.emit()
         self.events.estop_requested.emit(reason)
-        self._zero_all()
+        self._zero_all(reason=f"emergency stop ({reason})")
         self._estop_reason = reason
         if not self._estopped:
             self._estopped = True
@@ -459,8 +508,8 @@ class ConsoleModel:
         With `keep_external`, channels a planner drives (ROS) go on: the console losing focus
         stops the operator's input, not a planner the operator may be watching in rviz.
         """
-        active = bool(self._held) or self.is_moving or bool(self._targets)
-        self._zero_all(keep_external=keep_external)
+        active = bool(self.held_keys) or self.is_moving or bool(self._targets)
+        self._zero_all(keep_external=keep_external, reason=reason)
         self._publish()
         if active:
             self.events.message.emit(f"motion stopped: {reason}")
@@ -486,6 +535,8 @@ class ConsoleModel:
     def on_telemetry(self, frame: TelemetryFrame) -> None:
         """A telemetry frame: the robot's state and the position controller take it."""
         self.controller.on_telemetry(frame.readings, frame.received_at, frame.delay_s)
+        if self.arm is not None:
+            self.arm.controller.observe(frame.readings)
         self.robot.on_telemetry(frame)
 
     # ---- a planner (the ROS bridge, through the window) ------------------------------------
@@ -542,7 +593,47 @@ class ConsoleModel:
         for message in self.controller.pop_messages():
             self.events.position_message.emit(message)
         self._sync_targets()
+        if self.arm is not None:
+            self.arm.step(now)
         self._publish(now)
+
+    # ---- the arm (ocu.console.arm calls these) ---------------------------------------------
+
+    def arm_starting(self, *, move: bool) -> None:
+        """The arm takes its channels: the operator acted (e-stop latch, ROS), position targets
+        and held keys on its joints are dropped."""
+        assert self.arm is not None
+        self._operator_acted(keep_arm=True)
+        for channel in self.arm.channels:
+            joint = self._joint_of(channel)
+            if joint is not None and joint in self._targets:
+                self.controller.cancel(joint)
+            self._drop_keys(channel)
+            self._set_channel(channel, 0.0, Source.ARM)
+        self._sync_targets()
+        self._publish()
+
+    def arm_output(self, velocities: Mapping[str, float]) -> None:
+        """The arm's velocities now; its channels return to nobody when it commands nothing."""
+        assert self.arm is not None
+        active = self.arm.controller.active
+        for channel in self.arm.channels:
+            if self._channels[channel].source is not Source.ARM:
+                continue
+            if channel in velocities:
+                self._set_channel(channel, velocities[channel], Source.ARM)
+            else:
+                self._set_channel(channel, 0.0, Source.ARM if active else Source.NONE)
+        self._publish()
+
+    def _stop_arm(self, reason: str) -> None:
+        """The arm stops at once; its channels go to zero."""
+        if self.arm is None:
+            return
+        self.arm.stop(reason)
+        for channel in self.arm.channels:
+            if self._channels[channel].source is Source.ARM:
+                self._set_channel(channel, 0.0, Source.NONE)
 
     # ---- internals -------------------------------------------------------------------------
 
@@ -550,7 +641,10 @@ class ConsoleModel:
         if channel not in self._channels:
             raise CommandError(f"unknown velocity channel {channel!r}")
 
-    def _operator_acted(self) -> None:
+    def _operator_acted(self, *, keep_arm: bool = False) -> None:
+        if not keep_arm and self.arm is not None and self.arm.controller.moving_to is not None:
+            # A move is automatic: any operator motion input stops it.
+            self._stop_arm("operator input")
         self.events.operator_acted.emit()
         # The operator's input wins over a planner's, on every channel at once.
         for channel in self._channels:
@@ -577,8 +671,15 @@ class ConsoleModel:
             self.events.held_changed.emit(self.held_keys)
 
     def _take_manual(self, channel: str, *, keep_keys: bool = False) -> None:
-        """A manual input on a channel: the position controller lets go of its joint."""
+        """A manual input on a channel: the position controller lets go of its joint, and the
+        arm of all of its channels."""
         joint = self._joint_of(channel)
+        if (
+            self.arm is not None
+            and channel in self.arm.channels
+            and (self.arm.controller.active or self._channels[channel].source is Source.ARM)
+        ):
+            self._stop_arm(f"manual command on the {joint or channel}")
         if joint is not None and joint in self._targets:
             self.controller.cancel(joint)
             self._sync_targets()
@@ -645,9 +746,10 @@ class ConsoleModel:
         self._store(linear_name, ChannelCommand(v, linear.source if v else Source.NONE))
         self._store(turn_name, ChannelCommand(w, turn.source if w else Source.NONE))
 
-    def _zero_all(self, *, keep_external: bool = False) -> None:
-        had_keys = bool(self._held)
+    def _zero_all(self, *, keep_external: bool = False, reason: str = "stop") -> None:
+        had_keys = bool(self.held_keys)
         self._held.clear()
+        self._stop_arm(reason)
         self.controller.cancel()
         self._sync_targets()
         for channel in self._channels:

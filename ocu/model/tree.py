@@ -262,7 +262,9 @@ class KinematicTree:
     def _recompute(self) -> npt.NDArray[np.float64]:
         if not self._dirty:
             return self._world
-        q = self._values[self._source] * self._multiplier + self._offset
+        # A model without a moving joint has no values to index: every link is fixed.
+        source = self._values[self._source] if self._values.size else 0.0
+        q = source * self._multiplier + self._offset
         motion = np.tile(np.eye(4), (len(self.links), 1, 1))
         if self._rotating.any():
             rot = self._rotating

@@ -1,18 +1,26 @@
 """Load a URDF robot description: links with their meshes and the joints between them.
 
-Any URDF whose meshes trimesh can read works (STL, OBJ, PLY, GLB/GLTF; DAE needs pycollada),
-so the real vendor model or another robot can replace the shipped low-poly Engineer. Only
-visual geometry is read; collision and inertial elements are ignored.
+Any URDF whose meshes trimesh can read works (STL, OBJ, PLY, GLB/GLTF, and DAE through
+pycollada), so the real vendor model or another robot can replace the shipped low-poly
+Engineer. Visual geometry is drawn; collision geometry is kept as primitives for the arm's
+self-collision check (a collision mesh as the box around it), and drawn instead when no link
+has a visual. Inertial elements are ignored.
+
+A real robot's description is rarely perfect. What spoils only a part of it — a mesh that
+cannot be found or read, a mimic of a joint that does not exist — is skipped with a warning
+(`RobotModel.warnings`) and the rest loads; what leaves no tree of links is an error. A file
+that still holds xacro (`.xacro`, `$(find ...)`, `${...}`) gets a hint to run xacro first.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +30,22 @@ from ocu.model.mesh import MeshData, Rgba, empty_mesh, merge_meshes, mesh_from_t
 from ocu.model.tree import JOINT_TYPES, Joint, KinematicTree, Matrix, Mimic, TreeError, transform
 
 _UNSUPPORTED_TYPES = ("floating", "planar")
+XACRO_HINT = (
+    "this looks like an unprocessed xacro file: expand it first, e.g. "
+    "`xacro robot.urdf.xacro > robot.urdf` (ROS's xacro package)"
+)
+COLLISION_ONLY_NOTE = "no link has visual geometry: the collision geometry is drawn instead"
+COLLISION_KINDS = ("box", "cylinder", "sphere")
+
+
+@dataclass(frozen=True)
+class CollisionShape:
+    """A collision primitive in its link's frame: a box (size = extents), a cylinder along
+    its z (size = radius, radius, length) or a sphere (size = radius x3)."""
+
+    kind: str
+    origin: Matrix
+    size: tuple[float, float, float]
 
 
 class UrdfError(ValueError):
@@ -36,6 +60,11 @@ class RobotModel:
     tree: KinematicTree
     meshes: Mapping[str, MeshData]
     source: str = "<urdf>"
+    collisions: Mapping[str, tuple[CollisionShape, ...]] = field(default_factory=dict)
+    # What was skipped while loading (a mesh, a mimic), and notes such as COLLISION_ONLY_NOTE.
+    warnings: tuple[str, ...] = ()
+    # Whether `meshes` hold the collision geometry (the URDF has no visual geometry).
+    drawn_from_collision: bool = False
 
     @property
     def vertex_count(self) -> int:
@@ -56,50 +85,117 @@ def default_urdf_path() -> Path:
     return Path(sys.prefix) / "share" / "ocu" / "assets" / "engineer.urdf"
 
 
-def load_urdf(path: str | Path | None = None) -> RobotModel:
-    """Read a URDF file and every mesh it names; UrdfError with the reason on failure."""
+def load_urdf(path: str | Path | None = None, *, meshes: bool = True) -> RobotModel:
+    """Read a URDF file and every mesh it names; UrdfError with the reason on failure.
+
+    Without `meshes` no visual mesh file is read (kinematics and collision shapes only).
+    """
     urdf_path = Path(path) if path is not None else default_urdf_path()
     try:
         text = urdf_path.read_text(encoding="utf-8")
     except OSError as err:
-        raise UrdfError(f"cannot read URDF {urdf_path}: {err.strerror}") from err
-    return parse_urdf(text, base_dir=urdf_path.parent, source=str(urdf_path))
+        hint = f"; {XACRO_HINT}" if urdf_path.name.endswith(".xacro") else ""
+        raise UrdfError(f"cannot read URDF {urdf_path}: {err.strerror}{hint}") from err
+    except UnicodeDecodeError as err:
+        raise UrdfError(f"{urdf_path}: not UTF-8 text: {err}") from err
+    return parse_urdf(text, base_dir=urdf_path.parent, source=str(urdf_path), meshes=meshes)
 
 
-def parse_urdf(text: str, base_dir: str | Path = ".", source: str = "<urdf>") -> RobotModel:
+def looks_like_xacro(text: str, source: str = "") -> bool:
+    """Whether a URDF still holds xacro markup (or is named .xacro)."""
+    return (
+        source.endswith(".xacro")
+        or "xmlns:xacro" in text
+        or "<xacro:" in text
+        or "$(" in text
+        or "${" in text
+    )
+
+
+def parse_urdf(
+    text: str, base_dir: str | Path = ".", source: str = "<urdf>", *, meshes: bool = True
+) -> RobotModel:
     """Build a model from URDF text; relative mesh paths are resolved against base_dir."""
+    xacro = looks_like_xacro(text, source)
     try:
         root = ET.fromstring(text)
     except ET.ParseError as err:
-        raise UrdfError(f"{source}: not valid XML: {err}") from err
+        hint = f"; {XACRO_HINT}" if xacro else ""
+        raise UrdfError(f"{source}: not valid XML: {err}{hint}") from err
     if root.tag != "robot":
         raise UrdfError(f"{source}: the root element is <{root.tag}>, not <robot>")
-    reader = _Reader(source, Path(base_dir))
-    materials = {
-        name: color
-        for element in root.findall("material")
-        if (name := element.get("name")) and (color := reader.material_color(element, {}))
-    }
+    reader = _Reader(source, Path(base_dir), xacro=xacro)
+    materials = _named_materials(root, reader)
     link_elements = root.findall("link")
     if not link_elements:
-        raise UrdfError(f"{source}: no <link> elements")
+        raise reader.fail("no <link> elements")
     link_names = [reader.required(element, "name", "<link>") for element in link_elements]
     joints = [reader.joint(element) for element in root.findall("joint")]
+    joints = _drop_dangling_mimics(joints, reader)
     root_link = _root_link(source, link_names, joints)
     try:
         tree = KinematicTree(root_link, link_names, joints)
     except TreeError as err:
-        raise UrdfError(f"{source}: {err}") from err
-    meshes = {
-        name: reader.link_mesh(element, name, materials)
+        raise reader.fail(str(err)) from err
+    has_visuals = any(element.find("visual") is not None for element in link_elements)
+    has_collisions = any(element.find("collision") is not None for element in link_elements)
+    from_collision = has_collisions and not has_visuals
+    if from_collision:
+        reader.warnings.append(COLLISION_ONLY_NOTE)
+    drawn = "collision" if from_collision else "visual"
+    link_meshes = {
+        name: reader.link_mesh(element, name, materials, drawn, read_files=meshes)
         for element, name in zip(link_elements, link_names, strict=True)
     }
+    collisions = {
+        name: shapes
+        for element, name in zip(link_elements, link_names, strict=True)
+        if (shapes := reader.collision_shapes(element, name))
+    }
+    if xacro and not reader.warnings:
+        reader.warnings.append(XACRO_HINT)
     return RobotModel(
         name=root.get("name", "robot"),
         tree=tree,
-        meshes=meshes,
+        meshes=link_meshes,
         source=source,
+        collisions=collisions,
+        warnings=tuple(reader.warnings),
+        drawn_from_collision=from_collision,
     )
+
+
+def _named_materials(root: ET.Element, reader: _Reader) -> dict[str, Rgba]:
+    """Every material with a colour, by name: the robot's own first, then those defined in a
+    link's visual (URDF lets a later visual reuse them by name alone)."""
+    materials: dict[str, Rgba] = {}
+    inner = [m for visual in root.iter("visual") for m in visual.findall("material")]
+    for element in [*root.findall("material"), *inner]:
+        name = element.get("name")
+        if not name or name in materials:
+            continue
+        color = reader.material_color(element, {})
+        if color is not None:
+            materials[name] = color
+    return materials
+
+
+def _drop_dangling_mimics(joints: list[Joint], reader: _Reader) -> list[Joint]:
+    """A mimic of a joint that is not a moving joint of the model: the joint moves on its own."""
+    by_name = {joint.name: joint for joint in joints}
+    kept = []
+    for joint in joints:
+        mimic = joint.mimic
+        source = by_name.get(mimic.joint) if mimic is not None else None
+        if mimic is not None and (source is None or source.type == "fixed" or source.mimic):
+            reader.warnings.append(
+                f"joint {joint.name!r} mimics {mimic.joint!r}, which is not a moving joint of "
+                "this model: it moves on its own"
+            )
+            kept.append(dataclasses.replace(joint, mimic=None))
+        else:
+            kept.append(joint)
+    return kept
 
 
 def _root_link(source: str, links: list[str], joints: list[Joint]) -> str:
@@ -130,15 +226,22 @@ def _cycle_through_joints(joints: list[Joint]) -> list[str]:
     return [*cycle, cycle[0]] if cycle else path
 
 
+class _MeshSkippedError(Exception):
+    """A mesh file that cannot be found or read: its part of the robot is left out."""
+
+
 class _Reader:
     """Element parsers whose errors name the file and the element."""
 
-    def __init__(self, source: str, base_dir: Path) -> None:
+    def __init__(self, source: str, base_dir: Path, *, xacro: bool = False) -> None:
         self.source = source
         self.base_dir = base_dir
+        self.xacro = xacro
+        self.warnings: list[str] = []
 
     def fail(self, message: str) -> UrdfError:
-        return UrdfError(f"{self.source}: {message}")
+        hint = f"; {XACRO_HINT}" if self.xacro else ""
+        return UrdfError(f"{self.source}: {message}{hint}")
 
     def required(self, element: ET.Element, attribute: str, where: str) -> str:
         value = element.get(attribute)
@@ -228,19 +331,83 @@ class _Reader:
         name = element.get("name")
         return known.get(name) if name else None
 
-    def link_mesh(self, element: ET.Element, link: str, materials: Mapping[str, Rgba]) -> MeshData:
+    def link_mesh(
+        self,
+        element: ET.Element,
+        link: str,
+        materials: Mapping[str, Rgba],
+        drawn: str = "visual",
+        *,
+        read_files: bool = True,
+    ) -> MeshData:
+        """The link's visual (or collision) geometry as one mesh; a mesh file that cannot be
+        found or read is left out with a warning."""
         parts: list[MeshData] = []
-        for index, visual in enumerate(element.findall("visual")):
-            where = f"link {link!r} visual {index}"
+        for index, visual in enumerate(element.findall(drawn)):
+            where = f"link {link!r} {drawn} {index}"
             material = visual.find("material")
             color = self.material_color(material, materials) if material is not None else None
             origin = self.origin(visual, where)
             geometry = visual.find("geometry")
             if geometry is None or len(geometry) == 0:
                 raise self.fail(f"{where}: no <geometry>")
-            for mesh, placement in self.geometry(geometry[0], where):
+            if geometry[0].tag == "mesh" and not read_files:
+                continue
+            try:
+                placed = self.geometry(geometry[0], where)
+            except _MeshSkippedError as err:
+                self.warnings.append(f"{self.source}: {err}; the rest of the robot is drawn")
+                continue
+            for mesh, placement in placed:
                 parts.append(mesh_from_trimesh(mesh, origin @ placement, color))
         return merge_meshes(parts) if parts else empty_mesh()
+
+    def collision_shapes(self, element: ET.Element, link: str) -> tuple[CollisionShape, ...]:
+        """The link's collision elements as primitives (a mesh as the box around it)."""
+        shapes: list[CollisionShape] = []
+        for index, collision in enumerate(element.findall("collision")):
+            where = f"link {link!r} collision {index}"
+            origin = self.origin(collision, where)
+            geometry = collision.find("geometry")
+            if geometry is None or len(geometry) == 0:
+                raise self.fail(f"{where}: no <geometry>")
+            shape = geometry[0]
+            if shape.tag == "box":
+                size = self.floats(shape.get("size"), 3, f"{where} box size")
+                shapes.append(CollisionShape("box", origin, (size[0], size[1], size[2])))
+            elif shape.tag == "cylinder":
+                radius = self.floats(shape.get("radius"), 1, f"{where} cylinder radius")[0]
+                length = self.floats(shape.get("length"), 1, f"{where} cylinder length")[0]
+                shapes.append(CollisionShape("cylinder", origin, (radius, radius, length)))
+            elif shape.tag == "sphere":
+                radius = self.floats(shape.get("radius"), 1, f"{where} sphere radius")[0]
+                shapes.append(CollisionShape("sphere", origin, (radius, radius, radius)))
+            elif shape.tag == "mesh":
+                try:
+                    placed = self.geometry(shape, where)
+                except _MeshSkippedError as err:
+                    self.warnings.append(f"{self.source}: {err}; no collision shape for it")
+                    continue
+                points = np.vstack(
+                    [
+                        np.asarray(mesh.vertices) @ placement[:3, :3].T + placement[:3, 3]
+                        for mesh, placement in placed
+                    ]
+                )
+                low, high = points.min(axis=0), points.max(axis=0)
+                center = np.eye(4)
+                center[:3, 3] = (low + high) / 2.0
+                extents = high - low
+                shapes.append(
+                    CollisionShape(
+                        "box",
+                        origin @ center,
+                        (float(extents[0]), float(extents[1]), float(extents[2])),
+                    )
+                )
+            else:
+                raise self.fail(f"{where}: unknown geometry <{shape.tag}>")
+        return tuple(shapes)
 
     def geometry(self, element: ET.Element, where: str) -> list[tuple[trimesh.Trimesh, Matrix]]:
         tag = element.tag
@@ -270,18 +437,21 @@ class _Reader:
             if candidate.is_file():
                 return candidate
         looked = ", ".join(str(c) for c in candidates)
-        raise self.fail(f"{where}: mesh file not found: {filename} (looked in: {looked})")
+        hint = f"; {XACRO_HINT}" if "$(" in filename or "${" in filename else ""
+        raise _MeshSkippedError(
+            f"{where}: mesh file not found: {filename} (looked in: {looked}){hint}"
+        )
 
     def read_mesh(self, path: Path, where: str) -> list[tuple[trimesh.Trimesh, Matrix]]:
         try:
             loaded = trimesh.load(str(path))
         except Exception as err:  # trimesh raises many types for unreadable files
             hint = (
-                " (reading .dae needs the pycollada package)"
-                if path.suffix.lower() == ".dae"
+                " (reading .dae needs the pycollada package: pip install pycollada)"
+                if path.suffix.lower() == ".dae" and "collada" in str(err).lower()
                 else ""
             )
-            raise self.fail(f"{where}: cannot read mesh {path}: {err}{hint}") from err
+            raise _MeshSkippedError(f"{where}: cannot read mesh {path}: {err}{hint}") from err
         if isinstance(loaded, trimesh.Trimesh):
             meshes = [loaded]
         elif isinstance(loaded, trimesh.Scene):
@@ -290,7 +460,7 @@ class _Reader:
             meshes = []
         meshes = [m for m in meshes if len(m.faces) > 0]
         if not meshes:
-            raise self.fail(f"{where}: mesh {path} holds no triangles")
+            raise _MeshSkippedError(f"{where}: mesh {path} holds no triangles")
         return [(mesh, np.eye(4)) for mesh in meshes]
 
 
@@ -302,6 +472,13 @@ def _mesh_candidates(filename: str, base_dir: Path) -> list[Path]:
         if filename.startswith(scheme):
             package, _, rest = filename.removeprefix(scheme).partition("/")
             candidates: list[Path] = []
+            if not package:
+                # `package:///path`: no package name; the path is absolute, or relative to
+                # the URDF's folder or one of its parents.
+                rest = rest.lstrip("/")
+                folders = (base_dir.resolve(), *base_dir.resolve().parents)
+                candidates = [Path("/") / rest, *(folder / rest for folder in folders[:4])]
+                return list(dict.fromkeys(candidates))
             folder_chain = (base_dir.resolve(), *base_dir.resolve().parents)
             for folder in folder_chain[:4]:
                 if folder.name == package:

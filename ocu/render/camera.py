@@ -164,3 +164,32 @@ class OrbitCamera:
             [(ndc[:, 0] + 1.0) / 2.0 * width, (1.0 - ndc[:, 1]) / 2.0 * height]
         )
         return result
+
+    def ray(
+        self, x_px: float, y_px: float, width: int, height: int
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """The world ray (origin, unit direction) under a pixel: the inverse of `project`."""
+        inverse = np.linalg.inv(self.projection_matrix(width / height) @ self.view_matrix())
+        ndc_x = 2.0 * x_px / width - 1.0
+        ndc_y = 1.0 - 2.0 * y_px / height
+        near = inverse @ np.array([ndc_x, ndc_y, -1.0, 1.0])
+        far = inverse @ np.array([ndc_x, ndc_y, 1.0, 1.0])
+        start = near[:3] / near[3]
+        end = far[:3] / far[3]
+        direction = end - start
+        result: npt.NDArray[np.float64] = direction / np.linalg.norm(direction)
+        return start, result
+
+    def pick_on_height(
+        self, x_px: float, y_px: float, width: int, height: int, z_m: float
+    ) -> npt.NDArray[np.float64] | None:
+        """The world point under a pixel on the horizontal plane z = z_m (None: parallel, or
+        behind the eye)."""
+        origin, direction = self.ray(x_px, y_px, width, height)
+        if abs(direction[2]) < 1e-9:
+            return None
+        t = (z_m - origin[2]) / direction[2]
+        if t <= 0.0:
+            return None
+        result: npt.NDArray[np.float64] = origin + t * direction
+        return result

@@ -17,7 +17,7 @@ import numpy.typing as npt
 from ocu.model.mesh import MeshData
 from ocu.model.urdf import RobotModel
 from ocu.render.gl import GL
-from ocu.render.scene import LinkDraw, RenderFrame
+from ocu.render.scene import LinkDraw, OverlayDraw, RenderFrame
 
 VERTEX_SHADER = """
 #version 330 core
@@ -73,6 +73,9 @@ NO_TINT = (0.0, 0.0, 0.0, 0.0)
 GRID_HALF_SIZE_M = 1.5
 GRID_STEP_M = 0.25
 AXIS_LENGTH_M = 0.5
+
+
+OVERLAY_MODES = ("lines", "triangles")
 
 
 class RenderError(RuntimeError):
@@ -156,6 +159,18 @@ class ModelRenderer:
         self._uniforms: dict[str, int] = {}
         self.buffer_uploads = 0  # glBufferData calls: stays put after initialize()
         self.initialized = False
+        # Helpers drawn over the robot, by name: uploaded once, at the first frame after
+        # they are given (the GL context is current only while drawing).
+        self._overlay_meshes: dict[str, tuple[MeshData, str]] = {}
+        self._pending: set[str] = set()
+        self._overlays: dict[str, _Buffer] = {}
+
+    def set_overlay_mesh(self, name: str, mesh: MeshData, mode: str = "lines") -> None:
+        """A helper mesh (lines or triangles) that frames may draw by name."""
+        if mode not in OVERLAY_MODES:
+            raise ValueError(f"overlay mode must be one of {OVERLAY_MODES}, got {mode!r}")
+        self._overlay_meshes[name] = (mesh, mode)
+        self._pending.add(name)
 
     def initialize(self) -> None:
         """Compile the shaders and upload every mesh once; needs a current GL 3.3 context."""
@@ -179,6 +194,20 @@ class ModelRenderer:
                 self._buffers[link] = self._upload(mesh, GL.GL_TRIANGLES)
         self._grid = self._upload(grid_lines(), GL.GL_LINES)
         self.initialized = True
+        self._pending = set(self._overlay_meshes)
+        self._upload_overlays()
+
+    def _upload_overlays(self) -> None:
+        for name in sorted(self._pending):
+            mesh, mode = self._overlay_meshes[name]
+            old = self._overlays.pop(name, None)
+            if old is not None:
+                GL.glDeleteVertexArrays(1, [old.vao])
+                GL.glDeleteBuffers(1, [old.vbo])
+            if mesh.vertex_count:
+                kind = GL.GL_LINES if mode == "lines" else GL.GL_TRIANGLES
+                self._overlays[name] = self._upload(mesh, kind)
+        self._pending.clear()
 
     def _upload(self, mesh: MeshData, mode: int) -> _Buffer:
         data = interleave(mesh)
@@ -208,6 +237,8 @@ class ModelRenderer:
         """Draw one frame into the bound framebuffer (initialize() first)."""
         if not self.initialized:
             self.initialize()
+        if self._pending:
+            self._upload_overlays()
         GL.glViewport(0, 0, width_px, height_px)
         GL.glClearColor(*frame.background)
         GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
@@ -249,8 +280,32 @@ class ModelRenderer:
             self._draw_links(overlay)
             GL.glDepthMask(GL.GL_TRUE)
             GL.glDisable(GL.GL_BLEND)
+        if frame.overlays:
+            self._draw_overlays(frame.overlays)
         GL.glBindVertexArray(0)
         GL.glUseProgram(0)
+
+    def _draw_overlays(self, overlays: Sequence[OverlayDraw]) -> None:
+        u = self._uniforms
+        GL.glUniform1i(u["u_lit"], 0)
+        GL.glUniform4f(u["u_tint"], *NO_TINT)
+        GL.glEnable(GL.GL_BLEND)
+        GL.glBlendFuncSeparate(GL.GL_SRC_ALPHA, GL.GL_ONE_MINUS_SRC_ALPHA, GL.GL_ZERO, GL.GL_ONE)
+        GL.glDepthMask(GL.GL_FALSE)
+        for item in overlays:
+            buffer = self._overlays.get(item.mesh)
+            if buffer is None:
+                continue
+            if item.on_top:
+                GL.glDisable(GL.GL_DEPTH_TEST)
+            GL.glUniform1f(u["u_alpha"], item.alpha)
+            GL.glUniformMatrix4fv(u["u_model"], 1, GL.GL_FALSE, _matrix(item.world))
+            GL.glBindVertexArray(buffer.vao)
+            GL.glDrawArrays(buffer.mode, 0, buffer.count)
+            if item.on_top:
+                GL.glEnable(GL.GL_DEPTH_TEST)
+        GL.glDepthMask(GL.GL_TRUE)
+        GL.glDisable(GL.GL_BLEND)
 
     def _draw_links(self, links: Sequence[LinkDraw]) -> None:
         u = self._uniforms
@@ -278,7 +333,7 @@ class ModelRenderer:
 
     def release(self) -> None:
         """Delete the GL objects; needs the same context current."""
-        buffers = list(self._buffers.values())
+        buffers = list(self._buffers.values()) + list(self._overlays.values())
         if self._grid is not None:
             buffers.append(self._grid)
         for buffer in buffers:
@@ -287,6 +342,7 @@ class ModelRenderer:
         if self._program:
             GL.glDeleteProgram(self._program)
         self._buffers.clear()
+        self._overlays.clear()
         self._grid = None
         self._program = 0
         self.initialized = False

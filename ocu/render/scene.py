@@ -34,6 +34,18 @@ class LinkDraw:
 
 
 @dataclass(frozen=True)
+class OverlayDraw:
+    """A helper drawn over the robot (a frame's axes, an arrow, the workspace): the name of a
+    mesh given to the renderer, its transform, and how it is drawn."""
+
+    mesh: str
+    world: Matrix
+    alpha: float = 1.0
+    # Drawn through everything (a frame's axes inside the gripper stay visible).
+    on_top: bool = False
+
+
+@dataclass(frozen=True)
 class RenderFrame:
     """Everything the renderer needs for one image."""
 
@@ -49,6 +61,7 @@ class RenderFrame:
     background: Rgba = BACKGROUND
     show_grid: bool = True
     lit: bool = True
+    overlays: Sequence[OverlayDraw] = ()
 
 
 def stale_links(tree: KinematicTree, stale_joints: Collection[str]) -> frozenset[str]:
@@ -80,6 +93,7 @@ def build_frame(
     flat_colors: Mapping[str, Rgba] | None = None,
     reading: KinematicTree | None = None,
     fault_joints: Collection[str] = (),
+    overlays: Sequence[OverlayDraw] = (),
 ) -> RenderFrame:
     """A frame of the live pose, tinted where stale or implausible, with the ghost and the
     last reading's pose where they differ from it.
@@ -123,6 +137,7 @@ def build_frame(
         readings=readings,
         show_grid=show_grid and flat_colors is None,
         lit=flat_colors is None,
+        overlays=tuple(overlays) if flat_colors is None else (),
     )
 
 

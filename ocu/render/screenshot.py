@@ -23,25 +23,34 @@ class ScreenshotError(RuntimeError):
 
 
 def parse_angles(items: Sequence[str], model: RobotModel, option: str) -> dict[str, float]:
-    """`name=deg` pairs to radians, checked against the model's joints."""
+    """`name=value` pairs to joint values: degrees for a revolute joint (to radians), metres
+    for a prismatic one, checked against the model's joints."""
     joints = model.tree.actuated_joints
     angles: dict[str, float] = {}
     for item in items:
         name, sep, value = item.partition("=")
         if not sep:
-            raise ScreenshotError(f"{option} {item!r}: expected name=degrees")
+            raise ScreenshotError(f"{option} {item!r}: expected name=degrees (metres if prismatic)")
         if name not in joints:
             raise ScreenshotError(
                 f"{option} {item!r}: unknown joint {name!r}; joints: {', '.join(joints)}"
             )
         try:
-            degrees = float(value)
+            number = float(value)
         except ValueError:
             raise ScreenshotError(f"{option} {item!r}: {value!r} is not a number") from None
-        if not math.isfinite(degrees):
-            raise ScreenshotError(f"{option} {item!r}: angle must be finite")
-        angles[name] = math.radians(degrees)
+        if not math.isfinite(number):
+            raise ScreenshotError(f"{option} {item!r}: the value must be finite")
+        prismatic = model.tree.joint(name).type == "prismatic"
+        angles[name] = number if prismatic else math.radians(number)
     return angles
+
+
+def describe_value(model: RobotModel, name: str, value: float) -> str:
+    """A joint value in its unit: '35 deg' or '0.35 m'."""
+    if model.tree.joint(name).type == "prismatic":
+        return f"{value:g} m"
+    return f"{math.degrees(value):g} deg"
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -101,7 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("out", type=Path, help="PNG file to write")
     parser.add_argument(
-        "--joints", nargs="+", default=[], metavar="NAME=DEG", help="joint angles in degrees"
+        "--joints",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="joint values: degrees, or metres for a prismatic joint",
     )
     parser.add_argument(
         "--ghost", nargs="+", default=[], metavar="NAME=DEG", help="targets shown as a ghost"
@@ -127,12 +140,15 @@ def main(argv: list[str] | None = None) -> int:
         for name in args.stale:
             if name not in model.tree.joints:
                 raise ScreenshotError(f"--stale {name!r}: unknown joint")
+        for warning in model.warnings:
+            print(f"note: {warning}", file=sys.stderr)
         for name, angle in joints.items():
             limits = model.tree.joint(name).limits
             if limits is not None and not limits[0] - 1e-9 <= angle <= limits[1] + 1e-9:
+                low, high = (describe_value(model, name, v) for v in limits)
                 print(
-                    f"note: {name}={math.degrees(angle):g} deg is outside its limits "
-                    f"[{math.degrees(limits[0]):g}, {math.degrees(limits[1]):g}]",
+                    f"note: {name}={describe_value(model, name, angle)} is outside its limits "
+                    f"[{low}, {high}]",
                     file=sys.stderr,
                 )
         size = parse_size(args.size)

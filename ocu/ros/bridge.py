@@ -16,6 +16,12 @@ Link loss: while the link is LOST the bridge sends zeros whatever cmd_vel says; 
 CONNECTED again, cmd_vel must have been zero or silent for the cmd_vel timeout before a
 non-zero one drives again, so a planner still streaming its old command does not restart
 the robot the moment the link comes back (the console's rule: nothing resumes by itself).
+
+The arm (profile [arm], ocu.control.arm): a pose goal (tool0's position and pitch in the
+base frame) or a stored pose by name is one synchronized move; a twist (tool0's linear
+velocity and pitch rate in the base frame) jogs it and stops `twist_timeout_s` after the last
+one. They share the position controller's prediction, and stop with everything else when the
+link is lost, ROS is overridden or the bridge detaches.
 """
 
 from __future__ import annotations
@@ -27,11 +33,19 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum, IntEnum
+from pathlib import Path
 from typing import Protocol
 
+import numpy as np
+
+from ocu.console.poses import PoseError, PoseStore
+from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
 from ocu.control.drive import DriveBounds, DriveError, scale_drive
 from ocu.control.position import PositionController, PositionError
+from ocu.kinematics.arm import ArmError, ArmKinematics, ToolPose, pitch_axis, pitch_of
+from ocu.model.tree import Matrix
+from ocu.model.urdf import UrdfError, load_urdf
 from ocu.profile import RobotProfile
 from ocu.records import JointReading, LinkState, LinkStats
 
@@ -154,6 +168,34 @@ class CmdVelTimeout:
     def age(self, now: float) -> float | None:
         """Seconds since the last cmd_vel, None before the first."""
         return None if self._last_at is None else now - self._last_at
+
+
+def quaternion_xyzw(rotation: Matrix) -> tuple[float, float, float, float]:
+    """A rotation matrix (3x3 or 4x4) as a unit quaternion (x, y, z, w), w >= 0."""
+    r = np.asarray(rotation, dtype=float)[:3, :3]
+    w = math.sqrt(max(0.0, 1.0 + r[0, 0] + r[1, 1] + r[2, 2])) / 2.0
+    x = math.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2])) / 2.0
+    y = math.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2])) / 2.0
+    z = math.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2])) / 2.0
+    x = math.copysign(x, r[2, 1] - r[1, 2])
+    y = math.copysign(y, r[0, 2] - r[2, 0])
+    z = math.copysign(z, r[1, 0] - r[0, 1])
+    return x, y, z, w
+
+
+def rotation_of(x: float, y: float, z: float, w: float) -> Matrix:
+    """The 3x3 rotation of a quaternion (normalised first); BridgeError if it is zero."""
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not math.isfinite(norm) or norm < 1e-9:
+        raise BridgeError("the orientation quaternion must be finite and not zero")
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def parse_joint_goal(
@@ -377,6 +419,8 @@ class BridgeCore:
         *,
         clock: Callable[[], float] = time.monotonic,
         on_state_changed: StateCallback | None = None,
+        arm: ArmKinematics | None = None,
+        arm_poses_path: Path | None = None,
     ) -> None:
         self.profile = profile
         self.settings = settings if settings is not None else BridgeSettings.from_profile(profile)
@@ -402,6 +446,28 @@ class BridgeCore:
         # When the last cmd_vel asking for motion arrived (obeyed or not): the recovery
         # rule measures the quiet time from it.
         self._last_motion_at: float | None = None
+        # The arm in Cartesian space (None: no [arm] in the profile, or no URDF for it).
+        self.arm_kinematics: ArmKinematics | None = arm
+        self.arm_error = ""
+        if arm is None and profile.arm is not None:
+            try:
+                self.arm_kinematics = ArmKinematics(load_urdf(meshes=False), profile.arm)
+            except (ArmError, UrdfError) as err:
+                self.arm_error = f"arm topics off: {err}"
+                log.warning("%s", self.arm_error)
+        self.poses: PoseStore | None = None
+        if self.arm_kinematics is not None:
+            kin = self.arm_kinematics
+            limits = {
+                joint: (float(kin.chain.lower[i]), float(kin.chain.upper[i]))
+                for i, joint in enumerate(kin.joints)
+            }
+            builtin = profile.arm.poses if profile.arm is not None else {}
+            self.poses = PoseStore(builtin, kin.joints, limits, arm_poses_path)
+            if self.poses.error:
+                log.warning("stored arm poses: %s", self.poses.error)
+        self._arm: ArmController | None = None
+        self._arm_owned = False
 
     # ---- life --------------------------------------------------------------------------
 
@@ -418,6 +484,10 @@ class BridgeCore:
             self._sink = sink
             self._limits = limits if limits is not None else VelocityLimits(self.profile)
             self._controller = PositionController(self.profile, self._limits)
+            if self.arm_kinematics is not None:
+                self._arm = ArmController(
+                    self.profile, self._limits, self.arm_kinematics, self._controller
+                )
             self._goal_channels = set()
             self._drive = self.settings.drive_zero
             self._timeout = CmdVelTimeout(self.settings.cmd_vel_timeout_s)
@@ -471,10 +541,15 @@ class BridgeCore:
         self._controller.cancel()
         self._goal_channels = set()
         self._drive = self.settings.drive_zero
+        if self._arm is not None:
+            self._arm.stop("ROS released the arm")
+            self._arm.pop_messages()
+        self._arm_owned = False
 
     def _owned_channels(self) -> list[str]:
         owned = [name for name, value in self._drive.items() if value != 0.0]
-        return owned + sorted(self._goal_channels)
+        arm = list(self._arm.channels) if self._arm is not None and self._arm_owned else []
+        return owned + sorted(self._goal_channels | set(arm))
 
     @property
     def _in_control(self) -> bool:
@@ -497,6 +572,8 @@ class BridgeCore:
                 if stopped:
                     assert self._sink is not None
                     self._sink.set_velocities(**dict.fromkeys(stopped, 0.0))
+                    # The prediction integrates what is sent: the zeros too.
+                    self._controller.note_sent(self.clock(), {})
                 if self._in_control:
                     self._release()
                     self._update_state()
@@ -629,6 +706,137 @@ class BridgeCore:
         """Measured joint angles (and the round trip they took) for the position controller."""
         with self._lock:
             self._controller.on_telemetry(readings, received_at, delay_s)
+            if self._arm is not None:
+                self._arm.observe(readings)
+
+    # ---- the arm (any thread) ----------------------------------------------------------
+
+    @property
+    def arm_available(self) -> bool:
+        """Whether the arm topics work (the profile's [arm] and its URDF)."""
+        return self.arm_kinematics is not None
+
+    def _arm_ready(self, what: str) -> ArmController:
+        """The arm controller when ROS may move it; ArmError (counted) otherwise."""
+        if self._arm is None or not self._in_control:
+            self._rejected += 1
+            reason = self.arm_error or f"ROS control {self._state.value}"
+            raise ArmError(f"{what} ignored: {reason}")
+        if self._gate is LinkGate.LOST:
+            self._rejected += 1
+            raise ArmError(f"{what} ignored: {self._link_state.label}")
+        return self._arm
+
+    def _arm_takes_over(self) -> None:
+        """Joint goals on the arm's joints end: the arm commands them now."""
+        assert self._arm is not None
+        for joint in self._arm.joints:
+            self._controller.cancel(joint)
+        self._goal_channels -= set(self._arm.channels)
+        self._arm_owned = True
+
+    def on_pose_goal(self, target: ToolPose) -> dict[str, float]:
+        """Move tool0 to a position and pitch (base frame): IK, path check, one synchronized
+        move. Returns the joint goal; ArmError with the reason when refused."""
+        with self._lock:
+            arm = self._arm_ready("pose goal")
+            now = self.clock()
+            try:
+                _, start = arm.estimate(now)
+                kin = arm.kinematics
+                q = kin.solve(target, current=start)
+                move = arm.plan_move(q, now)
+            except ArmError:
+                self._rejected += 1
+                raise
+            self._arm_takes_over()
+            arm.start(move, now, target.describe())
+            self._update_state()
+            return kin.mapping(q)
+
+    def on_named_pose(self, name: str) -> dict[str, float]:
+        """Move to a stored pose (the profile's or the operator's file) by name."""
+        with self._lock:
+            arm = self._arm_ready("named pose")
+            assert self.poses is not None
+            now = self.clock()
+            try:
+                goal = self.poses.get(name)
+                move = arm.plan_move(goal, now)
+            except (ArmError, PoseError) as err:
+                self._rejected += 1
+                raise ArmError(str(err)) from err
+            self._arm_takes_over()
+            arm.start(move, now, name)
+            self._update_state()
+            return goal
+
+    def on_arm_twist(self, linear: Sequence[float], angular: Sequence[float]) -> bool:
+        """A twist of tool0 in the base frame: its linear velocity, and the angular velocity's
+        part about the tool's pitch axis. Motion stops `twist_timeout_s` after the last one.
+        Returns whether it was obeyed; a non-finite value stops the arm and raises ArmError."""
+        with self._lock:
+            arm = self._arm_ready("twist")
+            now = self.clock()
+            values = [float(v) for v in (*linear, *angular)]
+            if len(values) != 6 or not all(math.isfinite(v) for v in values):
+                arm.stop("a bad twist")
+                self._rejected += 1
+                raise ArmError("a twist needs six finite numbers")
+            moving = any(values)
+            if moving and self._gate is not LinkGate.OPEN:
+                self._link_refused += 1
+                return False
+            try:
+                current, _ = arm.estimate(now)
+            except ArmError:
+                self._rejected += 1
+                raise
+            tool = arm.kinematics.tool_matrix(current)
+            pitch_rate = float(np.dot(values[3:], pitch_axis(tool, arm.kinematics.axis_xy)))
+            if moving:
+                self._arm_takes_over()
+            timeout_s = arm.settings.twist_timeout_s
+            arm.jog([*values[:3], pitch_rate], "base", now, expires_after_s=timeout_s)
+            self._update_state()
+            return True
+
+    def goal_from_pose(
+        self, position: Sequence[float], orientation_xyzw: Sequence[float]
+    ) -> ToolPose:
+        """A PoseStamped's content as the arm's goal: the position, and the pitch of the
+        orientation's x axis (its yaw and roll are the arm's to choose)."""
+        if self.arm_kinematics is None:
+            raise ArmError(self.arm_error or "this robot has no arm profile")
+        values = [float(v) for v in position]
+        if len(values) != 3 or not all(math.isfinite(v) for v in values):
+            raise ArmError("the goal's position must be three finite numbers")
+        try:
+            rotation = rotation_of(*(float(v) for v in orientation_xyzw))
+        except (BridgeError, TypeError) as err:
+            raise ArmError(str(err)) from err
+        pose = np.eye(4)
+        pose[:3, :3] = rotation
+        pose[:3, 3] = values
+        return ToolPose(
+            values[0], values[1], values[2], pitch_of(pose, self.arm_kinematics.axis_xy)
+        )
+
+    def arm_tool_matrix(self, readings: Mapping[str, JointReading]) -> Matrix | None:
+        """tool0's pose in the base frame from readings (None: an arm joint not read)."""
+        kin = self.arm_kinematics
+        if kin is None:
+            return None
+        angles = {
+            name: r.angle_rad
+            for name, r in readings.items()
+            if r.angle_rad is not None and r.fault is None
+        }
+        if not all(joint in angles for joint in kin.joints):
+            return None
+        with self._lock:
+            kin.hold(angles)
+            return kin.tool_matrix(kin.vector(angles))
 
     # ---- periodic work -----------------------------------------------------------------
 
@@ -649,17 +857,25 @@ class BridgeCore:
                     )
                     self._send_drive(self.settings.drive_zero)
             messages: list[str] = []
+            velocities: dict[str, float] = {}
             if self._goal_channels:
                 velocities = self._controller.update(now)
                 for channel in self._goal_channels:
                     velocities.setdefault(channel, 0.0)
-                self._sink.set_velocities(**velocities)
-                # The controller's prediction integrates what the bridge sent (delay-aware).
-                self._controller.note_sent(now, {**self._drive, **velocities})
                 self._goal_channels = {
                     self._controller.channel_of(j) for j in self._controller.targets
                 }
                 messages = self._controller.pop_messages()
+            if self._arm is not None and (self._arm_owned or self._arm.active):
+                arm_velocities = self._arm.update(now)
+                for channel in self._arm.channels:
+                    velocities[channel] = arm_velocities.get(channel, 0.0)
+                self._arm_owned = self._arm.active
+                messages += self._arm.pop_messages()
+            if velocities:
+                self._sink.set_velocities(**velocities)
+                # The controller's prediction integrates what the bridge sent (delay-aware).
+                self._controller.note_sent(now, {**self._drive, **velocities})
             self._update_state()
             return messages
 
@@ -706,7 +922,8 @@ class BridgeCore:
     def _update_state(self) -> None:
         if self._state not in (BridgeState.LISTENING, BridgeState.COMMANDING):
             return
-        moving = any(v != 0.0 for v in self._drive.values()) or bool(self._goal_channels)
+        arm = self._arm is not None and self._arm.active
+        moving = any(v != 0.0 for v in self._drive.values()) or bool(self._goal_channels) or arm
         self._set_state(BridgeState.COMMANDING if moving else BridgeState.LISTENING)
 
     def _set_state(self, state: BridgeState) -> None:

@@ -20,9 +20,11 @@ import sys
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from types import FrameType
 from typing import Any, Protocol
 
+from ocu.console.poses import ARM_POSES_NAME, default_config_dir
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.ros.bridge import (
     DEFAULT_CMD_VEL_TIMEOUT_S,
@@ -53,9 +55,12 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~rate             Hz of the control loop: timeout, position control, heartbeat (default 50)
   ~camera           camera to select at start (a name in the profile's link.camera_names)
   ~extension        ask an extended robot for every camera's stream (default false)
+  ~arm_poses        the operator's stored arm poses (TOML); default: the console's
+                    arm_poses.toml in $OCU_CONFIG_DIR or ~/.config/ocu
 
-topics: cmd_vel, joint_goals in; joint_states, camera/compressed,
-camera/<name>/image/compressed, /diagnostics out (see docs/ros.md)
+topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose in; joint_states,
+camera/compressed, camera/<name>/image/compressed, arm/tool_pose, /tf, /diagnostics out
+(see docs/ros.md and docs/arm.md)
 
 _name:=value arguments hold for this run only: the node puts back (or deletes) what they
 replaced on the parameter server when it exits.
@@ -78,6 +83,7 @@ class NodeConfig:
     max_angular_rad_s: float
     extension: bool
     camera: int | None = None
+    arm_poses_path: Path | None = None
 
 
 ParamGetter = Callable[[str, Any], Any]
@@ -170,6 +176,7 @@ def read_config(get: ParamGetter, profile: RobotProfile, profile_path: str | Non
         max_angular_rad_s=max_angular,
         extension=_flag(get, "extension", False),
         camera=names.index(camera_text) if camera_text else None,
+        arm_poses_path=Path(_text(get, "arm_poses") or default_config_dir() / ARM_POSES_NAME),
     )
 
 
@@ -379,7 +386,11 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         if config.camera is not None:
             link.set_command(Command(camera=config.camera))  # before anything is sent
         bridge = RosBridge(
-            profile, config.bridge, hardware_id=f"{robot[0]}:{robot[1]}", heartbeat=True
+            profile,
+            config.bridge,
+            hardware_id=f"{robot[0]}:{robot[1]}",
+            heartbeat=True,
+            arm_poses_path=config.arm_poses_path,
         )
         # The link logs its state changes and safety events itself (forwarded to rosout);
         # the bridge subscribes to them: LINK LOST stops what ROS moves.

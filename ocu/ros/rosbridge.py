@@ -11,6 +11,16 @@ Topics (relative names resolve in the node's namespace; /diagnostics is global):
 - out `joint_states`   sensor_msgs/JointState: radians, rad/s, effort = motor current (A)
 - out `camera/compressed` and `camera/<name>/image/compressed`  sensor_msgs/CompressedImage
 - out `/diagnostics`   diagnostic_msgs/DiagnosticArray: link health and the bridge's state
+
+The arm (docs/arm.md), when the profile has an [arm] table:
+
+- in  `arm/pose_goal`  geometry_msgs/PoseStamped in base_link: tool0's position; the pitch
+  from the orientation
+- in  `arm/twist_cmd`  geometry_msgs/TwistStamped in base_link: tool0's linear velocity and
+  the angular velocity about its pitch axis; the arm stops 0.1 s after the last one
+- in  `arm/named_pose` std_msgs/String: a stored pose (stow, ready, ... or the operator's)
+- out `arm/tool_pose`  geometry_msgs/PoseStamped: tool0 from each telemetry packet
+- out `/tf`            tf2_msgs/TFMessage: base_link -> tool0 (when tf2_msgs is installed)
 """
 
 from __future__ import annotations
@@ -19,10 +29,12 @@ import logging
 import math
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionError
+from ocu.kinematics.arm import ArmError
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.records import LinkEvent, LinkState, LinkStateChanged, TelemetryFrame, VideoFrame
@@ -38,6 +50,7 @@ from ocu.ros.bridge import (
     camera_name,
     joint_state,
     link_report,
+    quaternion_xyzw,
 )
 from ocu.ros.environment import ensure_ros_path
 
@@ -45,8 +58,19 @@ ensure_ros_path()
 
 import rospy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
-from geometry_msgs.msg import Twist, TwistStamped  # noqa: E402
+from geometry_msgs.msg import (  # noqa: E402
+    PoseStamped,
+    TransformStamped,
+    Twist,
+    TwistStamped,
+)
 from sensor_msgs.msg import CompressedImage, JointState  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+
+try:  # tf2_msgs is a separate Debian package (python3-tf2-msgs): /tf only when it is there.
+    from tf2_msgs.msg import TFMessage
+except ImportError:  # pragma: no cover - depends on the machine
+    TFMessage = None
 
 log = logging.getLogger("ocu.ros")
 
@@ -56,6 +80,11 @@ JOINT_STATES_TOPIC = "joint_states"
 CAMERA_TOPIC = "camera/compressed"
 CAMERA_TOPIC_PER_CAMERA = "camera/{name}/image/compressed"
 DIAGNOSTICS_TOPIC = "/diagnostics"
+POSE_GOAL_TOPIC = "arm/pose_goal"
+TWIST_CMD_TOPIC = "arm/twist_cmd"
+NAMED_POSE_TOPIC = "arm/named_pose"
+TOOL_POSE_TOPIC = "arm/tool_pose"
+TF_TOPIC = "/tf"
 DIAGNOSTICS_PERIOD_S = 1.0
 WARNING_INTERVAL_S = 2.0
 STOP_JOIN_TIMEOUT_S = 5.0
@@ -123,10 +152,19 @@ class _Publishers:
             for name in profile.link.camera_names
         }
         self.diagnostics = rospy.Publisher(DIAGNOSTICS_TOPIC, DiagnosticArray, queue_size=2)
+        self.tool_pose: Any = None
+        self.tf: Any = None
+        if profile.arm is not None:
+            self.tool_pose = rospy.Publisher(TOOL_POSE_TOPIC, PoseStamped, queue_size=10)
+            if TFMessage is not None:
+                self.tf = rospy.Publisher(TF_TOPIC, TFMessage, queue_size=10)
 
     def unregister(self) -> None:
         for publisher in (self.joint_states, self.camera, self.diagnostics, *self.cameras.values()):
             publisher.unregister()
+        for publisher in (self.tool_pose, self.tf):
+            if publisher is not None:
+                publisher.unregister()
 
 
 class RosBridge:
@@ -146,9 +184,12 @@ class RosBridge:
         hardware_id: str = "",
         heartbeat: bool = False,
         on_state_changed: StateCallback | None = None,
+        arm_poses_path: Path | None = None,
     ) -> None:
         self.profile = profile
-        self.core = BridgeCore(profile, settings, on_state_changed=on_state_changed)
+        self.core = BridgeCore(
+            profile, settings, on_state_changed=on_state_changed, arm_poses_path=arm_poses_path
+        )
         self.settings = self.core.settings
         self.hardware_id = hardware_id
         # The node beats the link's heartbeat from the bridge thread; the console's GUI
@@ -189,6 +230,16 @@ class RosBridge:
                 twist = rospy.Subscriber(CMD_VEL_TOPIC, Twist, self._on_twist, queue_size=1)
             goals = rospy.Subscriber(JOINT_GOALS_TOPIC, JointState, self._on_joint_goal)
             self._subscribers = [twist, goals]
+            if self.core.arm_available:
+                self._subscribers += [
+                    rospy.Subscriber(POSE_GOAL_TOPIC, PoseStamped, self._on_pose_goal),
+                    rospy.Subscriber(
+                        TWIST_CMD_TOPIC, TwistStamped, self._on_arm_twist, queue_size=1
+                    ),
+                    rospy.Subscriber(NAMED_POSE_TOPIC, String, self._on_named_pose),
+                ]
+                if TFMessage is None:
+                    log.warning("tf2_msgs is not installed (python3-tf2-msgs): no /tf")
             self._stop.clear()
             self.failed.clear()
             self._thread = threading.Thread(target=self._run, name="ocu-ros-bridge", daemon=True)
@@ -269,6 +320,37 @@ class RosBridge:
         message.velocity = list(data.velocities_rad_s)
         message.effort = list(data.currents_a)
         self._publish(publishers.joint_states, message)
+        self._publish_tool(publishers, frame)
+
+    def _publish_tool(self, publishers: _Publishers, frame: TelemetryFrame) -> None:
+        """tool0 on arm/tool_pose and on /tf, from the packet's readings."""
+        arm = self.profile.arm
+        if arm is None or publishers.tool_pose is None:
+            return
+        pose = self.core.arm_tool_matrix(frame.readings)
+        if pose is None:
+            return
+        stamp = _stamp(frame.wall_time)
+        x, y, z, w = quaternion_xyzw(pose)
+        message = PoseStamped()
+        message.header.stamp = stamp
+        message.header.frame_id = arm.base_link
+        message.pose.position.x, message.pose.position.y, message.pose.position.z = (
+            float(v) for v in pose[:3, 3]
+        )
+        orientation = message.pose.orientation
+        orientation.x, orientation.y, orientation.z, orientation.w = x, y, z, w
+        self._publish(publishers.tool_pose, message)
+        if publishers.tf is not None:
+            transform = TransformStamped()
+            transform.header.stamp = stamp
+            transform.header.frame_id = arm.base_link
+            transform.child_frame_id = arm.tool_link
+            translation = transform.transform.translation
+            translation.x, translation.y, translation.z = (float(v) for v in pose[:3, 3])
+            rotation = transform.transform.rotation
+            rotation.x, rotation.y, rotation.z, rotation.w = x, y, z, w
+            self._publish(publishers.tf, TFMessage(transforms=[transform]))
 
     def on_video_frame(self, frame: VideoFrame) -> None:
         """Publish a JPEG on camera/compressed and on its camera's own topic."""
@@ -347,6 +429,57 @@ class RosBridge:
             )
         else:
             log.info("joint goals cancelled")
+
+    def _frame_ok(self, header: Any, topic: str) -> bool:
+        base = self.profile.arm.base_link if self.profile.arm is not None else ""
+        frame = str(header.frame_id).lstrip("/")
+        if frame and frame != base:
+            if self._throttle.allow(topic):
+                log.error("%s rejected: frame %r, only %r is understood", topic, frame, base)
+            return False
+        return True
+
+    def _on_pose_goal(self, message: Any) -> None:
+        if not self._frame_ok(message.header, POSE_GOAL_TOPIC):
+            return
+        position, orientation = message.pose.position, message.pose.orientation
+        try:
+            target = self.core.goal_from_pose(
+                (position.x, position.y, position.z),
+                (orientation.x, orientation.y, orientation.z, orientation.w),
+            )
+            goal = self.core.on_pose_goal(target)
+        except ArmError as err:
+            log.error("pose goal rejected: %s", err)
+            return
+        log.info(
+            "pose goal %s: %s",
+            target.describe(),
+            ", ".join(f"{j} {math.degrees(a):.1f}°" for j, a in goal.items()),
+        )
+
+    def _on_named_pose(self, message: Any) -> None:
+        try:
+            self.core.on_named_pose(str(message.data))
+        except ArmError as err:
+            log.error("named pose %r rejected: %s", message.data, err)
+            return
+        log.info("moving the arm to %s", message.data)
+
+    def _on_arm_twist(self, message: Any) -> None:
+        if not self._frame_ok(message.header, TWIST_CMD_TOPIC):
+            return
+        linear, angular = message.twist.linear, message.twist.angular
+        try:
+            obeyed = self.core.on_arm_twist(
+                (linear.x, linear.y, linear.z), (angular.x, angular.y, angular.z)
+            )
+        except ArmError as err:
+            if self._throttle.allow(TWIST_CMD_TOPIC):
+                log.warning("arm twist rejected: %s", err)
+            return
+        if not obeyed and self._throttle.allow("arm twist ignored"):
+            log.info("arm twist ignored: %s", self.core.refusal() or "the link is not up")
 
     # ---- bridge thread -----------------------------------------------------------------
 

@@ -4,6 +4,11 @@ The widget draws with OpenGL in a QOpenGLWidget when the display has GL, and oth
 the same renderer in an OSMesa context, showing the image in a plain QWidget. The mouse
 works the same in both: left drag orbits, middle drag or Shift+left drag pans, the wheel
 zooms, a double click resets the view; 1/2/3/4 (or the context menu) pick preset views.
+
+For the arm it draws the tool frame (tool0's axes, through the gripper), the jog's direction
+as an arrow, a pose goal's marker, and on request the reachable workspace in the arm's plane
+as translucent cells; Ctrl+click picks a point on the horizontal plane at `pick_height_m`
+(the pose goal's height) and emits `point_picked`.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+import numpy.typing as npt
 from PySide6.QtCore import QElapsedTimer, QPointF, Qt, QTimer, Signal, Slot
 from PySide6.QtGui import (
     QContextMenuEvent,
@@ -32,16 +38,22 @@ from PySide6.QtGui import (
 from PySide6.QtOpenGLWidgets import QOpenGLWidget
 from PySide6.QtWidgets import QMenu, QVBoxLayout, QWidget
 
-from ocu.model.tree import KinematicTree
+from ocu.model.mesh import MeshData
+from ocu.model.tree import KinematicTree, Matrix
 from ocu.model.urdf import RobotModel, load_urdf
 from ocu.profile import RobotProfile
 from ocu.records import JointReading
 from ocu.render.camera import VIEW_KEYS, VIEWS, OrbitCamera
+from ocu.render.overlays import arrow_mesh, axes_mesh, marker_mesh
 from ocu.render.platform import GlMode, choose_gl_platform, configure_gl_platform
-from ocu.render.scene import RenderFrame, build_frame, model_bounds
+from ocu.render.scene import OverlayDraw, RenderFrame, build_frame, model_bounds
 
 FRESHNESS_CHECK_MS = 250
 SOFTWARE_FRAME_INTERVAL_MS = 33  # at most ~30 OSMesa frames per second
+WORKSPACE_ALPHA = 0.13
+# The jog arrow: this long at the jog's full speed, never shorter than the minimum.
+ARROW_M_PER_M_S = 3.0
+ARROW_MIN_M = 0.08
 
 
 class TelemetryFrameLike(Protocol):
@@ -71,6 +83,8 @@ class Model3DWidget(QWidget):
     """The robot in 3D, following telemetry; see the module docstring for the controls."""
 
     frame_rendered = Signal()
+    # A point picked with Ctrl+click: x, y on the plane z = pick_height_m (base frame, m).
+    point_picked = Signal(float, float, float)
 
     def __init__(
         self,
@@ -108,6 +122,22 @@ class Model3DWidget(QWidget):
         self._drag_button: Qt.MouseButton | None = None
         self._drag_pan = False
         self._last_pos = QPointF()
+        # The arm's helpers: the tool frame (a link of the model), the jog's direction, a
+        # goal's pose, the workspace cells (drawn with a link's transform).
+        arm = profile.arm
+        self.tool_link = (
+            arm.tool_link if arm is not None and arm.tool_link in self.live.links else None
+        )
+        self._jog: npt.NDArray[np.float64] | None = None
+        self._goal_pose: Matrix | None = None
+        self._workspace_link: str | None = None
+        self.workspace_visible = False
+        self.pick_height_m = 0.3
+        self._overlay_meshes: dict[str, tuple[MeshData, str]] = {
+            "axes": (axes_mesh(), "lines"),
+            "arrow": (arrow_mesh(), "lines"),
+            "goal": (marker_mesh(), "lines"),
+        }
 
         wanted = gl_mode or choose_gl_platform(qt_platform=QGuiApplication.platformName())
         self.gl_mode: GlMode = configure_gl_platform(wanted)
@@ -241,6 +271,60 @@ class Model3DWidget(QWidget):
             self._drawn_stale = stale
             self.request_render()
 
+    # The arm's helpers.
+
+    def set_jog_direction(self, twist: npt.ArrayLike | None) -> None:
+        """The jog's velocity in the base frame (vx, vy, vz m/s, pitch rad/s), None: no jog."""
+        self._jog = None if twist is None else np.asarray(twist, dtype=np.float64)
+        self.request_render()
+
+    def set_goal_pose(self, pose: Matrix | None) -> None:
+        """Where a goal puts the tool (a 4x4 in the base frame), None: no goal."""
+        self._goal_pose = None if pose is None else np.asarray(pose, dtype=np.float64)
+        self.request_render()
+
+    def set_workspace(self, link: str | None, mesh: MeshData | None) -> None:
+        """The workspace cells, drawn with a link's transform (None: this arm has none)."""
+        self._workspace_link = link if link in self.live.links else None
+        if mesh is not None:
+            self.set_overlay_mesh("workspace", mesh, "triangles")
+        self.request_render()
+
+    def set_workspace_visible(self, visible: bool) -> None:
+        """Draw the workspace or not."""
+        self.workspace_visible = visible
+        self.request_render()
+
+    def set_overlay_mesh(self, name: str, mesh: MeshData, mode: str) -> None:
+        """A helper mesh the frames may draw (uploaded once, at the next frame)."""
+        self._overlay_meshes[name] = (mesh, mode)
+        renderer = getattr(self._surface, "renderer", None)
+        if renderer is not None:
+            renderer.set_overlay_mesh(name, mesh, mode)
+
+    def install_overlays(self, renderer: Any) -> None:
+        """Give a new renderer every helper mesh."""
+        for name, (mesh, mode) in self._overlay_meshes.items():
+            renderer.set_overlay_mesh(name, mesh, mode)
+
+    def overlays(self) -> list[OverlayDraw]:
+        """The helpers to draw now."""
+        items: list[OverlayDraw] = []
+        world = self.live.world_transforms()
+        if self.workspace_visible and self._workspace_link is not None:
+            items.append(
+                OverlayDraw("workspace", world[self._workspace_link].copy(), WORKSPACE_ALPHA)
+            )
+        if self.tool_link is not None:
+            tool = world[self.tool_link].copy()
+            items.append(OverlayDraw("axes", tool, on_top=True))
+            if self._jog is not None:
+                items.append(OverlayDraw("arrow", _arrow(tool, self._jog), on_top=True))
+        if self._goal_pose is not None:
+            items.append(OverlayDraw("goal", self._goal_pose.copy(), on_top=True))
+            items.append(OverlayDraw("axes", self._goal_pose.copy(), alpha=0.6, on_top=True))
+        return items
+
     # View.
 
     def set_view(self, name: str) -> None:
@@ -294,6 +378,7 @@ class Model3DWidget(QWidget):
             stale_joints=self._drawn_stale,
             reading=self.reading,
             fault_joints=self._faults,
+            overlays=self.overlays(),
         )
 
     def _surface_rendered(self) -> None:
@@ -310,6 +395,11 @@ class Model3DWidget(QWidget):
         """Start an orbit (left) or pan (middle, Shift+left) drag."""
         button = event.button()
         shift = bool(event.modifiers() & Qt.KeyboardModifier.ShiftModifier)
+        control = bool(event.modifiers() & Qt.KeyboardModifier.ControlModifier)
+        if button == Qt.MouseButton.LeftButton and control:
+            self.pick(event.position().x(), event.position().y())
+            event.accept()
+            return
         if button in (Qt.MouseButton.LeftButton, Qt.MouseButton.MiddleButton):
             self._drag_button = button
             self._drag_pan = button == Qt.MouseButton.MiddleButton or shift
@@ -317,6 +407,15 @@ class Model3DWidget(QWidget):
             event.accept()
             return
         super().mousePressEvent(event)
+
+    def pick(self, x_px: float, y_px: float) -> npt.NDArray[np.float64] | None:
+        """The point under a pixel on the plane z = pick_height_m; emits point_picked."""
+        point = self.camera.pick_on_height(
+            x_px, y_px, max(self.width(), 1), max(self.height(), 1), self.pick_height_m
+        )
+        if point is not None:
+            self.point_picked.emit(float(point[0]), float(point[1]), float(point[2]))
+        return point
 
     def mouseMoveEvent(self, event: QMouseEvent) -> None:
         """Orbit or pan by the distance moved since the last event."""
@@ -378,6 +477,29 @@ class Model3DWidget(QWidget):
         menu.exec(event.globalPos())
 
 
+def _arrow(tool: Matrix, twist: npt.NDArray[np.float64]) -> Matrix:
+    """The arrow's transform: from tool0 along the jog's direction, its length its speed."""
+    linear = twist[:3]
+    speed = float(np.linalg.norm(linear))
+    if speed < 1e-9:
+        # A pitch alone: a short arrow along the tool's z, up or down.
+        direction = tool[:3, 2] * (1.0 if twist[3] >= 0.0 else -1.0)
+        length = ARROW_MIN_M
+    else:
+        direction = linear / speed
+        length = max(speed * ARROW_M_PER_M_S, ARROW_MIN_M)
+    helper = np.array([0.0, 0.0, 1.0]) if abs(direction[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    side = np.cross(helper, direction)
+    side /= np.linalg.norm(side)
+    up = np.cross(direction, side)
+    result = np.eye(4)
+    result[:3, 0] = direction * length
+    result[:3, 1] = side * length
+    result[:3, 2] = up * length
+    result[:3, 3] = tool[:3, 3]
+    return result
+
+
 def _gl_surface_format() -> QSurfaceFormat:
     fmt = QSurfaceFormat()
     fmt.setRenderableType(QSurfaceFormat.RenderableType.OpenGL)
@@ -398,6 +520,7 @@ class _GlSurface(QOpenGLWidget):
         self._owner = owner
         self.setFormat(_gl_surface_format())
         self.renderer = ModelRenderer(owner.model)
+        owner.install_overlays(self.renderer)
         self.frames_rendered = 0
         self.error: str | None = None
 
@@ -472,6 +595,7 @@ class _SoftwareSurface(QWidget):
             from ocu.render.renderer import ModelRenderer
 
             self.renderer = ModelRenderer(self._owner.model)
+            self._owner.install_overlays(self.renderer)
             width, height = self._pixel_size()
             self._offscreen = OffscreenRenderer(self.renderer, width, height)
         except Exception as err:  # no OSMesa, or a GL failure: show why instead of crashing

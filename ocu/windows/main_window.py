@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from PySide6.QtCore import QByteArray, QEvent, QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent, QHideEvent
@@ -32,7 +33,9 @@ from PySide6.QtWidgets import (
 )
 
 from ocu import hotkeys
+from ocu.console.arm import ArmGoal
 from ocu.console.model import ConsoleModel
+from ocu.console.poses import ARM_POSES_NAME
 from ocu.hotkeys import KeyMap
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
@@ -47,6 +50,7 @@ from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.model3d import Model3DWidget
 from ocu.widgets.replay import ReplayBanner, ReplayControls
 from ocu.widgets.video import VideoPanel
+from ocu.windows.arm import ArmModeIndicator, ArmPanel
 from ocu.windows.help_overlay import HelpOverlay
 from ocu.windows.joint_position import JointPositionPanel
 from ocu.windows.key_filter import KeyFilter
@@ -59,7 +63,7 @@ log = logging.getLogger("ocu.console")
 CONTROL_PERIOD_MS = 50
 # The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
-LAYOUT_VERSION = 2  # 2: the Video dock
+LAYOUT_VERSION = 3  # 2: the Video dock; 3: the Arm dock
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
@@ -84,6 +88,7 @@ class MainWindow(QMainWindow):
         key_map: KeyMap | None = None,
         *,
         connect: bool = True,
+        arm_poses_path: Path | None = None,
         recorder: Recorder | None = None,
         replay: ReplayLink | None = None,
         parent: QWidget | None = None,
@@ -98,7 +103,12 @@ class MainWindow(QMainWindow):
         self.recorder = recorder if replay is None else None
         self.settings = settings
         self.key_map = key_map if key_map is not None else hotkeys.load_key_map(profile)
-        self.model = ConsoleModel(profile, fine_factor=self.key_map.fine_factor)
+        # The operator's stored arm poses sit beside the hotkey file and the settings.
+        if arm_poses_path is None:
+            arm_poses_path = Path(settings.fileName()).parent / ARM_POSES_NAME
+        self.model = ConsoleModel(
+            profile, fine_factor=self.key_map.fine_factor, arm_poses_path=arm_poses_path
+        )
         self.link: QtLink | None = None
         self.replay_controller = ReplayController(replay, self) if replay is not None else None
         self._shut = False
@@ -143,6 +153,14 @@ class MainWindow(QMainWindow):
         model_view = self.model_dock.widget()
         assert isinstance(model_view, Model3DWidget)
         self.model_view = model_view
+        self.arm_panel: ArmPanel | None = None
+        self.arm_dock: QDockWidget | None = None
+        if self.model.arm is not None:
+            self.arm_panel = ArmPanel(self.model.arm)
+            self.arm_dock = self._dock("arm_dock", "Arm", self.arm_panel)
+            self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.arm_dock)
+            self.tabifyDockWidget(self.joint_dock, self.arm_dock)
+            self.joint_dock.raise_()
 
         self.link_status = LinkStatus(self.model, address_text)
         self.statusBar().addPermanentWidget(self.link_status, 1)
@@ -170,6 +188,9 @@ class MainWindow(QMainWindow):
             disabled_reason="a replay has no robot to command" if replay is not None else None,
         )
         self.link_status.add_indicator(self.ros.label)
+        if self.model.arm is not None:
+            self.arm_indicator = ArmModeIndicator(self.model.arm)
+            self.link_status.add_indicator(self.arm_indicator)
         self.help_overlay = HelpOverlay(self.model, self.key_map, self)
         self._build_menu()
 
@@ -197,6 +218,7 @@ class MainWindow(QMainWindow):
         )
         if self.replay_controller is not None:
             self._build_replay_bar(self.replay_controller)
+        self._wire_arm()
 
         self._control_timer = QTimer(self)
         self._control_timer.setInterval(CONTROL_PERIOD_MS)
@@ -269,7 +291,11 @@ class MainWindow(QMainWindow):
         bar.addWidget(self.replay_controls)
         self.addToolBar(Qt.ToolBarArea.TopToolBarArea, bar)
         self.replay_bar = bar
-        for widget in (self.velocity_panel, self.max_panel, self.joint_panel.targets_panel):
+        disabled: list[QWidget] = [self.velocity_panel, self.max_panel]
+        disabled.append(self.joint_panel.targets_panel)
+        if self.arm_panel is not None:
+            disabled.append(self.arm_panel)
+        for widget in disabled:
             widget.setEnabled(False)
             widget.setToolTip(REPLAY_DISABLED_TIP)
         self.link_status.set_replay()
@@ -372,6 +398,46 @@ class MainWindow(QMainWindow):
         if last is not None:
             predicted = self.model.predicted_angles(time.monotonic())
             self.model_view.set_joint_angles(predicted, fresh_at=last)
+        if self.arm_panel is not None:
+            self.arm_panel.refresh()
+            self.model_view.pick_height_m = self.arm_panel.pick_height_m()
+
+    # ---- the arm ---------------------------------------------------------------------------
+
+    def _wire_arm(self) -> None:
+        """The arm's model to the 3D view and the log; the 3D view's picks to the Arm dock."""
+        self.model.events.targets_changed.connect(lambda _targets: self._update_ghost())
+        arm = self.model.arm
+        if arm is None:
+            if self.model.arm_error:
+                self.log_event(self.model.arm_error)
+            return
+        assert self.arm_panel is not None
+        view = self.model_view
+        workspace = arm.kinematics.workspace_slice()
+        if workspace is not None:
+            view.set_workspace(*workspace)
+        arm.events.workspace_changed.connect(view.set_workspace_visible)
+        arm.events.jog_changed.connect(view.set_jog_direction)
+        arm.events.goal_changed.connect(self._on_arm_goal)
+        view.point_picked.connect(self.arm_panel.on_point_picked)
+
+    def _on_arm_goal(self, goal: ArmGoal | None) -> None:
+        arm = self.model.arm
+        assert arm is not None
+        pose = None
+        if goal is not None:
+            pose = arm.kinematics.tool_matrix(arm.kinematics.vector(goal.joints))
+        self.model_view.set_goal_pose(pose)
+        self._update_ghost()
+
+    def _update_ghost(self) -> None:
+        """The ghost: position targets and the arm's goal together."""
+        ghost = dict(self.model.targets)
+        arm = self.model.arm
+        if arm is not None and arm.goal is not None:
+            ghost.update(arm.goal.joints)
+        self.model_view.set_ghost(ghost or None)
 
     def _on_link_state(self, state: LinkState, reason: str) -> None:
         if not self._is_current_link():
@@ -471,5 +537,4 @@ def add_model_dock(window: MainWindow) -> QDockWidget:
     dock = window._dock("model3d_dock", "3D model", widget)
     window.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, dock)
     window.splitDockWidget(window.velocity_dock, dock, Qt.Orientation.Vertical)
-    window.model.events.targets_changed.connect(lambda targets: widget.set_ghost(targets or None))
     return dock

@@ -234,8 +234,12 @@ class RosControl(QObject):
             raise RuntimeError("rospy was shut down in this process")
         if not rospy.core.is_initialized():
             init_node(NODE_NAME, anonymous=True)  # rospy allows one node per process
+        arm = self.model.arm
         return RosBridge(
-            self.profile, hardware_id=self.hardware_id, on_state_changed=self.state_changed.emit
+            self.profile,
+            hardware_id=self.hardware_id,
+            on_state_changed=self.state_changed.emit,
+            arm_poses_path=arm.poses.path if arm is not None else None,
         )
 
     def _on_state(self, state: BridgeState, text: str) -> None:

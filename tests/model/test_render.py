@@ -200,3 +200,31 @@ def test_screenshot_command_reports_bad_arguments(
     assert screenshot_main([str(out), "--urdf", str(tmp_path / "none.urdf")]) == 1
     assert "cannot read URDF" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_screenshot_of_a_collision_only_robot_with_a_prismatic_joint(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Prismatic values are metres, limit notes say so; collision geometry is drawn and the
+    note says it is."""
+    urdf = tmp_path / "slider.urdf"
+    urdf.write_text(
+        '<robot name="slider">'
+        '<link name="rail"><collision><geometry><box size="1 0.1 0.1"/></geometry></collision>'
+        "</link>"
+        '<link name="carriage"><collision><geometry><box size="0.2 0.2 0.2"/></geometry>'
+        "</collision></link>"
+        '<joint name="slide" type="prismatic"><parent link="rail"/><child link="carriage"/>'
+        '<axis xyz="1 0 0"/><limit lower="0" upper="0.3"/></joint></robot>'
+    )
+    out = tmp_path / "slider.png"
+    status = screenshot_main(
+        [str(out), "--urdf", str(urdf), "--joints", "slide=0.35", "--size", "160x120"]
+    )
+    assert status == 0
+    err = capsys.readouterr().err
+    assert "collision geometry is drawn instead" in err
+    assert "slide=0.35 m is outside its limits [0 m, 0.3 m]" in err
+    with Image.open(out) as image:
+        pixels = np.asarray(image.convert("RGB"))
+    assert _not_background(pixels).mean() > 0.02

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +12,14 @@ import numpy.typing as npt
 import pytest
 import trimesh
 
-from ocu.model.urdf import RobotModel, UrdfError, default_urdf_path, load_urdf, parse_urdf
+from ocu.model.urdf import (
+    COLLISION_ONLY_NOTE,
+    RobotModel,
+    UrdfError,
+    default_urdf_path,
+    load_urdf,
+    parse_urdf,
+)
 from ocu.profile import RobotProfile
 
 REPO = Path(__file__).resolve().parents[2]
@@ -25,7 +33,11 @@ def test_engineer_has_the_parts_of_the_robot(engineer: RobotModel) -> None:
         "upper_arm", "forearm", "neck_link", "head", "head_cameras", "gripper_base",
         "left_jaw", "right_jaw",
     } <= links  # fmt: skip
-    assert all(engineer.meshes[name].vertex_count > 0 for name in links)
+    assert all(engineer.meshes[name].vertex_count > 0 for name in links - {"tool0"})
+    # tool0, the grasp point between the jaws, is a bare frame on the gripper.
+    assert engineer.meshes["tool0"].vertex_count == 0
+    assert engineer.tree.parent_joint("tool0").parent == "gripper_base"  # type: ignore[union-attr]
+    assert engineer.warnings == ()
     assert engineer.tree.root == "base_link"
     assert engineer.tree.joint("left_track_mount").type == "fixed"
 
@@ -177,26 +189,116 @@ def test_other_mesh_formats_drop_in(tmp_path: Path) -> None:
     assert model.tree.actuated_joints == ("j1",)
 
 
-def test_missing_mesh_names_the_file_and_where_it_looked(tmp_path: Path) -> None:
+def test_a_missing_or_unreadable_mesh_leaves_the_rest_of_the_robot(tmp_path: Path) -> None:
+    """One bad mesh is skipped with a warning naming the file and where it was looked for."""
+    (tmp_path / "bad.stl").write_bytes(b"not a mesh at all")
     urdf = tmp_path / "r.urdf"
     urdf.write_text(
         _urdf(
             '<link name="base"><visual><geometry><mesh filename="meshes/gone.stl"/>'
             "</geometry></visual></link>"
+            '<link name="arm"><visual><geometry><mesh filename="bad.stl"/></geometry></visual>'
+            '<visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
+            + _joint("j", "base", "arm")
         )
     )
-    with pytest.raises(UrdfError, match=r"link 'base' visual 0: mesh file not found: "
-                       r"meshes/gone.stl \(looked in: .*gone.stl\)"):  # fmt: skip
-        load_urdf(urdf)
-
-
-def test_unreadable_mesh_is_reported(tmp_path: Path) -> None:
-    (tmp_path / "bad.stl").write_bytes(b"not a mesh at all")
-    text = _urdf(
-        '<link name="base"><visual><geometry><mesh filename="bad.stl"/></geometry></visual></link>'
+    model = load_urdf(urdf)
+    assert model.meshes["base"].vertex_count == 0
+    assert model.meshes["arm"].triangle_count == 12  # the box of the second visual
+    assert len(model.warnings) == 2
+    assert re.search(
+        r"link 'base' visual 0: mesh file not found: meshes/gone.stl \(looked in: .*gone.stl\)"
+        r"; the rest of the robot is drawn",
+        model.warnings[0],
     )
-    with pytest.raises(UrdfError, match=r"link 'base' visual 0: (cannot read mesh|mesh ).*bad"):
-        parse_urdf(text, tmp_path)
+    assert re.search(r"link 'arm' visual 0: (cannot read mesh|mesh ).*bad", model.warnings[1])
+
+
+def test_a_mimic_of_a_missing_joint_moves_on_its_own(tmp_path: Path) -> None:
+    text = _urdf(
+        _box_link("a") + _box_link("b")
+        + _joint("j", "a", "b", extra='<mimic joint="nope"/>')
+    )  # fmt: skip
+    model = parse_urdf(text, tmp_path)
+    assert model.tree.actuated_joints == ("j",)
+    assert model.warnings == (
+        "joint 'j' mimics 'nope', which is not a moving joint of this model: it moves on its own",
+    )
+
+
+def test_a_robot_without_a_moving_joint_loads_and_renders(tmp_path: Path) -> None:
+    text = _urdf(_box_link("a") + _box_link("b") + _joint("j", "a", "b", "fixed"))
+    model = parse_urdf(text, tmp_path)
+    assert model.tree.actuated_joints == ()
+    assert set(model.tree.world_transforms()) == {"a", "b"}
+
+
+def test_collada_meshes_load_through_pycollada(tmp_path: Path) -> None:
+    box = trimesh.creation.box(extents=(0.3, 0.2, 0.1))
+    (tmp_path / "part.dae").write_bytes(box.export(file_type="dae"))
+    text = _urdf(
+        '<link name="a"><visual><geometry><mesh filename="part.dae"/></geometry></visual></link>'
+    )
+    model = parse_urdf(text, tmp_path)
+    assert model.warnings == ()
+    low, high = model.meshes["a"].bounds()
+    assert np.allclose(high - low, [0.3, 0.2, 0.1], atol=1e-6)
+
+
+def test_package_with_an_empty_name_and_materials_reused_by_name(tmp_path: Path) -> None:
+    (tmp_path / "meshes").mkdir()
+    trimesh.creation.box(extents=(0.1, 0.1, 0.1)).export(tmp_path / "meshes" / "cube.stl")
+    absolute = tmp_path / "meshes" / "cube.stl"
+    text = _urdf(
+        '<link name="a"><visual><geometry><mesh filename="package:///meshes/cube.stl"/>'
+        '</geometry><material name="signal"><color rgba="1 0.5 0 1"/></material></visual></link>'
+        f'<link name="b"><visual><geometry><mesh filename="package://{absolute}"/>'
+        '</geometry><material name="signal"/></visual></link>' + _joint("j", "a", "b")
+    )
+    model = parse_urdf(text, tmp_path)
+    assert model.warnings == ()
+    assert model.meshes["a"].triangle_count == 12
+    assert model.meshes["b"].triangle_count == 12
+    # Defined in link a's visual, used by name in link b's: b is orange, not the default grey.
+    assert (model.meshes["b"].colors == [255, 128, 0, 255]).all()
+
+
+def test_collision_only_robot_is_drawn_from_its_collision_geometry(tmp_path: Path) -> None:
+    text = _urdf(
+        '<link name="a"><collision><origin xyz="0 0 0.5"/><geometry><box size="1 1 1"/>'
+        "</geometry></collision></link>"
+        '<link name="b"><collision><geometry><cylinder radius="0.1" length="0.4"/></geometry>'
+        "</collision></link>" + _joint("j", "a", "b")
+    )
+    model = parse_urdf(text, tmp_path)
+    assert model.drawn_from_collision
+    assert COLLISION_ONLY_NOTE in model.warnings
+    assert model.meshes["a"].triangle_count == 12
+    assert model.meshes["b"].vertex_count > 0
+    low, _high = model.meshes["a"].bounds()
+    assert np.allclose(low, [-0.5, -0.5, 0.0])
+    assert model.collisions["a"][0].kind == "box"
+    assert model.collisions["b"][0].size == (0.1, 0.1, 0.4)
+
+
+def test_xacro_leftovers_get_a_hint(tmp_path: Path) -> None:
+    text = _urdf(
+        '<link name="a"><visual><geometry><mesh filename="$(find my_robot)/meshes/a.stl"/>'
+        "</geometry></visual></link>"
+    )
+    model = parse_urdf(text, tmp_path)
+    assert any("unprocessed xacro" in warning for warning in model.warnings)
+    with pytest.raises(UrdfError, match=r"origin rpy.*unprocessed xacro file: expand it first"):
+        parse_urdf(
+            _urdf(_box_link("a") + _box_link("b")
+                  + _joint("j", "a", "b", extra='<origin rpy="0 0 ${pi/2}"/>')),
+            tmp_path,
+        )  # fmt: skip
+    source = tmp_path / "robot.urdf.xacro"
+    source.write_text('<robot xmlns:xacro="http://www.ros.org/wiki/xacro" name="r">'
+                      '<xacro:macro name="m"/></robot>')  # fmt: skip
+    with pytest.raises(UrdfError, match=r"xacro robot\.urdf\.xacro > robot\.urdf"):
+        load_urdf(source)
 
 
 def test_cycle_is_reported_with_its_joints(tmp_path: Path) -> None:
@@ -239,10 +341,6 @@ def test_other_structural_errors(tmp_path: Path) -> None:
         r"joint 'j' origin xyz: '1 2' is not 3": _urdf(
             _box_link("a") + _box_link("b")
             + _joint("j", "a", "b", extra='<origin xyz="1 2"/>')
-        ),
-        r"mimics 'nope', which is not a moving joint": _urdf(
-            _box_link("a") + _box_link("b")
-            + _joint("j", "a", "b", extra='<mimic joint="nope"/>')
         ),
         r"link 'a' visual 0: unknown geometry <cone>": _urdf(
             '<link name="a"><visual><geometry><cone/></geometry></visual></link>'

@@ -5,12 +5,14 @@ from __future__ import annotations
 import logging
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionError
+from ocu.kinematics.arm import ArmError, ToolPose
 from ocu.profile import RobotProfile, load_profile
 from ocu.records import JointReading, LinkState, LinkStats
 from ocu.ros.bridge import (
@@ -25,6 +27,8 @@ from ocu.ros.bridge import (
     camera_name,
     joint_state,
     link_report,
+    quaternion_xyzw,
+    rotation_of,
     twist_to_drive,
 )
 
@@ -602,3 +606,59 @@ def test_bridge_report(core: BridgeCore, sink: Sink) -> None:
     assert values["cmd_vel received"] == "1"
     core.override()
     assert bridge_report(core.status(), "sim").level is DiagnosticLevel.WARN
+
+
+# ---- the arm ------------------------------------------------------------------------------
+
+
+def _arm_readings(angles: dict[str, float]) -> dict[str, JointReading]:
+    return {name: reading(name, value) for name, value in angles.items()}
+
+
+def test_quaternions_round_trip_and_a_pose_gives_its_pitch(core: BridgeCore) -> None:
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        rotation = rotation_of(*q)
+        assert np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
+        assert np.allclose(rotation_of(*quaternion_xyzw(rotation)), rotation, atol=1e-9)
+    # A tool pointing outward from the waist axis (x = -0.12 m), 20° down (ROS: pitch +20°
+    # about y).
+    yaw, pitch = math.atan2(0.35, 0.5 + 0.12), math.radians(20.0)
+    turned = rotation_of(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)) @ rotation_of(
+        0.0, math.sin(pitch / 2), 0.0, math.cos(pitch / 2)
+    )
+    target = core.goal_from_pose((0.5, 0.35, 0.4), quaternion_xyzw(turned))
+    assert target.pitch == pytest.approx(-pitch)
+    with pytest.raises(ArmError, match="not zero"):
+        core.goal_from_pose((0.5, 0.35, 0.4), (0.0, 0.0, 0.0, 0.0))
+
+
+def test_arm_goals_and_twists_stop_when_the_link_is_lost(
+    core: BridgeCore, sink: Sink, clock: Clock, profile: RobotProfile
+) -> None:
+    assert profile.arm is not None
+    with pytest.raises(ArmError, match="no reading of the waist yet"):
+        core.on_pose_goal(ToolPose(0.5, 0.0, 0.5, 0.0))
+    core.on_telemetry(_arm_readings(profile.arm.poses["ready"]), clock.now, 0.05)
+    core.on_named_pose("look_forward")
+    assert state_of(core) is BridgeState.COMMANDING
+    clock.now += 0.2
+    core.step()
+    assert sink.current["shoulder"] > 0.0
+    core.on_link_state(LinkState.LOST, "test")
+    assert all(sink.current[c] == 0.0 for c in ("waist", "shoulder", "elbow", "neck"))
+    with pytest.raises(ArmError, match="LINK LOST"):
+        core.on_named_pose("ready")
+    core.on_link_state(LinkState.CONNECTED, "back")
+    clock.now += 1.0
+    assert core.on_arm_twist((0.0, 0.05, 0.0), (0.0, 0.0, 0.0)) is True
+    core.step()
+    assert sink.current["waist"] > 0.0
+    # 0.1 s without a twist: the arm stops by itself.
+    clock.now += profile.arm.twist_timeout_s + 0.01
+    assert core.step() == [f"arm: no twist for {profile.arm.twist_timeout_s:g} s, jog stopped"]
+    assert sink.current["waist"] == 0.0
+    with pytest.raises(ArmError, match="no stored pose 'dance'"):
+        core.on_named_pose("dance")

@@ -1,0 +1,282 @@
+"""The arm in the console model, against the simulator's physics behind a 50 ms link at 10 Hz:
+Cartesian jogs (keys, frames, Shift), the safety stops with their reasons, pose goals and
+stored poses, and that every automatic arm motion yields to the operator, Space and a lost link.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from ocu import hotkeys
+from ocu.console.arm import ArmGoal
+from ocu.console.model import Source
+from ocu.control.arm import SLOW, STOP
+from ocu.hotkeys import KeyMap, load_key_map
+from ocu.kinematics.arm import ArmError, ToolPose
+from ocu.profile import RobotProfile
+from tests.console.arm_rig import Rig
+
+Array = npt.NDArray[np.float64]
+
+
+@pytest.fixture(scope="module")
+def key_map(profile: RobotProfile) -> KeyMap:
+    return load_key_map(profile)
+
+
+def _deviation(points: list[Array], start: Array, axis: Array) -> float:
+    """Largest distance of the points from the line through start along axis."""
+    unit = axis / np.linalg.norm(axis)
+    return max(float(np.linalg.norm((p - start) - np.dot(p - start, unit) * unit)) for p in points)
+
+
+def test_jog_follows_the_line_and_release_stops_at_once(
+    profile: RobotProfile, tmp_path: Path, key_map: KeyMap
+) -> None:
+    rig = Rig(profile, tmp_path)
+    model = rig.model
+    hotkeys.press(model, key_map, "C")
+    assert rig.arm.cartesian
+    start = rig.position()
+    assert hotkeys.press(model, key_map, "A")  # left, in the base frame
+    assert rig.arm_sources() == {Source.ARM}
+    assert rig.arm_velocities()  # at once, not on the next tick
+    trace = []
+    for _ in range(40):
+        rig.tick()
+        trace.append(rig.position())
+    moved = rig.position() - start
+    assert moved[1] == pytest.approx(0.05 * 2.0, abs=0.01)  # 5 cm/s for 2 s (plus the delay)
+    assert _deviation(trace, start, np.array([0.0, 1.0, 0.0])) < 0.002
+    assert hotkeys.release(model, key_map, "A")
+    assert rig.arm_velocities() == {}  # release = stop, in the same call
+    assert rig.arm_sources() == {Source.NONE}
+    assert model.held_keys == frozenset()
+    # Shift: the fine fraction of the speed.
+    hotkeys.set_fine(model, True)
+    hotkeys.press(model, key_map, "A")
+    before = rig.position()
+    rig.run(2.0)
+    hotkeys.release(model, key_map, "A")
+    slow = rig.position()[1] - before[1]
+    assert slow == pytest.approx(0.05 * 0.25 * 2.0, abs=0.004)
+    # Back in joint mode the same key drives the chassis again.
+    hotkeys.set_fine(model, False)
+    hotkeys.press(model, key_map, "C")
+    hotkeys.press(model, key_map, "A")
+    assert model.velocities()["drive_turn"] > 0.0
+    assert rig.arm_velocities() == {}
+
+
+def test_tool_frame_moves_along_the_gripper(
+    profile: RobotProfile, tmp_path: Path, key_map: KeyMap
+) -> None:
+    rig = Rig(profile, tmp_path)
+    arm = rig.arm
+    assert rig.arm.preview_pose(ToolPose(0.6, 0.2, 0.5, math.radians(-30.0)))
+    arm.accept()
+    rig.run_until_idle()
+    hotkeys.press(rig.model, key_map, "C")
+    hotkeys.press(rig.model, key_map, "V")
+    assert arm.frame == "tool"
+    start = rig.truth()
+    hotkeys.press(rig.model, key_map, "W")
+    trace = []
+    for _ in range(30):
+        rig.tick()
+        trace.append(rig.position())
+    hotkeys.release(rig.model, key_map, "W")
+    heading = math.atan2(start.y - rig.kinematics.axis_xy[1], start.x - rig.kinematics.axis_xy[0])
+    along = np.array(
+        [math.cos(heading) * math.cos(start.pitch), math.sin(heading) * math.cos(start.pitch),
+         math.sin(start.pitch)]
+    )  # fmt: skip
+    moved = rig.position() - start.position
+    assert float(np.dot(moved, along)) > 0.06
+    assert _deviation(trace, start.position, along) < 0.003  # forward = where the jaws point
+    assert rig.truth().pitch == pytest.approx(start.pitch, abs=math.radians(0.5))
+
+
+def test_stretching_out_slows_then_stops_with_the_reason(
+    profile: RobotProfile, tmp_path: Path, key_map: KeyMap
+) -> None:
+    rig = Rig(profile, tmp_path)
+    hotkeys.press(rig.model, key_map, "C")
+    hotkeys.press(rig.model, key_map, "W")
+    levels = []
+    for _ in range(300):
+        rig.tick()
+        levels.append(rig.arm.status.level)
+        if rig.arm.status.level == STOP:
+            break
+    status = rig.arm.status
+    assert status.level == STOP
+    assert "stretched out: the edge of the workspace" in status.reason
+    assert SLOW in levels
+    assert levels.index(SLOW) < len(levels) - 1
+    assert rig.arm.status.condition is not None
+    assert rig.arm.status.condition >= profile.arm.singularity_stop  # type: ignore[union-attr]
+    assert rig.robot.joints["elbow"] > math.radians(10.0)  # never reaches the singularity
+    assert any("STOPPED" in m and "stretched" in m for m in rig.messages)
+    # Moving away from the singularity is allowed at once.
+    hotkeys.release(rig.model, key_map, "W")
+    hotkeys.press(rig.model, key_map, "S")
+    rig.tick()
+    assert rig.arm.status.level != STOP
+    assert "stretched" not in rig.arm.status.reason
+    assert rig.arm_velocities()
+
+
+def test_a_joint_limit_stops_the_jog_with_its_margin(
+    profile: RobotProfile, tmp_path: Path, key_map: KeyMap
+) -> None:
+    rig = Rig(profile, tmp_path, start=profile.arm.poses["look_forward"])  # type: ignore[union-attr]
+    hotkeys.press(rig.model, key_map, "C")
+    hotkeys.press(rig.model, key_map, "M")  # faster: 1.5 x the pitch rate
+    hotkeys.press(rig.model, key_map, "Y")  # pitch up until the neck runs out
+    for _ in range(300):
+        rig.tick()
+        if rig.arm.status.level == STOP:
+            break
+    assert rig.arm.status.level == STOP
+    assert "near its limit" in rig.arm.status.reason
+    rig.run(1.0)
+    margin = profile.arm.joint_limit_margin_rad  # type: ignore[union-attr]
+    for joint in rig.arm.kinematics.joints:
+        low, high = profile.motors[joint].limits_rad  # type: ignore[misc]
+        angle = rig.robot.joints[joint]
+        assert low + margin * 0.9 <= angle <= high - margin * 0.9, joint
+
+
+def test_never_into_the_chassis(profile: RobotProfile, tmp_path: Path, key_map: KeyMap) -> None:
+    """Down over the deck: stopped at the clearance, by the real (simulated) joints too."""
+    above_deck = {"waist": 0.0, "shoulder": math.radians(80.0), "elbow": math.radians(130.0),
+                  "neck": math.radians(-40.0)}  # fmt: skip
+    rig = Rig(profile, tmp_path, start=above_deck)
+    before = rig.truth_contact()
+    assert before is not None
+    assert before.distance_m > 0.05
+    hotkeys.press(rig.model, key_map, "C")
+    hotkeys.press(rig.model, key_map, "F")  # down
+    for _ in range(400):
+        rig.tick()
+        if rig.arm.status.level == STOP:
+            break
+    assert rig.arm.status.level == STOP
+    assert "would come too close" in rig.arm.status.reason
+    rig.run(1.0)
+    contact = rig.truth_contact()
+    assert contact is not None
+    assert contact.distance_m > 0.0
+    assert (
+        rig.truth().z < rig.kinematics.tool_pose(rig.kinematics.vector(above_deck)).z - 0.05
+    )  # it did come down first
+
+
+def test_pose_goal_ghost_then_accept_all_joints_together(
+    profile: RobotProfile, tmp_path: Path
+) -> None:
+    rig = Rig(profile, tmp_path)
+    goals: list[ArmGoal | None] = []
+    rig.arm.events.goal_changed.connect(goals.append)
+    target = ToolPose(0.45, -0.25, 0.55, math.radians(-45.0))
+    preview = rig.arm.preview_pose(target)
+    assert not preview.accepted
+    assert goals == [preview]
+    rig.run(0.5)
+    assert rig.arm_velocities() == {}  # the ghost only: nothing moves before Accept
+    accepted = rig.arm.accept()
+    assert accepted.accepted
+    assert goals[-1] == accepted
+    moving_since: dict[str, float] = {}
+    still_since: dict[str, float] = {}
+    previous = dict(rig.robot.joints)
+    while rig.arm.controller.active:
+        rig.tick()
+        now = dict(rig.robot.joints)
+        for joint in rig.arm.kinematics.joints:
+            if abs(now[joint] - previous[joint]) > 1e-4:
+                moving_since.setdefault(joint, rig.t)
+                still_since.pop(joint, None)
+            else:
+                still_since.setdefault(joint, rig.t)
+        previous = now
+        assert rig.t < 30
+    starts = list(moving_since.values())
+    assert max(starts) - min(starts) <= 0.15  # started together
+    assert max(still_since.values()) - min(still_since.values()) <= 0.4  # arrived together
+    error = float(np.linalg.norm(rig.truth().position - target.position))
+    assert error < 0.005
+    assert rig.truth().pitch == pytest.approx(target.pitch, abs=math.radians(0.6))
+    assert any(m.startswith("arm: reached") for m in rig.messages)
+    assert goals[-1] is None
+
+
+def test_moves_yield_to_the_operator_space_and_a_lost_link(
+    profile: RobotProfile, tmp_path: Path, key_map: KeyMap
+) -> None:
+    rig = Rig(profile, tmp_path)
+    model = rig.model
+
+    def start() -> None:
+        hotkeys.press(model, key_map, "F4")  # look forward: a stored pose from a key
+        rig.run(0.3)
+        assert rig.arm_velocities()
+        assert rig.arm_sources() == {Source.ARM}
+
+    start()
+    hotkeys.press(model, key_map, "T")  # the gripper: any other operator motion input
+    assert rig.arm_velocities() == {}
+    assert model.velocities() == {"gripper": model.hotkey_speed("gripper")}
+    hotkeys.release(model, key_map, "T")
+    assert any("stopped: operator input" in m for m in rig.messages)
+    start()
+    hotkeys.press(model, key_map, "Space")
+    assert model.velocities() == {}
+    assert model.estopped
+    rig.run(0.5)
+    assert model.velocities() == {}  # nothing resumes
+    start()  # a stored pose is operator input: the latch lets it through
+    assert not model.estopped
+    model.halt("link lost")
+    assert model.velocities() == {}
+    rig.run(0.5)
+    assert model.velocities() == {}
+    # A manual command on an arm joint takes the channel and stops the others.
+    start()
+    model.set_velocity("elbow", 0.1)
+    assert model.velocities() == {"elbow": 0.1}
+    assert rig.arm.goal is None
+
+
+def test_a_path_through_the_chassis_is_refused(profile: RobotProfile, tmp_path: Path) -> None:
+    """From a low reach on the right, swinging straight to 'look back' sweeps the gripper
+    through the right track: refused, nothing moves."""
+    low_right = {"waist": math.radians(-60.0), "shoulder": math.radians(-5.0),
+                 "elbow": math.radians(40.0), "neck": math.radians(-20.0)}  # fmt: skip
+    rig = Rig(profile, tmp_path, start=low_right)
+    with pytest.raises(ArmError, match=r"the path comes too close at \d+% of the way: .* overlap"):
+        rig.arm.go_to("look_back")
+    rig.run(0.3)
+    assert rig.arm_velocities() == {}
+    with pytest.raises(ArmError, match="out of reach"):
+        rig.arm.preview_pose(ToolPose(1.5, 0.0, 0.5, 0.0))
+
+
+def test_stored_poses_are_saved_beside_the_hotkeys(profile: RobotProfile, tmp_path: Path) -> None:
+    rig = Rig(profile, tmp_path)
+    rig.arm.go_to("look_forward")
+    rig.run_until_idle()
+    assert rig.arm.save_pose("over the deck") == "over the deck"
+    path = tmp_path / "arm_poses.toml"
+    assert '[poses."over the deck"]' in path.read_text()
+    again = Rig(profile, tmp_path)
+    assert again.arm.poses.names[-1] == "over the deck"
+    again.arm.go_to("over the deck")
+    again.run_until_idle()
+    assert np.linalg.norm(again.truth().position - rig.truth().position) < 0.005
