@@ -26,8 +26,9 @@ CALIBRATION_FILE_NAME = "gamepad-calibration.toml"
 # A calibrated axis must have travelled at least this share of SDL's half range (a stick) or
 # of its whole range (a trigger) on each side of its centre: less is a stick not moved.
 MIN_TRAVEL = 0.5
-# A centre must lie this share of the range away from either end.
-CENTRE_MARGIN = 0.2
+# A stick rests within this share of SDL's half range of 0, a trigger as near its minimum:
+# farther, it is still held.
+CENTRE_LIMIT = 0.25
 FIELDS = ("min", "centre", "max")
 
 
@@ -110,20 +111,20 @@ class CalibrationSession:
             low, high, centre = self.low[axis], self.high[axis], rest[axis]
             low, high = min(low, centre), max(high, centre)
             if axis in TRIGGERS:
-                if (high - low) < MIN_TRAVEL * RAW_MAX:
+                if centre - low > CENTRE_LIMIT * RAW_MAX:
+                    problems.append(f"{axis}: let go of it before saving")
+                elif high - low < MIN_TRAVEL * RAW_MAX:
                     problems.append(f"{axis}: press it all the way, then let go")
-                    continue
-                axes[axis] = AxisCalibration(low, low, high)
+                else:
+                    axes[axis] = AxisCalibration(low, low, high)
                 continue
             half = RAW_MAX * MIN_TRAVEL
-            if centre - low < half or high - centre < half:
+            if abs(centre) > CENTRE_LIMIT * RAW_MAX:
+                problems.append(f"{axis}: let go of it before saving")
+            elif centre - low < half or high - centre < half:
                 problems.append(f"{axis}: move it to both ends")
-                continue
-            margin = (high - low) * CENTRE_MARGIN
-            if not low + margin <= centre <= high - margin:
-                problems.append(f"{axis}: let go of it before setting the centre")
-                continue
-            axes[axis] = AxisCalibration(low, centre, high)
+            else:
+                axes[axis] = AxisCalibration(low, centre, high)
         if problems:
             raise CalibrationError("; ".join(problems))
         return PadCalibration(axes)

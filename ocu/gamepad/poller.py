@@ -115,6 +115,11 @@ class PadPoller:
         """Whether the poll thread runs."""
         return self._thread is not None and self._thread.is_alive()
 
+    def peek(self) -> PadState | None:
+        """The newest state, taken or not (None while no pad is open)."""
+        with self._lock:
+            return self._latest
+
     def take(self) -> PadState | None:
         """The newest state not yet taken (None: nothing new), with every press since the last."""
         with self._lock:

@@ -297,13 +297,14 @@ class GamepadTeleop:
         self._engaged = True
         self._armed.clear()
         self._buttons_armed.clear()
-        alt = self.alt
-        for axis in AXES:
-            binding = self.mapping.binding(axis, alt)
-            if binding is not None and self.value(axis) == 0.0:
-                self._armed[axis] = binding
-        down = self._state.down if self._state is not None else frozenset()
-        self._buttons_armed = {b for b in self.mapping.buttons if b not in down}
+        state = self._state
+        if state is not None:  # otherwise each arms when its first reading is at rest
+            alt = self.alt
+            for axis in AXES:
+                binding = self.mapping.binding(axis, alt)
+                if binding is not None and self.value(axis) == 0.0:
+                    self._armed[axis] = binding
+            self._buttons_armed = {b for b in self.mapping.buttons if b not in state.down}
         self._refresh_status()
 
     def _disengage(self, reason: str) -> bool:
