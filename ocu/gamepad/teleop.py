@@ -61,6 +61,8 @@ class TeleopEvents:
     def __init__(self) -> None:
         self.status_changed: Event[[PadStatus, str]] = Event()
         self.pad_changed: Event[[PadInfo | None]] = Event()
+        # Every state taken from the pad in use (the calibration learns from each).
+        self.state_changed: Event[[PadState]] = Event()
         self.message: Event[[str]] = Event()
 
 
@@ -224,6 +226,7 @@ class GamepadTeleop:
             return
         previous = self._state
         self._state = state
+        self.events.state_changed.emit(state)
         down = state.down
         # The poller counts only presses it saw happen: a button held when the pad appeared
         # is not among them.

@@ -284,6 +284,7 @@ class GamepadPanel(QWidget):
 
         teleop.events.status_changed.connect(lambda _status, _text: self._show_status())
         teleop.events.pad_changed.connect(self._on_pad)
+        teleop.events.state_changed.connect(lambda _state: self._feed())
         self._fill_mapping()
         self._show_status()
         self._update_buttons()
@@ -400,7 +401,6 @@ class GamepadPanel(QWidget):
         """Live values (about 30 Hz, only while the dock is shown)."""
         if not self.isVisible():
             return
-        self._feed()
         self.view.update()
         teleop = self.teleop
         state = teleop.state
