@@ -6,7 +6,8 @@ state changed and `on_event(event)` when a pad comes, goes, or SDL fails. Both c
 on the poll thread: the consumer takes the newest state with `take()` on its own thread
 (`ocu.qt.gamepad` does so on the GUI thread). A button pressed and released between two
 takes is still reported, in `PadState.pressed`. `last_poll_at` says when the thread last
-finished a poll: a consumer that sees it grow old knows the thread stalled.
+finished a poll (None until the first, while SDL starts): a consumer that sees it grow old
+knows the thread stalled.
 """
 
 from __future__ import annotations
@@ -88,7 +89,7 @@ class PadPoller:
         self._pad: _OpenPad | None = None
         self._rescan_at = 0.0
         self._unsupported: set[str] = set()
-        self.last_poll_at = clock()
+        self.last_poll_at: float | None = None
         self.polls = 0
 
     # ---- the consumer's side -----------------------------------------------------------------
@@ -97,7 +98,7 @@ class PadPoller:
         """Start the poll thread."""
         if self._thread is not None:
             raise RuntimeError("the poller runs already")
-        self.last_poll_at = self._clock()
+        self.last_poll_at = None
         self._thread = threading.Thread(target=self._run, name=THREAD_NAME, daemon=True)
         self._thread.start()
 

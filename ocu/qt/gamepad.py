@@ -111,7 +111,10 @@ class QtGamepad(QObject):
             if self.teleop.status is not PadStatus.UNAVAILABLE:
                 self.teleop.on_stalled("the gamepad poll thread ended")
             return
-        silent_s = time.monotonic() - self.poller.last_poll_at
+        last = self.poller.last_poll_at
+        if last is None:  # SDL still starting: no pad can be in use yet
+            return
+        silent_s = time.monotonic() - last
         if silent_s > self.stall_timeout_s:
             self.teleop.on_stalled(f"gamepad poll thread silent for {1000 * silent_s:.0f} ms")
         else:

@@ -156,11 +156,12 @@ def test_unplugging_stops_and_a_pad_plugged_in_mid_motion_starts_nothing(
     virtual_pad.detach()
     assert_stops_promptly(qtbot, sim, since, "pad unplugged")
     qtbot.waitUntil(lambda: console.pad_indicator.text() == "no pad", timeout=DEADLINE_MS)
-    # Plugged in again with the deadman and the stick held (the virtual pad comes back at
-    # rest; a person's hands are already on it).
-    virtual_pad.attach()
-    virtual_pad.set_button("leftshoulder", True)
-    virtual_pad.set_axis("lefty", UP)
+    # Plugged in again with the deadman and the stick held: the poll thread waits on SDL's
+    # lock until the pad is in and held, as when a person's hands are already on it.
+    with JoysticksLocked():
+        virtual_pad.attach()
+        virtual_pad.set_button("leftshoulder", True)
+        virtual_pad.set_axis("lefty", UP)
     qtbot.waitUntil(lambda: console.teleop.state is not None, timeout=DEADLINE_MS)
     qtbot.waitUntil(
         lambda: console.teleop.value("lefty") == -1.0 and not console.teleop.engaged,
