@@ -1,8 +1,13 @@
 """SDL's game controllers read on a thread of their own ("ocu-gamepad"), no Qt.
 
-The thread opens the first game controller SDL knows (hot-plug included), reads it
-`poll_hz` times a second and keeps the newest `PadState`; it calls `on_state()` when the
-state changed and `on_event(event)` when a pad comes, goes, or SDL fails. Both callbacks run
+The thread opens the first game controller SDL knows (hot-plug included) and keeps the
+newest `PadState`; it calls `on_state()` when the state changed and `on_event(event)` when a
+pad comes, goes, or SDL fails. It sleeps inside SDL (`SDL_WaitEventTimeout`, the GIL
+released) until SDL reports a change — SDL reads the device every millisecond — or the
+poll period (1 / `poll_hz`) passes; so a stick moved is read within about a millisecond,
+and the thread reports at least `poll_hz` times a second. With no pad open it only looks for
+one, ten times a second. With `wake_on_events=False` it only polls, every period (the
+benchmark's baseline). Both callbacks run
 on the poll thread: the consumer takes the newest state with `take()` on its own thread
 (`ocu.qt.gamepad` does so on the GUI thread). A button pressed and released between two
 takes is still reported, in `PadState.pressed`. `last_poll_at` says when the thread last
@@ -40,6 +45,8 @@ THREAD_NAME = "ocu-gamepad"
 # After an SDL error, or while no pad is open, look for one this often.
 RESCAN_S = 1.0
 JOIN_TIMEOUT_S = 2.0
+# How often the thread looks for a pad while none is open.
+NO_PAD_PERIOD_S = 0.1
 # SDL's controller types, grouped by the labels printed on the buttons.
 _FAMILIES = {3: "playstation", 4: "playstation", 7: "playstation", 6: "virtual"}
 # Events the poller does not need; SDL stops queueing them. (The joystick events stay: SDL
@@ -72,11 +79,13 @@ class PadPoller:
         on_state: Callable[[], None],
         on_event: Callable[[PadEvent], None],
         *,
+        wake_on_events: bool = True,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if not poll_hz > 0:
             raise ValueError(f"poll_hz must be positive, got {poll_hz!r}")
         self.period_s = 1.0 / poll_hz
+        self.wake_on_events = wake_on_events
         self._on_state = on_state
         self._on_event = on_event
         self._clock = clock
@@ -153,29 +162,40 @@ class PadPoller:
                 if hasattr(sdl, name):
                     sdl.SDL_EventState(getattr(sdl, name), sdl.SDL_IGNORE)
             event = sdl.SDL_Event()
+            timeout_ms = max(1, round(1000 * self.period_s))
             next_at = self._clock()
             while not self._stop.is_set():
+                waiting = self.wake_on_events and self._pad is not None
                 try:
-                    self._poll(sdl, event)
+                    if waiting:
+                        pending = sdl.SDL_WaitEventTimeout(ctypes.byref(event), timeout_ms)
+                    else:
+                        pending = sdl.SDL_PollEvent(ctypes.byref(event))
+                    self._poll(sdl, event, bool(pending))
                 except Exception as err:  # an SDL call failed: the pad's motion must stop
                     log.exception("gamepad poll failed")
                     self._close(sdl)
                     self._rescan_at = self._clock() + RESCAN_S
                     self._on_event(PadError(f"{type(err).__name__}: {err}"))
+                    self._stop.wait(self.period_s)
                 now = self._clock()
                 self.last_poll_at = now
                 self.polls += 1
-                # Late (a loaded machine): no burst of catch-up polls.
-                next_at = max(next_at + self.period_s, now)
-                self._stop.wait(next_at - now)
+                if not waiting:
+                    # Without a pad, look for one now and then (plugging one in is seen
+                    # within NO_PAD_PERIOD_S); late (a loaded machine): no catch-up burst.
+                    period_s = self.period_s if self._pad is not None else NO_PAD_PERIOD_S
+                    next_at = max(next_at + period_s, now)
+                    self._stop.wait(next_at - now)
         finally:
             self._close(sdl)
             sdl_loader.release(sdl)
 
-    def _poll(self, sdl: ModuleType, event: Any) -> None:
+    def _poll(self, sdl: ModuleType, event: Any, pending: bool) -> None:
+        """Handle `event` (if `pending`) and every other queued event, then read the pad."""
         changed = False
         taps: set[str] = set()
-        while sdl.SDL_PollEvent(ctypes.byref(event)):
+        while pending:
             kind = event.type
             if kind == sdl.SDL_CONTROLLERDEVICEADDED:
                 if self._pad is None:
@@ -195,6 +215,7 @@ class PadPoller:
                         taps.add(BUTTONS[button])
             elif kind in (sdl.SDL_CONTROLLERAXISMOTION, sdl.SDL_CONTROLLERBUTTONUP):
                 changed = True
+            pending = bool(sdl.SDL_PollEvent(ctypes.byref(event)))
         if self._pad is None and self._clock() >= self._rescan_at:
             self._rescan_at = self._clock() + RESCAN_S
             changed |= self._scan(sdl)

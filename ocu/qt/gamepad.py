@@ -1,9 +1,11 @@
 """The game controller in Qt: the poll thread's states and events delivered on the GUI thread.
 
 `QtGamepad` owns the `PadPoller` ("ocu-gamepad" thread) and hands what it reads to the
-`GamepadTeleop` on the GUI thread, where the console model lives. States go through a
-one-state mailbox: the poll thread signals only when the mailbox was empty, so a busy GUI
-takes the newest state (with every press since the last) instead of a queue of old ones.
+`GamepadTeleop` on the GUI thread, where the console model lives. The poll thread posts one
+high-priority event when it has something new and none is waiting; the GUI thread then
+handles the pad's events (connected, unplugged, errors) in order and takes the newest state
+(with every press since the last): a busy GUI takes the newest state instead of a queue of
+old ones, and takes it before the repaints and telemetry that wait with it.
 A watchdog on the GUI thread reads the poll thread's last poll time: silent for the
 mapping's `stall_timeout_ms` while a pad is in use, and the pad's motion stops.
 """
@@ -12,8 +14,9 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 
-from PySide6.QtCore import QObject, QTimer, Signal
+from PySide6.QtCore import QCoreApplication, QEvent, QObject, Qt, QTimer
 
 from ocu.gamepad.pad import (
     PadConnected,
@@ -28,13 +31,14 @@ from ocu.gamepad.teleop import GamepadTeleop, PadStatus
 
 # The watchdog looks this many times per stall timeout.
 WATCHDOG_CHECKS = 4
+# "The poll thread has something new": posted at high priority, so it is handled before the
+# other events that wait (telemetry, repaints) as soon as the GUI thread is free.
+READY = QEvent.Type(QEvent.registerEventType())
+HIGH_PRIORITY = Qt.EventPriority.HighEventPriority.value
 
 
 class QtGamepad(QObject):
     """Runs the poller and feeds the teleop on the GUI thread; `shutdown()` stops both."""
-
-    state_ready = Signal()
-    pad_event = Signal(object)
 
     def __init__(self, teleop: GamepadTeleop, parent: QObject | None = None) -> None:
         super().__init__(parent)
@@ -42,12 +46,12 @@ class QtGamepad(QObject):
         self.teleop = teleop
         mapping = teleop.mapping
         self.stall_timeout_s = mapping.stall_timeout_s
-        self.poller = PadPoller(mapping.poll_hz, self._on_state_thread, self.pad_event.emit)
-        self._queued = False
-        self._queue_lock = threading.Lock()
-        # Methods of this QObject: emitted on the poll thread, run on the GUI thread.
-        self.state_ready.connect(self._take_state)
-        self.pad_event.connect(self._on_event)
+        self.poller = PadPoller(mapping.poll_hz, self._on_state_thread, self._on_event_thread)
+        # Filled on the poll thread, emptied on the GUI thread, in order: a pad's events
+        # (connected first) are handled before its newest state.
+        self._events: deque[PadEvent] = deque()
+        self._posted = False
+        self._post_lock = threading.Lock()
         self._watchdog = QTimer(self)
         self._watchdog.setInterval(max(5, round(1000 * self.stall_timeout_s / WATCHDOG_CHECKS)))
         self._watchdog.timeout.connect(self.check_stall)
@@ -72,17 +76,34 @@ class QtGamepad(QObject):
         if self.teleop.info is not None:
             self.teleop.on_disconnected("closed with the console")
 
-    def _on_state_thread(self) -> None:
-        # The poll thread: one signal at most waits in the GUI's queue.
-        with self._queue_lock:
-            if self._queued:
-                return
-            self._queued = True
-        self.state_ready.emit()
+    # ---- the poll thread ---------------------------------------------------------------------
 
-    def _take_state(self) -> None:
-        with self._queue_lock:
-            self._queued = False
+    def _on_state_thread(self) -> None:
+        self._post()
+
+    def _on_event_thread(self, event: PadEvent) -> None:
+        self._events.append(event)
+        self._post()
+
+    def _post(self) -> None:
+        # One "ready" event at most waits in the GUI thread's queue.
+        with self._post_lock:
+            if self._posted:
+                return
+            self._posted = True
+        QCoreApplication.postEvent(self, QEvent(READY), HIGH_PRIORITY)
+
+    # ---- the GUI thread ----------------------------------------------------------------------
+
+    def customEvent(self, event: QEvent) -> None:
+        """The poll thread has something new: its events in order, then the newest state."""
+        if event.type() != READY:
+            super().customEvent(event)
+            return
+        with self._post_lock:
+            self._posted = False
+        while self._events:
+            self._on_event(self._events.popleft())
         state = self.poller.take()
         if state is not None and self._started:
             self.teleop.on_state(state)
@@ -112,7 +133,7 @@ class QtGamepad(QObject):
                 self.teleop.on_stalled("the gamepad poll thread ended")
             return
         last = self.poller.last_poll_at
-        if last is None:  # SDL still starting: no pad can be in use yet
+        if last is None or self.teleop.info is None:  # no pad in use: nothing to stop
             return
         silent_s = time.monotonic() - last
         if silent_s > self.stall_timeout_s:

@@ -38,6 +38,21 @@ UP = -32768
 FULL = 32767
 # A zero command must reach the robot this soon after the pad should stop (loopback).
 PROMPT_S = 0.3
+# The consoles here declare the poll thread stalled later than the default (100 ms): a
+# test machine loaded by other jobs must not stall it by accident while the pad should
+# engage. The stall test waits this long.
+STALL_TIMEOUT_MS = 400
+
+
+def pad_mapping(profile: RobotProfile, **options: object) -> PadMapping:
+    """The default mapping with the tests' stall timeout and `options`."""
+    return parse_pad_mapping(
+        {"options": {"stall_timeout_ms": STALL_TIMEOUT_MS, **options}},
+        profile,
+        load_pad_mapping(profile),
+        "test",
+    )
+
 
 PadConsoleFactory = Callable[..., MainWindow]
 
@@ -55,7 +70,7 @@ def make_pad_console(
             lambda: UdpLink(profile, sim.address),
             "simulator",
             settings,
-            pad_mapping=mapping or load_pad_mapping(profile),
+            pad_mapping=mapping or pad_mapping(profile),
             pad_calibrations=CalibrationStore(tmp_path / CALIBRATION_FILE_NAME),
         )
         qtbot.addWidget(window)
@@ -260,10 +275,7 @@ def test_focus_policy_foreground_only(
     profile: RobotProfile,
     qtbot: QtBot,
 ) -> None:
-    mapping = parse_pad_mapping(
-        {"options": {"background": False}}, profile, load_pad_mapping(profile), "test"
-    )
-    console = make_pad_console(sim, mapping)
+    console = make_pad_console(sim, pad_mapping(profile, background=False))
     plug(qtbot, console, virtual_pad)
     drive(qtbot, console, sim, virtual_pad)
     other = QWidget()
