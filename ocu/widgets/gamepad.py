@@ -11,11 +11,13 @@ from __future__ import annotations
 from PySide6.QtCore import QPointF, QRectF, Qt, QTimer
 from PySide6.QtGui import QColor, QPainter, QPaintEvent, QPen
 from PySide6.QtWidgets import (
+    QFrame,
     QGroupBox,
     QHBoxLayout,
     QHeaderView,
     QLabel,
     QPushButton,
+    QScrollArea,
     QSizePolicy,
     QTableWidget,
     QTableWidgetItem,
@@ -67,6 +69,8 @@ STATUS_HELP = {
 ARMED = QColor("#2e7d32")
 IDLE = QColor("#78909c")
 DISARMED = QColor("#ef6c00")
+# The D-pad as arrows on the small button chips.
+CHIP_TEXT = {"dpup": "D ▲", "dpdown": "D ▼", "dpleft": "D ◀", "dpright": "D ▶"}
 CALIBRATION_HELP = (
     "Move both sticks in full circles and press both triggers all the way, "
     "then let go of everything and press Save."
@@ -106,7 +110,7 @@ class PadView(QWidget):
         super().__init__(parent)
         self.setObjectName("pad_view")
         self.teleop = teleop
-        self.setMinimumSize(360, 190)
+        self.setMinimumSize(360, 200)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Fixed)
 
     def paintEvent(self, event: QPaintEvent) -> None:
@@ -183,16 +187,18 @@ class PadView(QWidget):
         state = teleop.state
         down = state.down if state is not None else frozenset()
         family = family_of(teleop.info)
-        width, height, gap = 62.0, 22.0, 4.0
-        per_row = max(1, int((self.width() - gap) // (width + gap)))
-        for index, button in enumerate(BUTTONS[:15]):
+        shown = BUTTONS[:15]  # the buttons every pad of the database has
+        per_row = (len(shown) + 1) // 2
+        height, gap = 26.0, 4.0
+        width = (self.width() - gap * (per_row + 1)) / per_row
+        for index, button in enumerate(shown):
             row, column = divmod(index, per_row)
             rect = QRectF(gap + column * (width + gap), top + row * (height + gap), width, height)
             painter.setPen(QPen(QColor("#455a64"), 1.0))
             painter.setBrush(QColor("#ffb300") if button in down else QColor("#eceff1"))
             painter.drawRoundedRect(rect, 4.0, 4.0)
             painter.setPen(QColor("#263238"))
-            text = control_label(family, button).replace("D-pad ", "D ")
+            text = CHIP_TEXT.get(button) or control_label(family, button)
             painter.drawText(rect, Qt.AlignmentFlag.AlignCenter, text)
 
 
@@ -210,7 +216,17 @@ class GamepadPanel(QWidget):
         self.teleop = teleop
         self.store = store
         self.session: CalibrationSession | None = None
-        layout = QVBoxLayout(self)
+        # Everything scrolls: the dock shares its area with others and may be short.
+        outer = QVBoxLayout(self)
+        outer.setContentsMargins(0, 0, 0, 0)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QFrame.Shape.NoFrame)
+        scroll.setFocusPolicy(Qt.FocusPolicy.NoFocus)
+        content = QWidget()
+        scroll.setWidget(content)
+        outer.addWidget(scroll)
+        layout = QVBoxLayout(content)
         self.status_label = QLabel()
         self.status_label.setObjectName("pad_status")
         self.status_label.setWordWrap(True)
@@ -234,6 +250,7 @@ class GamepadPanel(QWidget):
         sources.setStyleSheet("color:#666;")
         mapping_layout.addWidget(self.mapping_table)
         mapping_layout.addWidget(sources)
+        self.mapping_table.setMinimumHeight(160)
         layout.addWidget(mapping_box, 1)
 
         calibration_box = QGroupBox("Calibration (range and centre of each axis)")
@@ -253,6 +270,11 @@ class GamepadPanel(QWidget):
             for column in range(6):
                 self.calibration_table.setItem(row, column, QTableWidgetItem(""))
             self._cell(row, 0, axis)
+        self.calibration_table.setMinimumHeight(
+            self.calibration_table.horizontalHeader().height()
+            + 6
+            + self.calibration_table.verticalHeader().defaultSectionSize() * len(AXES)
+        )
         calibration_layout.addWidget(self.calibration_table)
         buttons = QHBoxLayout()
         self.calibrate_button = QPushButton("Calibrate…")
@@ -368,6 +390,13 @@ class GamepadPanel(QWidget):
         self._fill_mapping()
         self._update_buttons()
         self._show_status()
+
+    def help_rows(self) -> list[tuple[str, str]]:
+        """The mapping for the help overlay, named as on the pad in use (none: no pad)."""
+        if self.teleop.info is None:
+            return []
+        family = family_of(self.teleop.info)
+        return [(describe_control(family, c), does) for c, does in self.teleop.mapping.describe()]
 
     def _fill_mapping(self) -> None:
         family = family_of(self.teleop.info)

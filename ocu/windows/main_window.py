@@ -197,7 +197,9 @@ class MainWindow(QMainWindow):
         self.gamepad: QtGamepad | None = None
         if pad_mapping is not None and replay is None:
             self.gamepad = QtGamepad(self.teleop, self)
-        self.help_overlay = HelpOverlay(self.model, self.key_map, self)
+        self.help_overlay = HelpOverlay(
+            self.model, self.key_map, self, pad_rows=self.gamepad_panel.help_rows
+        )
         self._build_menu()
 
         self.key_filter: KeyFilter | None = None
