@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from PySide6.QtCore import QSettings
     from PySide6.QtWidgets import QApplication
 
+    from ocu.gamepad.mapping import PadMapping
     from ocu.hotkeys import KeyMap
     from ocu.windows.main_window import MainWindow
 
@@ -85,12 +86,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--config-dir",
         metavar="DIR",
         type=Path,
-        help=f"where the window layout ({SETTINGS_FILE}) and the hotkey override "
-        f"(hotkeys.toml) live; default ${CONFIG_DIR_ENV} or ~/.config/ocu",
+        help=f"where the window layout ({SETTINGS_FILE}), the hotkey and gamepad overrides "
+        f"(hotkeys.toml, gamepad.toml) and the pads' calibration live; default "
+        f"${CONFIG_DIR_ENV} or ~/.config/ocu",
     )
     parser.add_argument(
         "--keys", metavar="FILE", type=Path, help="hotkey map merged over the default one"
     )
+    parser.add_argument(
+        "--pad-map", metavar="FILE", type=Path, help="gamepad mapping merged over the default one"
+    )
+    parser.add_argument("--no-gamepad", action="store_true", help="do not read game controllers")
     parser.add_argument("--log-level", default="INFO")
     return parser
 
@@ -141,6 +147,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         key_map = load_key_map(profile, override)
     except KeyMapError as err:
         return refuse_file(str(err))
+    from ocu.gamepad.mapping import USER_PAD_MAP_NAME, PadMappingError, load_pad_mapping
+
+    if args.pad_map is not None and not args.pad_map.exists():
+        parser.error(f"--pad-map: {args.pad_map} does not exist")
+    pad_override = args.pad_map if args.pad_map is not None else config_dir / USER_PAD_MAP_NAME
+    try:
+        pad_mapping = load_pad_mapping(profile, pad_override)
+    except PadMappingError as err:
+        return refuse_file(str(err))
     if args.replay is not None:
         return run_replay(
             profile, args.replay, args.quit_after, config_dir=config_dir, key_map=key_map
@@ -154,6 +169,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         config_dir=config_dir,
         key_map=key_map,
         record_path=args.record,
+        pad_mapping=None if args.no_gamepad else pad_mapping,
     )
 
 
@@ -167,10 +183,12 @@ def run_console(
     config_dir: Path,
     key_map: KeyMap,
     record_path: Path | None = None,
+    pad_mapping: PadMapping | None = None,
 ) -> int:
     """Start simulator (if no robot), link and window; run the Qt event loop."""
     from PySide6.QtWidgets import QApplication
 
+    from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
     from ocu.link.base import Link, LinkError
     from ocu.link.live import UdpLink
     from ocu.record.errors import RecordingError
@@ -216,7 +234,16 @@ def run_console(
             return UdpLink(profile, robot_address, extension=True, description=address_text)
 
         settings = open_settings(config_dir)
-        window = MainWindow(profile, make_link, address_text, settings, key_map, recorder=recorder)
+        window = MainWindow(
+            profile,
+            make_link,
+            address_text,
+            settings,
+            key_map,
+            recorder=recorder,
+            pad_mapping=pad_mapping,
+            pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
+        )
         return run_window(app, window, quit_after_s)
     finally:
         recorder.stop()  # after the window's shutdown: the link's closing zeros are in it

@@ -1,13 +1,14 @@
 """The console model: the whole command and what is known of the robot (no Qt, napari-style).
 
 It owns the one command the link sends — every channel's velocity with its source (a slider,
-a text box, a hotkey, a switch, the position controller, a planner through ROS), the torch,
-the selected camera, the video bit-rate, the per-camera stream request — bounded by the one
-set of velocity limits; and the robot's state (`robot`, ocu.console.robot). The latest manual
-input on a channel wins: it takes the joint back from the position controller and the channel
-back from ROS. Views subscribe to `events` and `robot.events` and write the operator's input
-back through the methods below; the window sends `command()` to the link whenever
-`events.command_changed` fires and never reads a command back from the link.
+a text box, a hotkey, a switch, the game controller, the position controller, a planner
+through ROS), the torch, the selected camera, the video bit-rate, the per-camera stream
+request — bounded by the one set of velocity limits; and the robot's state (`robot`,
+ocu.console.robot). The latest manual input on a channel wins: it takes the joint back from
+the position controller and the channel back from ROS. Views subscribe to `events` and
+`robot.events` and write the operator's input back through the methods below; the window
+sends `command()` to the link whenever `events.command_changed` fires and never reads a
+command back from the link.
 
 The arm (`arm`, ocu.console.arm) moves its joints' channels as one more automatic source,
 `ARM`: Cartesian jogs, pose goals and stored poses. Space, a lost link and any manual input on
@@ -61,9 +62,14 @@ class Source(Enum):
     ROS = "ros"
     # The arm in Cartesian space (ocu.console.arm): jogs, pose goals, stored poses.
     ARM = "arm"
+    # The operator's game controller (ocu.gamepad): a stick or a button held, deadman held.
+    GAMEPAD = "gamepad"
 
 
-MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH)
+MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH, Source.GAMEPAD)
+# What the pad asks of one channel: a stick's fraction of the maximum, a button's direction.
+PadWish = tuple[float, int]
+PAD_AT_REST: PadWish = (0.0, 0)
 
 
 @dataclass(frozen=True)
@@ -155,6 +161,10 @@ class ConsoleModel:
             if extension is not None
             else ()
         )
+        # The game controller's wish per channel it maps, and the channels it must leave
+        # alone until its wish is back at rest (another input took them meanwhile).
+        self._pad: dict[str, PadWish] = {}
+        self._pad_blocked: set[str] = set()
         self._estopped = False
         self._estop_reason = ""
         self._connected = True
@@ -502,14 +512,16 @@ class ConsoleModel:
         self._publish()
         self.events.message.emit(f"EMERGENCY STOP ({reason})")
 
-    def halt(self, reason: str, *, keep_external: bool = False) -> bool:
+    def halt(self, reason: str, *, keep_external: bool = False, keep_gamepad: bool = False) -> bool:
         """Stop all motion without the e-stop burst; True if anything was moving or held.
 
         With `keep_external`, channels a planner drives (ROS) go on: the console losing focus
-        stops the operator's input, not a planner the operator may be watching in rviz.
+        stops the operator's input, not a planner the operator may be watching in rviz. With
+        `keep_gamepad`, so do the channels the game controller drives (its deadman is held,
+        and it reads the pad whatever window has the focus: docs/gamepad.md).
         """
         active = bool(self.held_keys) or self.is_moving or bool(self._targets)
-        self._zero_all(keep_external=keep_external, reason=reason)
+        self._zero_all(keep_external=keep_external, keep_gamepad=keep_gamepad, reason=reason)
         self._publish()
         if active:
             self.events.message.emit(f"motion stopped: {reason}")
@@ -529,6 +541,82 @@ class ConsoleModel:
         if visible != self._help_visible:
             self._help_visible = visible
             self.events.help_changed.emit(visible)
+
+    # ---- the game controller (ocu.gamepad, through the window) -----------------------------
+
+    def set_gamepad(
+        self, fractions: Mapping[str, float], held: Mapping[str, int] | None = None
+    ) -> None:
+        """What the pad asks of each channel it maps; a channel left out is at rest.
+
+        `fractions`: a stick's share of the channel's maximum, in [-1, 1]; `held`: a button's
+        direction (-1, 0, 1), at the channel's hotkey speed. A channel becomes the pad's when
+        its wish leaves rest (the latest manual input wins) and follows the wish while the
+        pad holds it. Anything else that takes the channel meanwhile (a key, a slider, a
+        target, a halt, an e-stop) keeps it until the pad's wish is back at rest: a stick
+        still deflected never takes it back by itself.
+        """
+        held = held or {}
+        wishes: dict[str, PadWish] = {}
+        for channel in (*fractions, *held):
+            self._check_channel(channel)
+            fraction = _check_finite(channel, fractions.get(channel, 0.0))
+            direction = held.get(channel, 0)
+            if direction not in (-1, 0, 1):
+                raise ValueError(f"pad direction must be -1, 0 or 1, got {direction!r}")
+            wishes[channel] = (min(max(fraction, -1.0), 1.0), direction)
+        for channel in self._pad:
+            wishes.setdefault(channel, PAD_AT_REST)
+        taking = []
+        for channel, wish in wishes.items():
+            previous = self._pad.get(channel, PAD_AT_REST)
+            self._pad[channel] = wish
+            ours = self._requested(channel).source is Source.GAMEPAD
+            if wish == PAD_AT_REST:
+                self._pad_blocked.discard(channel)
+                if ours:
+                    self._set_channel(channel, 0.0, Source.NONE)
+            elif channel in self._pad_blocked:
+                continue
+            elif ours:
+                self._set_channel(channel, self._pad_velocity(channel), Source.GAMEPAD)
+            elif previous == PAD_AT_REST:
+                taking.append(channel)
+            else:
+                # Taken from the pad while its wish was away from rest.
+                self._pad_blocked.add(channel)
+        if taking:
+            self._operator_acted()
+            for channel in taking:
+                self._take_manual(channel)
+                self._set_channel(channel, self._pad_velocity(channel), Source.GAMEPAD)
+        self._publish()
+
+    def stop_gamepad(self, reason: str) -> bool:
+        """The pad lets go (deadman released, unplugged, stalled): its channels stop now.
+
+        True if the pad was moving anything; its wishes are at rest afterwards.
+        """
+        moving = self.gamepad_channels
+        self._pad = dict.fromkeys(self._pad, PAD_AT_REST)
+        self._pad_blocked.clear()
+        for channel in moving:
+            self._set_channel(channel, 0.0, Source.NONE)
+        self._publish()
+        if moving:
+            self.events.message.emit(f"gamepad motion stopped: {reason}")
+        return bool(moving)
+
+    @property
+    def gamepad_channels(self) -> list[str]:
+        """Channels the game controller drives now."""
+        return [c for c in self._channels if self._requested(c).source is Source.GAMEPAD]
+
+    def _pad_velocity(self, channel: str) -> float:
+        fraction, direction = self._pad.get(channel, PAD_AT_REST)
+        if direction:
+            return direction * self.hotkey_speed(channel)
+        return fraction * self.limits.get(channel)
 
     # ---- robot input -----------------------------------------------------------------------
 
@@ -711,6 +799,8 @@ class ConsoleModel:
         elif command.source is Source.SWITCH:
             direction = 1.0 if command.velocity > 0 else -1.0
             self._set_channel(channel, direction * self.hotkey_speed(channel), Source.SWITCH)
+        elif command.source is Source.GAMEPAD:
+            self._set_channel(channel, self._pad_velocity(channel), Source.GAMEPAD)
         elif command.source in (Source.SLIDER, Source.TEXT):
             if channel in self._drive_request:
                 self._apply_drive()  # the pair is bounded again from the operator's request
@@ -746,14 +836,19 @@ class ConsoleModel:
         self._store(linear_name, ChannelCommand(v, linear.source if v else Source.NONE))
         self._store(turn_name, ChannelCommand(w, turn.source if w else Source.NONE))
 
-    def _zero_all(self, *, keep_external: bool = False, reason: str = "stop") -> None:
+    def _zero_all(
+        self, *, keep_external: bool = False, keep_gamepad: bool = False, reason: str = "stop"
+    ) -> None:
         had_keys = bool(self.held_keys)
         self._held.clear()
         self._stop_arm(reason)
         self.controller.cancel()
         self._sync_targets()
         for channel in self._channels:
-            if keep_external and self._requested(channel).source is Source.ROS:
+            source = self._requested(channel).source
+            if (keep_external and source is Source.ROS) or (
+                keep_gamepad and source is Source.GAMEPAD
+            ):
                 continue
             self._set_channel(channel, 0.0, Source.NONE)
         if had_keys:

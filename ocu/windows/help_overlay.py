@@ -1,7 +1,11 @@
-"""The hotkey help overlay (F1 or ?): the key map over the whole window, mouse-transparent."""
+"""The hotkey help overlay (F1 or ?): the key map over the whole window, mouse-transparent.
+
+With a game controller connected, its mapping stands beside the keys.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from html import escape
 
 from PySide6.QtCore import QEvent, QObject, Qt
@@ -13,20 +17,41 @@ from ocu.hotkeys import KeyMap
 OVERLAY_STYLE = "background: rgba(20, 24, 28, 215); color: white;"
 
 
-def help_html(key_map: KeyMap) -> str:
-    """The key map as an HTML table (keys by US position)."""
-    rows = "".join(
-        f"<tr><td align='right' style='padding:3px 18px;font-weight:bold;font-size:17pt;"
-        f"color:#ffd54f'>{escape(keys)}</td>"
-        f"<td style='padding:3px 6px;font-size:15pt'>{escape(what)}</td></tr>"
-        for keys, what in key_map.help_rows()
+PadRows = Callable[[], list[tuple[str, str]]]
+
+
+def _table(rows: list[tuple[str, str]], key_pt: int, text_pt: int) -> str:
+    return (
+        "<table>"
+        + "".join(
+            f"<tr><td align='right' style='padding:3px 18px;font-weight:bold;font-size:{key_pt}pt;"
+            f"color:#ffd54f'>{escape(keys)}</td>"
+            f"<td style='padding:3px 6px;font-size:{text_pt}pt'>{escape(what)}</td></tr>"
+            for keys, what in rows
+        )
+        + "</table>"
     )
+
+
+def help_html(key_map: KeyMap, pad_rows: list[tuple[str, str]] | None = None) -> str:
+    """The key map as an HTML table (keys by US position), the pad's mapping beside it."""
+    keys = _table(key_map.help_rows(), 17, 15)
+    if pad_rows:
+        pad = (
+            "<div style='font-size:15pt;font-weight:bold'>Gamepad — hold the deadman</div>"
+            + _table(pad_rows, 12, 12)
+        )
+        body = (
+            "<table align='center'><tr><td valign='top'>" + keys + "</td>"
+            "<td valign='top' style='padding-left:40px'>" + pad + "</td></tr></table>"
+        )
+    else:
+        body = "<table align='center'><tr><td>" + keys + "</td></tr></table>"
     sources = "<br>".join(escape(s) for s in key_map.sources)
     return (
         "<div style='font-size:20pt;font-weight:bold'>Hotkeys — hold to move, release to stop"
-        "</div><table align='center'>" + rows + "</table>"
-        "<p style='font-size:11pt'>Keys work by position (a Russian layout drives the same). "
-        "Letters go to a text box that has focus; Space stops from anywhere. "
+        "</div>" + body + "<p style='font-size:11pt'>Keys work by position (a Russian layout "
+        "drives the same). Letters go to a text box that has focus; Space stops from anywhere. "
         "F1, ? or Esc closes this help.<br>Key map: " + sources + "</p>"
     )
 
@@ -34,9 +59,17 @@ def help_html(key_map: KeyMap) -> str:
 class HelpOverlay(QWidget):
     """Covers its parent while the model says help is visible."""
 
-    def __init__(self, model: ConsoleModel, key_map: KeyMap, parent: QWidget) -> None:
+    def __init__(
+        self,
+        model: ConsoleModel,
+        key_map: KeyMap,
+        parent: QWidget,
+        pad_rows: PadRows | None = None,
+    ) -> None:
         super().__init__(parent)
         self.host = parent
+        self.key_map = key_map
+        self.pad_rows = pad_rows
         self.setObjectName("help_overlay")
         self.setAttribute(Qt.WidgetAttribute.WA_TransparentForMouseEvents)
         self.setAttribute(Qt.WidgetAttribute.WA_StyledBackground)
@@ -60,6 +93,8 @@ class HelpOverlay(QWidget):
         return False
 
     def _on_help(self, visible: bool) -> None:
+        if visible and self.pad_rows is not None:
+            self.label.setText(help_html(self.key_map, self.pad_rows()))
         self.setGeometry(self.host.rect())
         self.setVisible(visible)
         if visible:

@@ -9,8 +9,10 @@ The window only wires: the link's events (through its Qt adapter) go into the co
 the model's command goes to the link, and the views subscribe to the model. Beside the
 operator: the video panel shows the link's cameras, a Recorder (if given) subscribes to every
 link the window makes, and the ROS toggle lets a ROS 1 planner drive through the model until
-the operator acts. Given a replay (a read-only link) instead of a link factory, the same
-window replays a recording: REPLAY banner, command widgets disabled, no hotkeys, nothing sent.
+the operator acts. Given a pad mapping, a game controller drives the robot too (the Gamepad
+dock, docs/gamepad.md): the window applies its focus policy. Given a replay (a read-only link)
+instead of a link factory, the same window replays a recording: REPLAY banner, command
+widgets disabled, no hotkeys, no pad, nothing sent.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from PySide6.QtCore import QByteArray, QEvent, QSettings, Qt, QTimer
-from PySide6.QtGui import QAction, QCloseEvent, QHideEvent
+from PySide6.QtGui import QAction, QCloseEvent, QHideEvent, QShowEvent
 from PySide6.QtWidgets import (
     QApplication,
     QDockWidget,
@@ -36,16 +38,22 @@ from ocu import hotkeys
 from ocu.console.arm import ArmGoal
 from ocu.console.model import ConsoleModel
 from ocu.console.poses import ARM_POSES_NAME
+from ocu.gamepad.calibration import CalibrationError, CalibrationStore, PadCalibration
+from ocu.gamepad.mapping import PadMapping, load_pad_mapping
+from ocu.gamepad.pad import PadInfo
+from ocu.gamepad.teleop import GamepadTeleop
 from ocu.hotkeys import KeyMap
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.qt.console import ConsoleBinding
+from ocu.qt.gamepad import QtGamepad
 from ocu.qt.link import QtLink
 from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
 from ocu.record.replay_link import ReplayLink
 from ocu.records import LinkState
+from ocu.widgets.gamepad import GamepadPanel, PadIndicator
 from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.model3d import Model3DWidget
 from ocu.widgets.replay import ReplayBanner, ReplayControls
@@ -76,7 +84,9 @@ class MainWindow(QMainWindow):
     """The operator console; `link_factory` makes a fresh, not yet started link per Connect.
 
     With `replay` (and no link factory) the console shows a recording instead; with a
-    `recorder` it has a Record button and records every link it makes.
+    `recorder` it has a Record button and records every link it makes. With `pad_mapping`
+    it reads game controllers (calibrations from `pad_calibrations`); without, the Gamepad
+    dock shows the default mapping and says the pad is off.
     """
 
     def __init__(
@@ -91,6 +101,8 @@ class MainWindow(QMainWindow):
         arm_poses_path: Path | None = None,
         recorder: Recorder | None = None,
         replay: ReplayLink | None = None,
+        pad_mapping: PadMapping | None = None,
+        pad_calibrations: CalibrationStore | None = None,
         parent: QWidget | None = None,
     ) -> None:
         super().__init__(parent)
@@ -124,6 +136,12 @@ class MainWindow(QMainWindow):
         self.max_panel = MaxVelocityPanel(self.model)
         self.joint_panel = JointPositionPanel(self.model)
         self.video_panel = VideoPanel(self.model)
+        self.teleop = GamepadTeleop(
+            self.model,
+            pad_mapping or load_pad_mapping(profile),
+            calibration_for=lambda info: _calibration(pad_calibrations, info),
+        )
+        self.gamepad_panel = GamepadPanel(self.teleop, pad_calibrations)
         self.event_log = QListWidget()
         self.event_log.setObjectName("event_log")
         self.event_log.setFocusPolicy(Qt.FocusPolicy.NoFocus)
@@ -136,6 +154,7 @@ class MainWindow(QMainWindow):
         self.joint_dock = self._dock("joint_position_dock", "Joint position", self.joint_panel)
         self.log_dock = self._dock("event_log_dock", "Events", self.event_log)
         self.video_dock = self._dock("video_dock", "Video", self.video_panel)
+        self.gamepad_dock = self._dock("gamepad_dock", "Gamepad", self.gamepad_panel)
         # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
         # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
@@ -144,6 +163,7 @@ class MainWindow(QMainWindow):
         self.model_dock = add_model_dock(self)
         self.tabifyDockWidget(self.model_dock, self.max_dock)
         self.tabifyDockWidget(self.max_dock, self.log_dock)
+        self.tabifyDockWidget(self.log_dock, self.gamepad_dock)
         self.model_dock.raise_()
         self.resizeDocks(
             [self.velocity_dock, self.video_dock], [500, 1100], Qt.Orientation.Horizontal
@@ -191,7 +211,16 @@ class MainWindow(QMainWindow):
         if self.model.arm is not None:
             self.arm_indicator = ArmModeIndicator(self.model.arm)
             self.link_status.add_indicator(self.arm_indicator)
-        self.help_overlay = HelpOverlay(self.model, self.key_map, self)
+        self.pad_indicator = PadIndicator(self.teleop)
+        self.link_status.add_indicator(self.pad_indicator)
+        self.teleop.events.message.connect(self.log_event)
+        # The pad is read only on a live console: a replay commands nothing.
+        self.gamepad: QtGamepad | None = None
+        if pad_mapping is not None and replay is None:
+            self.gamepad = QtGamepad(self.teleop, self)
+        self.help_overlay = HelpOverlay(
+            self.model, self.key_map, self, pad_rows=self.gamepad_panel.help_rows
+        )
         self._build_menu()
 
         self.key_filter: KeyFilter | None = None
@@ -237,6 +266,8 @@ class MainWindow(QMainWindow):
         self.resize(*DEFAULT_SIZE)
         self._default_state = self.saveState(LAYOUT_VERSION)
         self.layout_restored = self.restore_layout()
+        if self.gamepad is not None:
+            self.gamepad.start()
         if connect:
             self._start_link()
         else:
@@ -467,31 +498,65 @@ class MainWindow(QMainWindow):
 
     # ---- focus, visibility, closing --------------------------------------------------------
 
-    def _check_focus(self) -> None:
+    def _focused(self) -> bool:
         active = QApplication.activeWindow()
-        if active is None or not self.owns(active):
-            # A planner the operator watches in another window (rviz) goes on.
-            self.model.halt("console lost focus", keep_external=True)
+        return active is not None and self.owns(active)
+
+    def _check_focus(self) -> None:
+        if not self._focused():
+            # A planner the operator watches in another window (rviz) goes on, and so does
+            # a pad whose deadman is held, if its mapping allows the background.
+            self.model.halt(
+                "console lost focus",
+                keep_external=True,
+                keep_gamepad=self.teleop.mapping.background,
+            )
+        self._apply_pad_policy()
+
+    def _apply_pad_policy(self) -> None:
+        """The pad's focus policy (docs/gamepad.md): never while the console cannot be seen;
+        in the background only if its mapping allows it."""
+        if self._shut:
+            return
+        if not self.isVisible() or self.isMinimized():
+            self.teleop.set_active(False, "console hidden or minimised")
+        elif not (self._focused() or self.teleop.mapping.background):
+            self.teleop.set_active(False, "console lost focus")
+        else:
+            self.teleop.set_active(True)
 
     def _on_focus_window(self, _window: object) -> None:
         self._check_focus()
 
     def _on_application_state(self, state: Qt.ApplicationState) -> None:
         if state != Qt.ApplicationState.ApplicationActive:
-            self.model.halt("application inactive", keep_external=True)
+            self.model.halt(
+                "application inactive",
+                keep_external=True,
+                keep_gamepad=self.teleop.mapping.background,
+            )
+        self._apply_pad_policy()
 
     def changeEvent(self, event: QEvent) -> None:
         """Minimising or losing activation stops the robot."""
-        if event.type() == QEvent.Type.WindowStateChange and self.isMinimized():
-            self.model.halt("window minimised")
+        if event.type() == QEvent.Type.WindowStateChange:
+            if self.isMinimized():
+                self.model.halt("window minimised")
+            self._apply_pad_policy()
         elif event.type() == QEvent.Type.ActivationChange and not self.isActiveWindow():
             self._check_focus()
         super().changeEvent(event)
+
+    def showEvent(self, event: QShowEvent) -> None:
+        """A console shown again lets the pad engage again (with a fresh deadman press)."""
+        super().showEvent(event)
+        self._apply_pad_policy()
 
     def hideEvent(self, event: QHideEvent) -> None:
         """A hidden console commands nothing."""
         self.model.halt("window hidden")
         super().hideEvent(event)
+        self._apply_pad_policy()
 
     def closeEvent(self, event: QCloseEvent) -> None:
         """Stop, remember the layout, close the link (zeros last)."""
@@ -502,6 +567,8 @@ class MainWindow(QMainWindow):
         """Stop all motion and the link; idempotent (closeEvent and aboutToQuit both call it)."""
         if self._shut:
             return
+        if self.gamepad is not None:
+            self.gamepad.shutdown()  # no pad state arrives after the halt
         self.model.halt("console closed")
         self.save_layout()
         self._control_timer.stop()
@@ -529,6 +596,17 @@ class MainWindow(QMainWindow):
         self.event_log.scrollToBottom()
         self.statusBar().showMessage(text, 8000)
         log.info("%s", text)
+
+
+def _calibration(store: CalibrationStore | None, info: PadInfo) -> PadCalibration:
+    """A pad's saved calibration; SDL's ranges if none (or the file is unreadable)."""
+    if store is None:
+        return PadCalibration()
+    try:
+        return store.get(info.guid)
+    except CalibrationError as err:
+        log.warning("%s; using SDL's ranges", err)
+        return PadCalibration()
 
 
 def add_model_dock(window: MainWindow) -> QDockWidget:

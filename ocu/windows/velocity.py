@@ -37,6 +37,7 @@ SOURCE_TEXT = {
     Source.POSITION: "position",
     Source.ROS: "ROS",
     Source.ARM: "arm",
+    Source.GAMEPAD: "pad",
 }
 STOP_ALL_STYLE = (
     "QPushButton { background: #c62828; color: white; font-size: 16pt; font-weight: bold;"

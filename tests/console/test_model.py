@@ -487,3 +487,38 @@ def test_the_robot_state_is_the_one_copy_views_read(
     assert robot.status is status
     robot.on_extension(False, "silent")
     assert robot.status is None
+
+
+# ---- the game controller (ocu.gamepad drives these; tests/gamepad has the pad's side) ------
+
+
+def test_gamepad_input_is_checked_before_anything_applies(model: ConsoleModel) -> None:
+    model.set_gamepad({"neck": 0.5})
+    for bad in ({"neck": math.nan}, {"nek": 0.1}, {"neck": 0.2, "waist": math.inf}):
+        with pytest.raises(CommandError):
+            model.set_gamepad(bad)
+    with pytest.raises(ValueError, match="direction"):
+        model.set_gamepad({}, {"flippers": 2})
+    assert model.velocities() == {"neck": 0.5 * model.max_velocity("neck")}
+    model.set_gamepad({"neck": 3.0})  # a share beyond full is full
+    assert model.velocities() == {"neck": model.max_velocity("neck")}
+
+
+def test_halt_keeps_the_pad_only_when_asked_and_the_pad_waits_for_rest(
+    model: ConsoleModel,
+) -> None:
+    model.set_gamepad({"neck": 0.5}, {"flippers": 1})
+    model.hotkey_down("W", "drive_linear", 1)
+    assert model.halt("console lost focus", keep_gamepad=True)
+    assert set(model.velocities()) == {"neck", "flippers"}
+    assert model.velocities()["flippers"] == model.hotkey_speed("flippers")
+    model.halt("window hidden")
+    assert model.velocities() == {}
+    model.set_gamepad({"neck": 0.6}, {"flippers": 1})  # still deflected: nothing resumes
+    assert model.velocities() == {}
+    model.set_gamepad({"neck": 0.0}, {"flippers": 1})
+    model.set_gamepad({"neck": 0.4}, {"flippers": 1})
+    assert set(model.velocities()) == {"neck"}
+    assert model.stop_gamepad("deadman released")
+    assert model.velocities() == {}
+    assert model.gamepad_channels == []

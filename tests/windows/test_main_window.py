@@ -21,6 +21,7 @@ DOCKS = {
     "model3d_dock",
     "video_dock",
     "arm_dock",
+    "gamepad_dock",
 }
 
 

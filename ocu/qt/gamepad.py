@@ -1,0 +1,142 @@
+"""The game controller in Qt: the poll thread's states and events delivered on the GUI thread.
+
+`QtGamepad` owns the `PadPoller` ("ocu-gamepad" thread) and hands what it reads to the
+`GamepadTeleop` on the GUI thread, where the console model lives. The poll thread posts one
+high-priority event when it has something new and none is waiting; the GUI thread then
+handles the pad's events (connected, unplugged, errors) in order and takes the newest state
+(with every press since the last): a busy GUI takes the newest state instead of a queue of
+old ones, and takes it before the repaints and telemetry that wait with it.
+A watchdog on the GUI thread reads the poll thread's last poll time: silent for the
+mapping's `stall_timeout_ms` while a pad is in use, and the pad's motion stops.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+
+from PySide6.QtCore import QCoreApplication, QEvent, QObject, Qt, QTimer
+
+from ocu.gamepad.pad import (
+    PadConnected,
+    PadDisconnected,
+    PadError,
+    PadEvent,
+    PadUnavailable,
+    PadUnsupported,
+)
+from ocu.gamepad.poller import PadPoller
+from ocu.gamepad.teleop import GamepadTeleop, PadStatus
+
+# The watchdog looks this many times per stall timeout.
+WATCHDOG_CHECKS = 4
+# "The poll thread has something new": posted at high priority, so it is handled before the
+# other events that wait (telemetry, repaints) as soon as the GUI thread is free.
+READY = QEvent.Type(QEvent.registerEventType())
+HIGH_PRIORITY = Qt.EventPriority.HighEventPriority.value
+
+
+class QtGamepad(QObject):
+    """Runs the poller and feeds the teleop on the GUI thread; `shutdown()` stops both."""
+
+    def __init__(self, teleop: GamepadTeleop, parent: QObject | None = None) -> None:
+        super().__init__(parent)
+        self.setObjectName("ocu-qt-gamepad")
+        self.teleop = teleop
+        mapping = teleop.mapping
+        self.stall_timeout_s = mapping.stall_timeout_s
+        self.poller = PadPoller(mapping.poll_hz, self._on_state_thread, self._on_event_thread)
+        # Filled on the poll thread, emptied on the GUI thread, in order: a pad's events
+        # (connected first) are handled before its newest state.
+        self._events: deque[PadEvent] = deque()
+        self._posted = False
+        self._post_lock = threading.Lock()
+        self._watchdog = QTimer(self)
+        self._watchdog.setInterval(max(5, round(1000 * self.stall_timeout_s / WATCHDOG_CHECKS)))
+        self._watchdog.timeout.connect(self.check_stall)
+        self._started = False
+
+    def start(self) -> None:
+        """Start polling."""
+        if self._started:
+            return
+        self._started = True
+        self.teleop.start()
+        self.poller.start()
+        self._watchdog.start()
+
+    def shutdown(self) -> None:
+        """Stop polling; the pad's motion stops. Idempotent."""
+        if not self._started:
+            return
+        self._started = False
+        self._watchdog.stop()
+        self.poller.stop()
+        if self.teleop.info is not None:
+            self.teleop.on_disconnected("closed with the console")
+
+    # ---- the poll thread ---------------------------------------------------------------------
+
+    def _on_state_thread(self) -> None:
+        self._post()
+
+    def _on_event_thread(self, event: PadEvent) -> None:
+        self._events.append(event)
+        self._post()
+
+    def _post(self) -> None:
+        # One "ready" event at most waits in the GUI thread's queue.
+        with self._post_lock:
+            if self._posted:
+                return
+            self._posted = True
+        QCoreApplication.postEvent(self, QEvent(READY), HIGH_PRIORITY)
+
+    # ---- the GUI thread ----------------------------------------------------------------------
+
+    def customEvent(self, event: QEvent) -> None:
+        """The poll thread has something new: its events in order, then the newest state."""
+        if event.type() != READY:
+            super().customEvent(event)
+            return
+        with self._post_lock:
+            self._posted = False
+        while self._events:
+            self._on_event(self._events.popleft())
+        state = self.poller.take()
+        if state is not None and self._started:
+            self.teleop.on_state(state)
+
+    def _on_event(self, event: PadEvent) -> None:
+        if not self._started:
+            return
+        teleop = self.teleop
+        if isinstance(event, PadConnected):
+            teleop.on_connected(event.info)
+        elif isinstance(event, PadDisconnected):
+            teleop.on_disconnected(event.reason)
+        elif isinstance(event, PadError):
+            teleop.on_error(event.message)
+        elif isinstance(event, PadUnavailable):
+            teleop.on_unavailable(event.message)
+        elif isinstance(event, PadUnsupported):
+            teleop.events.message.emit(
+                f"joystick '{event.name}' is not a game controller SDL knows: it is not used "
+                "(give SDL its mapping in SDL_GAMECONTROLLERCONFIG)"
+            )
+
+    def check_stall(self) -> None:
+        """The watchdog: a poll thread silent too long stops the pad's motion."""
+        if not self.poller.running:
+            if self.teleop.status is not PadStatus.UNAVAILABLE:
+                self.teleop.on_stalled("the gamepad poll thread ended")
+            return
+        last = self.poller.last_poll_at
+        if last is None or self.teleop.info is None:  # no pad in use: nothing to stop
+            return
+        silent_s = time.monotonic() - last
+        if silent_s > self.stall_timeout_s:
+            self.teleop.on_stalled(f"gamepad poll thread silent for {1000 * silent_s:.0f} ms")
+        else:
+            self.teleop.on_polling()
