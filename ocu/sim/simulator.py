@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import NamedTuple
 
+from ocu.nav.world import World
 from ocu.net.loop import SelectLoop
 from ocu.net.transport import Address, Transport, UdpTransport
 from ocu.profile import RobotProfile
@@ -33,7 +34,9 @@ from ocu.sim.extended import (
 )
 from ocu.sim.faults import Direction, FaultConfig, FaultLayer
 from ocu.sim.physics import RobotPhysics
+from ocu.sim.rangefinder import DEFAULT_RANGE_SENSOR, RangeSensor, RangeSensorConfig
 from ocu.sim.robot import RobotServer
+from ocu.sim.scene import WorldView
 from ocu.sim.video import FrameRenderer
 
 log = logging.getLogger("ocu.sim")
@@ -69,6 +72,7 @@ class SimState:
     velocities: dict[str, float]
     commanded_velocities: dict[str, float]
     track_speeds_m_s: tuple[float, float]
+    # Ground truth of the chassis in the world: x_m, y_m, heading_rad.
     pose: tuple[float, float, float]
     torch: bool
     camera: int
@@ -92,6 +96,9 @@ class SimState:
     send_errors: int
     internal_errors: int
     extended: ExtendedCounters | None = None
+    # Times the chassis ran into a wall or a box, and whether it is pressed against one now.
+    collisions: int = 0
+    in_contact: bool = False
 
 
 @dataclass
@@ -146,8 +153,15 @@ class RobotSimulator:
         battery_drain_percent_per_s: float = DEFAULT_DRAIN_PERCENT_PER_S,
         noise_deg: float = 0.0,
         transport: Transport | None = None,
+        world: World | None = None,
+        range_sensor: RangeSensorConfig | None = DEFAULT_RANGE_SENSOR,
     ) -> None:
-        """Bind host:port over UDP, or serve `transport` (host and port are then ignored)."""
+        """Bind host:port over UDP, or serve `transport` (host and port are then ignored).
+
+        In a `world` the robot starts at its start pose and stops against its walls and
+        boxes; the cameras draw it. An extended robot also sends range scans of it
+        (`range_sensor`, None: no sensor).
+        """
         self.profile = profile
         rate_hz = profile.link.telemetry_rate_hz if telemetry_hz is None else telemetry_hz
         if not (math.isfinite(rate_hz) and rate_hz > 0.0):
@@ -164,6 +178,9 @@ class RobotSimulator:
         self._telemetry_timer = _Periodic(1.0 / rate_hz)
         self._video_timer = _Periodic(1.0 / video_fps if video_fps > 0.0 else None)
 
+        self._start_s = time.monotonic()
+        self._physics = RobotPhysics(profile, initial_joints, now_s=self._start_s, world=world)
+        view = WorldView(world) if world is not None and world.obstacles else None
         extension: ExtendedServer | None = None
         if extended:
             codec = make_extension_codec(profile)
@@ -176,10 +193,24 @@ class RobotSimulator:
                 battery_percent=battery_percent,
                 drain_percent_per_s=battery_drain_percent_per_s,
                 seed=seed,
+                world=view,
+                range_sensor=(
+                    RangeSensor(
+                        self._physics.world,
+                        range_sensor,
+                        mount_xy_m=profile.navigation.scan_mount_xy_m,
+                        seed=seed,
+                    )
+                    if range_sensor is not None
+                    else None
+                ),
             )
-        self._start_s = time.monotonic()
-        self._physics = RobotPhysics(profile, initial_joints, now_s=self._start_s)
-        renderer = FrameRenderer(profile.link.camera_names, video_size)
+        renderer = FrameRenderer(
+            profile.link.camera_names,
+            video_size,
+            world=view,
+            mounts=tuple(camera.mount for camera in profile.cameras),
+        )
         self._robot = RobotServer(
             profile, self._physics, renderer, extension, seed=seed, noise_deg=noise_deg
         )
@@ -431,6 +462,8 @@ class RobotSimulator:
             send_errors=self._counters.send_errors,
             internal_errors=self._counters.internal_errors,
             extended=None if robot.extension is None else robot.extension.counters(physics.time_s),
+            collisions=physics.collisions,
+            in_contact=physics.in_contact,
         )
 
     def _publish(self) -> None:
