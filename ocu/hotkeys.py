@@ -17,6 +17,7 @@ from typing import Any
 
 from ocu.console.model import DEFAULT_FINE_FACTOR, ConsoleModel
 from ocu.profile import RobotProfile, did_you_mean
+from ocu.records import CommandError
 
 USER_KEY_MAP_NAME = "hotkeys.toml"
 ESTOP_KEY = "Space"
@@ -242,13 +243,62 @@ def toggle_help(model: ConsoleModel) -> None:
     model.set_help_visible(not model.help_visible)
 
 
+def _refused(model: ConsoleModel, action: Callable[[], None]) -> None:
+    """Run an operator action; a refusal (no points marked, ...) becomes a message."""
+    try:
+        action()
+    except CommandError as err:
+        model.events.message.emit(str(err))
+
+
+def odometry_reset(model: ConsoleModel) -> None:
+    """The robot is at the map's origin again (the operator knows where it is)."""
+    model.reset_odometry()
+
+
+def zones_override(model: ConsoleModel) -> None:
+    """Let the next motion through the safety zones (pushing an object)."""
+    model.override_zones()
+
+
+def assist_linear(model: ConsoleModel) -> None:
+    """Start the linear shuttle between the marked points, or stop it."""
+    if model.assist_mode == "linear":
+        model.stop_assist("L pressed")
+    else:
+        _refused(model, model.start_linear)
+
+
+def assist_path(model: ConsoleModel) -> None:
+    """Follow the waypoints, or stop following them."""
+    if model.assist_mode == "path":
+        model.stop_assist("P pressed")
+    else:
+        _refused(model, model.start_path)
+
+
+def path_clear(model: ConsoleModel) -> None:
+    """Forget the waypoints and shuttle points; a running mode stops."""
+    model.clear_waypoints()
+
+
 COMMANDS: dict[str, Callable[[ConsoleModel], None]] = {
     "emergency_stop": emergency_stop,
     "help": toggle_help,
+    "odometry_reset": odometry_reset,
+    "zones_override": zones_override,
+    "assist_linear": assist_linear,
+    "assist_path": assist_path,
+    "path_clear": path_clear,
 }
 COMMAND_TITLES = {
     "emergency_stop": "EMERGENCY STOP (also the StopAll button)",
     "help": "show / hide this help",
+    "odometry_reset": "map: reset odometry to (0, 0, 0°)",
+    "zones_override": "map: override the safety zones for the next motion",
+    "assist_linear": "map: linear shuttle between the marked points, start / stop",
+    "assist_path": "map: follow the waypoints, start / stop",
+    "path_clear": "map: clear waypoints and shuttle points",
 }
 
 

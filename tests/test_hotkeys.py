@@ -42,7 +42,16 @@ def model(profile: RobotProfile) -> ConsoleModel:
 
 def test_default_map_is_table_4(key_map: KeyMap) -> None:
     assert {k: (b.channel, b.direction) for k, b in key_map.hold.items()} == TABLE_4
-    assert key_map.commands == {"Space": "emergency_stop", "F1": "help", "Slash": "help"}
+    paper = {"Space": "emergency_stop", "F1": "help", "Slash": "help"}
+    assert {k: key_map.commands[k] for k in paper} == paper
+    map_keys = {
+        "O": "odometry_reset",
+        "Z": "zones_override",
+        "L": "assist_linear",
+        "P": "assist_path",
+        "X": "path_clear",
+    }
+    assert {k: key_map.commands[k] for k in map_keys} == map_keys
     assert key_map.fine_factor == 0.25
 
 
@@ -98,7 +107,7 @@ def test_missing_user_file_means_the_default(profile: RobotProfile, tmp_path: Pa
         ('[hold]\nK = "waist up"\n', "must be"),
         ("[hold]\nK = 3\n", "must be a string"),
         ('[hold]\nSpace = "waist +"\n', "emergency stop"),
-        ('[commands]\nK = "dance"\n', "unknown command 'dance'; known: emergency_stop, help$"),
+        ('[commands]\nK = "dance"\n', "unknown command 'dance'; known: emergency_stop, help, "),
         (
             '[commands]\nK = "halp"\n',
             r"commands\.K: unknown command 'halp'; did you mean 'help'\?$",
@@ -186,4 +195,7 @@ def test_help_rows_list_every_binding(key_map: KeyMap) -> None:
     assert rows["Space"].startswith("EMERGENCY STOP")
     assert rows["F1 or ?"] == "show / hide this help"
     assert "Shift + key" in rows
-    assert len(rows) == 10
+    assert rows["O"] == "map: reset odometry to (0, 0, 0°)"
+    assert rows["Z"] == "map: override the safety zones for the next motion"
+    # 7 channels, Shift, Space, help and the five map commands.
+    assert len(rows) == 15
