@@ -46,11 +46,18 @@ class OccupancyGrid:
         self.free_reach_m = free_reach_m
         self.log_odds: npt.NDArray[np.float32] = np.zeros((self.cells, self.cells), np.float32)
         self._marks = np.zeros(self.cells * self.cells, dtype=bool)
+        # The display image, brought up to date only where scans changed it.
+        self._image = np.full((self.cells, self.cells), 128, dtype=np.uint8)
+        self._dirty: list[int] | None = None
+        levels = np.linspace(-LOG_ODDS_LIMIT, LOG_ODDS_LIMIT, 256)
+        self._shades = np.asarray(255.0 / (1.0 + np.exp(levels)), dtype=np.uint8)
         self.scans = 0
 
     def clear(self) -> None:
         """Forget everything (odometry was reset: the old map no longer lines up)."""
         self.log_odds[:] = 0.0
+        self._image[:] = 128
+        self._dirty = None
         self.scans = 0
 
     def cell_of(
@@ -71,14 +78,23 @@ class OccupancyGrid:
         sx = pose.x_m + c * mount_xy_m[0] - s * mount_xy_m[1]
         sy = pose.y_m + s * mount_xy_m[0] + c * mount_xy_m[1]
         world_angles = angles + pose.heading_rad
+        # Free space also between neighbouring beams (as far as the nearer of the two
+        # reaches), so far cells are not left unknown between beams.
+        if len(angles) > 1:
+            between = (world_angles[:-1] + world_angles[1:]) / 2.0
+            fine_angles = np.concatenate([world_angles, between])
+            fine_lengths = np.concatenate([lengths, np.minimum(lengths[:-1], lengths[1:])])
+        else:
+            fine_angles, fine_lengths = world_angles, lengths
         step = self.resolution_m * 0.8
         samples = np.arange(0.0, float(lengths.max()), step, dtype=np.float32)
         # Every beam sampled up to a cell short of its end: those cells are free.
         along = samples[None, :]
-        free = along < (lengths[:, None] - self.resolution_m).astype(np.float32)
-        fx = (sx + along * np.cos(world_angles).astype(np.float32)[:, None])[free]
-        fy = (sy + along * np.sin(world_angles).astype(np.float32)[:, None])[free]
+        free = along < (fine_lengths[:, None] - self.resolution_m).astype(np.float32)
+        fx = (sx + along * np.cos(fine_angles).astype(np.float32)[:, None])[free]
+        fy = (sy + along * np.sin(fine_angles).astype(np.float32)[:, None])[free]
         row, column, inside = self.cell_of(fx, fy)
+        self._touch(row[inside], column[inside])
         # Each cell once per scan, however many samples fell in it.
         marks = self._marks
         marks[:] = False
@@ -91,8 +107,27 @@ class OccupancyGrid:
         marks[:] = False
         marks[row[inside] * self.cells + column[inside]] = True
         flat[marks] += LOG_ODDS_HIT
-        np.clip(self.log_odds, -LOG_ODDS_LIMIT, LOG_ODDS_LIMIT, out=self.log_odds)
+        self._touch(row[inside], column[inside])
+        box = self._dirty
+        if box is not None:
+            region = self.log_odds[box[0] : box[1] + 1, box[2] : box[3] + 1]
+            np.clip(region, -LOG_ODDS_LIMIT, LOG_ODDS_LIMIT, out=region)
         self.scans += 1
+
+    def _touch(self, rows: npt.NDArray[np.intp], columns: npt.NDArray[np.intp]) -> None:
+        """Grow the region the display image must redraw."""
+        if len(rows) == 0:
+            return
+        box = [int(rows.min()), int(rows.max()), int(columns.min()), int(columns.max())]
+        if self._dirty is not None:
+            old = self._dirty
+            box = [
+                min(old[0], box[0]),
+                max(old[1], box[1]),
+                min(old[2], box[2]),
+                max(old[3], box[3]),
+            ]
+        self._dirty = box
 
     def probabilities(self) -> npt.NDArray[np.float32]:
         """Occupancy probability of every cell (0.5: unknown)."""
@@ -100,6 +135,11 @@ class OccupancyGrid:
 
     def image(self) -> npt.NDArray[np.uint8]:
         """Grey levels for display: white free, black occupied, mid-grey unknown (row 0 = y
-        lowest)."""
-        shade = 255.0 * (1.0 - self.probabilities())
-        return np.asarray(np.clip(shade, 0, 255), dtype=np.uint8)
+        lowest). The grid's own array, updated where scans changed it: do not modify."""
+        box = self._dirty
+        if box is not None:
+            self._dirty = None
+            region = self.log_odds[box[0] : box[1] + 1, box[2] : box[3] + 1]
+            index = ((region + LOG_ODDS_LIMIT) * (255.0 / (2 * LOG_ODDS_LIMIT))).astype(np.intp)
+            self._image[box[0] : box[1] + 1, box[2] : box[3] + 1] = self._shades[index]
+        return self._image

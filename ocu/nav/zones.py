@@ -93,6 +93,9 @@ def travel_to_contact(
     if speed <= 0.0 or len(points) == 0:
         return None
     xy = np.asarray(points, dtype=np.float64)
+    # Nothing farther than the horizon plus the footprint's reach can be touched.
+    reach = horizon_m + math.hypot(max(footprint.front_m, footprint.rear_m), footprint.half_width_m)
+    xy = xy[np.hypot(xy[:, 0], xy[:, 1]) <= reach]
     inside_now = _inside(xy[:, 0], xy[:, 1], footprint)
     xy = xy[~inside_now]
     if len(xy) == 0:

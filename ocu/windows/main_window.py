@@ -44,6 +44,7 @@ from ocu.record.recorder import Recorder
 from ocu.record.replay_link import ReplayLink
 from ocu.records import LinkState
 from ocu.widgets.link_status import LinkStatus
+from ocu.widgets.map_view import MapPanel, NavStatus
 from ocu.widgets.model3d import Model3DWidget
 from ocu.widgets.replay import ReplayBanner, ReplayControls
 from ocu.widgets.video import VideoPanel
@@ -59,7 +60,7 @@ log = logging.getLogger("ocu.console")
 CONTROL_PERIOD_MS = 50
 # The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
-LAYOUT_VERSION = 2  # 2: the Video dock
+LAYOUT_VERSION = 3  # 2: the Video dock; 3: the Map dock
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
@@ -114,6 +115,7 @@ class MainWindow(QMainWindow):
         self.max_panel = MaxVelocityPanel(self.model)
         self.joint_panel = JointPositionPanel(self.model)
         self.video_panel = VideoPanel(self.model)
+        self.map_panel = MapPanel(self.model)
         self.event_log = QListWidget()
         self.event_log.setObjectName("event_log")
         self.event_log.setFocusPolicy(Qt.FocusPolicy.NoFocus)
@@ -126,6 +128,7 @@ class MainWindow(QMainWindow):
         self.joint_dock = self._dock("joint_position_dock", "Joint position", self.joint_panel)
         self.log_dock = self._dock("event_log_dock", "Events", self.event_log)
         self.video_dock = self._dock("video_dock", "Video", self.video_panel)
+        self.map_dock = self._dock("map_dock", "Map", self.map_panel)
         # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
         # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
@@ -134,6 +137,8 @@ class MainWindow(QMainWindow):
         self.model_dock = add_model_dock(self)
         self.tabifyDockWidget(self.model_dock, self.max_dock)
         self.tabifyDockWidget(self.max_dock, self.log_dock)
+        # The map beside the 3D model: the robot's pose in the room, its arm in the other.
+        self.tabifyDockWidget(self.model_dock, self.map_dock)
         self.model_dock.raise_()
         self.resizeDocks(
             [self.velocity_dock, self.video_dock], [500, 1100], Qt.Orientation.Horizontal
@@ -170,6 +175,8 @@ class MainWindow(QMainWindow):
             disabled_reason="a replay has no robot to command" if replay is not None else None,
         )
         self.link_status.add_indicator(self.ros.label)
+        self.nav_status = NavStatus(self.model)
+        self.link_status.add_indicator(self.nav_status)
         self.help_overlay = HelpOverlay(self.model, self.key_map, self)
         self._build_menu()
 
@@ -272,6 +279,7 @@ class MainWindow(QMainWindow):
         for widget in (self.velocity_panel, self.max_panel, self.joint_panel.targets_panel):
             widget.setEnabled(False)
             widget.setToolTip(REPLAY_DISABLED_TIP)
+        self.map_panel.set_replay()
         self.link_status.set_replay()
 
     def restore_layout(self) -> bool:
