@@ -99,10 +99,19 @@ class Trajectory:
         return float(np.hypot(np.diff(self.x_m), np.diff(self.y_m)).sum())
 
 
-def from_samples(times_s: Array, x_m: Array, y_m: Array) -> Trajectory:
-    """A trajectory through timed points: heading, v and ω by eq. 3.3-3.5 (finite differences)."""
-    dx, dy = np.gradient(x_m, times_s), np.gradient(y_m, times_s)
-    ddx, ddy = np.gradient(dx, times_s), np.gradient(dy, times_s)
+def from_samples(
+    times_s: Array,
+    x_m: Array,
+    y_m: Array,
+    derivatives: tuple[Array, Array, Array, Array] | None = None,
+) -> Trajectory:
+    """A trajectory through timed points: heading, v and ω by eq. 3.3-3.5, from the given
+    first and second derivatives (dx, dy, ddx, ddy) or by finite differences."""
+    if derivatives is not None:
+        dx, dy, ddx, ddy = derivatives
+    else:
+        dx, dy = np.gradient(x_m, times_s), np.gradient(y_m, times_s)
+        ddx, ddy = np.gradient(dx, times_s), np.gradient(dy, times_s)
     speed2 = dx * dx + dy * dy
     heading = np.unwrap(np.arctan2(dy, dx))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -131,15 +140,24 @@ def ellipse(
     ellipse is moved and turned so that point and heading are the robot's.
     """
     t = np.linspace(0.0, period_s, samples)
-    phase = 2.0 * math.pi * t / period_s
+    rate = 2.0 * math.pi / period_s
+    phase = rate * t
     local_x = major_m * np.cos(phase) - major_m
     local_y = minor_m * np.sin(phase)
+    # Eq. 6.1's derivatives, exact.
+    dlx, dly = -major_m * rate * np.sin(phase), minor_m * rate * np.cos(phase)
+    ddlx, ddly = -major_m * rate**2 * np.cos(phase), -minor_m * rate**2 * np.sin(phase)
     # In the local frame the start heads along +y; the robot's heading is that direction.
     turn = start.heading_rad - math.pi / 2.0
     c, s = math.cos(turn), math.sin(turn)
-    x = start.x_m + c * local_x - s * local_y
-    y = start.y_m + s * local_x + c * local_y
-    return from_samples(t, x, y)
+
+    def rotate(ax: Array, ay: Array) -> tuple[Array, Array]:
+        return c * ax - s * ay, s * ax + c * ay
+
+    x, y = rotate(local_x, local_y)
+    dx, dy = rotate(dlx, dly)
+    ddx, ddy = rotate(ddlx, ddly)
+    return from_samples(t, start.x_m + x, start.y_m + y, (dx, dy, ddx, ddy))
 
 
 def chaikin(points: Array, passes: int = SMOOTHING_PASSES) -> Array:
