@@ -189,6 +189,14 @@ def build_parser() -> argparse.ArgumentParser:
         f"'{DEFAULT_WORLD}' is the shipped room. Without it: an open plane",
     )
     parser.add_argument(
+        "--turn-slip",
+        type=_probability,
+        default=0.0,
+        metavar="FRACTION",
+        help="the tracks skid in turns: the chassis turns this fraction less than its belts "
+        "say (default 0); odometry from track speeds then drifts, an IMU heading does not",
+    )
+    parser.add_argument(
         "--scan-hz",
         type=_non_negative,
         default=DEFAULT_SCAN_HZ,
@@ -289,6 +297,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 noise_deg=args.noise_deg,
                 world=world,
                 range_sensor=range_sensor,
+                turn_slip=min(args.turn_slip, 0.99),
             )
         except TransportError as err:
             print(f"ocu-sim: cannot listen: {err}", file=sys.stderr)

@@ -74,8 +74,14 @@ class RobotPhysics:
         *,
         now_s: float = 0.0,
         world: World | None = None,
+        turn_slip: float = 0.0,
     ) -> None:
+        if not 0.0 <= turn_slip < 1.0:
+            raise ValueError(f"turn_slip must be in [0, 1), got {turn_slip!r}")
         self.profile = profile
+        # Tracks skid in a turn: the chassis turns this fraction less than its belts say
+        # (the belts' speeds, which telemetry reports, are unchanged).
+        self.turn_slip = turn_slip
         self.world = world if world is not None else EMPTY_WORLD
         self._footprint = profile.navigation.footprint
         if self.world.obstacles and self._footprint is None:
@@ -264,7 +270,7 @@ class RobotPhysics:
         if left_m_s == 0.0 and right_m_s == 0.0:
             return
         speed_m_s = (left_m_s + right_m_s) / 2.0
-        turn_rad_s = (right_m_s - left_m_s) / self.profile.track_width_m
+        turn_rad_s = (right_m_s - left_m_s) / self.profile.track_width_m * (1.0 - self.turn_slip)
         footprint = self._footprint
         if footprint is None or not self.world.obstacles:
             moved = advance(Pose(*self._pose), speed_m_s * dt_s, turn_rad_s * dt_s)
@@ -287,6 +293,17 @@ class RobotPhysics:
             self._in_contact = False
             self._stalled = None
         self._pose = (pose.x_m, pose.y_m, pose.heading_rad)
+
+    def place(self, pose: Pose) -> None:
+        """Put the chassis somewhere (a test's or a benchmark's hand); ValueError if that
+        overlaps an obstacle."""
+        if self._footprint is not None:
+            touched = self.world.touching(self._footprint, pose)
+            if touched is not None:
+                raise ValueError(f"{tuple(pose)} overlaps a {touched.kind}")
+        self._pose = (pose.x_m, pose.y_m, pose.heading_rad)
+        self._in_contact = False
+        self._stalled = None
 
     def _contact(self, pose: Pose) -> None:
         """The chassis ran into something: it stops there and its tracks stall."""

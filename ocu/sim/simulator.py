@@ -16,10 +16,11 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import NamedTuple
 
+from ocu.nav.geometry import Pose
 from ocu.nav.world import World
 from ocu.net.loop import SelectLoop
 from ocu.net.transport import Address, Transport, UdpTransport
@@ -131,6 +132,13 @@ class _Periodic:
         return True
 
 
+@dataclass
+class _PlaceRequest:
+    pose: Pose
+    done: threading.Event = field(default_factory=threading.Event)
+    error: ValueError | None = None
+
+
 class RobotSimulator:
     """A simulated Engineer robot server on a UDP socket (or a given transport)."""
 
@@ -155,6 +163,7 @@ class RobotSimulator:
         transport: Transport | None = None,
         world: World | None = None,
         range_sensor: RangeSensorConfig | None = DEFAULT_RANGE_SENSOR,
+        turn_slip: float = 0.0,
     ) -> None:
         """Bind host:port over UDP, or serve `transport` (host and port are then ignored).
 
@@ -179,7 +188,9 @@ class RobotSimulator:
         self._video_timer = _Periodic(1.0 / video_fps if video_fps > 0.0 else None)
 
         self._start_s = time.monotonic()
-        self._physics = RobotPhysics(profile, initial_joints, now_s=self._start_s, world=world)
+        self._physics = RobotPhysics(
+            profile, initial_joints, now_s=self._start_s, world=world, turn_slip=turn_slip
+        )
         view = WorldView(world) if world is not None and world.obstacles else None
         extension: ExtendedServer | None = None
         if extended:
@@ -217,6 +228,8 @@ class RobotSimulator:
         self._fault_layer = FaultLayer(faults or FaultConfig(), seed, self._deliver)
         self._counters = _Counters()
 
+        self._place_lock = threading.Lock()
+        self._place_requests: list[_PlaceRequest] = []
         self._received: deque[ReceivedRcp] = deque(maxlen=RECEIVED_LOG_LENGTH)
         self._received_lock = threading.Lock()
         self._condition = threading.Condition()
@@ -327,6 +340,18 @@ class RobotSimulator:
         """Reported positions get uniform noise of ±noise_deg (the true angle is unchanged)."""
         self._robot.set_noise_deg(noise_deg)
 
+    def place(self, pose: Pose) -> None:
+        """Put the robot somewhere in its world (tests, benchmarks); ValueError if it would
+        overlap an obstacle. Thread-safe: done on the simulator's loop thread."""
+        request = _PlaceRequest(pose)
+        with self._place_lock:
+            self._place_requests.append(request)
+        self._loop.wake()
+        if not request.done.wait(5.0):
+            raise RuntimeError("the simulator did not place the robot")
+        if request.error is not None:
+            raise request.error
+
     def cut_link(self) -> None:
         """Drop every datagram in both directions until restore_link()."""
         self._fault_layer.set_cut(True)
@@ -373,6 +398,16 @@ class RobotSimulator:
         return True
 
     def _step(self, now_s: float) -> float:
+        with self._place_lock:
+            requests, self._place_requests = self._place_requests, []
+        for request in requests:
+            self._physics.advance(now_s)
+            try:
+                self._physics.place(request.pose)
+            except ValueError as err:
+                request.error = err
+            self._publish()
+            request.done.set()
         self._fault_layer.release_due(now_s)
         if self._physics_timer.due(now_s):
             self._physics.advance(now_s)

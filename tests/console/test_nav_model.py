@@ -59,11 +59,11 @@ def tracks(clock: Clock, speed_m_s: float = 0.0) -> TelemetryFrame:
     return TelemetryFrame(TelemetryPacket(tick=1), readings, clock.now, 0.0, 0.0)
 
 
-SOURCES: dict[str, Callable[[ConsoleModel], None]] = {
-    "hotkey": lambda m: m.hotkey_down("W", LINEAR, 1) and None,
-    "slider": lambda m: m.set_velocity(LINEAR, 0.3) and None,
-    "typed": lambda m: m.set_velocities({LINEAR: 0.3}) and None,
-    "ros": lambda m: m.set_external_velocities({LINEAR: 0.3}) and None,
+SOURCES: dict[str, Callable[[ConsoleModel], object]] = {
+    "hotkey": lambda m: m.hotkey_down("W", LINEAR, 1),
+    "slider": lambda m: m.set_velocity(LINEAR, 0.3),
+    "typed": lambda m: m.set_velocities({LINEAR: 0.3}),
+    "ros": lambda m: m.set_external_velocities({LINEAR: 0.3}),
 }
 
 

@@ -78,7 +78,9 @@ def test_scans_and_heading_arrive_over_the_extension(profile: RobotProfile) -> N
                     status = event
     assert len(scan.ranges_m) == 360
     ranges = np.asarray(scan.ranges_m)
-    angles = scan.angle_min_rad + scan.angle_increment_rad * np.arange(360)
+    angles = np.asarray(
+        scan.angle_min_rad + scan.angle_increment_rad * np.arange(360), dtype=np.float64
+    )
     ahead = ranges[np.argmin(np.abs(angles))]
     # The east wall's face is 4.95 m ahead; noise 1 cm.
     assert ahead == pytest.approx(4.95, abs=0.05)
