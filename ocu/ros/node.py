@@ -54,8 +54,9 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~camera           camera to select at start (a name in the profile's link.camera_names)
   ~extension        ask an extended robot for every camera's stream (default false)
 
-topics: cmd_vel, joint_goals in; joint_states, camera/compressed,
-camera/<name>/image/compressed, /diagnostics out (see docs/ros.md)
+topics: cmd_vel, joint_goals, follow_path (nav_msgs/Path in odom), scan (when the robot
+sends none) in; joint_states, camera/compressed, camera/<name>/image/compressed, odom, /tf
+(odom -> base_link), scan (when the robot sends ranges), /diagnostics out (see docs/ros.md)
 
 _name:=value arguments hold for this run only: the node puts back (or deletes) what they
 replaced on the parameter server when it exits.
@@ -343,6 +344,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.control.commands import VelocityLimits
     from ocu.link.base import LinkError
     from ocu.link.live import UdpLink
+    from ocu.nav.navigator import Navigator
     from ocu.records import Command
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
@@ -378,8 +380,14 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
                 )
         if config.camera is not None:
             link.set_command(Command(camera=config.camera))  # before anything is sent
+        # Odometry, the safety zones and the path mode, fed from the link (no map: no view).
+        navigator = Navigator(profile, grid=False)
         bridge = RosBridge(
-            profile, config.bridge, hardware_id=f"{robot[0]}:{robot[1]}", heartbeat=True
+            profile,
+            config.bridge,
+            hardware_id=f"{robot[0]}:{robot[1]}",
+            heartbeat=True,
+            navigator=navigator,
         )
         # The link logs its state changes and safety events itself (forwarded to rosout);
         # the bridge subscribes to them: LINK LOST stops what ROS moves.
