@@ -175,6 +175,13 @@ class Navigator:
             at = self._robot_scan_at
             return at is not None and now - at <= max(self.settings.scan_stale_after_s, 1.0)
 
+    def set_time_scale(self, scale: float) -> None:
+        """Robot seconds per second of the events' clock (a replay's speed)."""
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise ValueError(f"time scale must be > 0, got {scale!r}")
+        with self._lock:
+            self.odometry.time_scale = scale
+
     def reset_odometry(self, pose: Pose = ORIGIN) -> None:
         """The operator's reset: pose zero, no uncertainty; the map and trail start over."""
         with self._lock:

@@ -103,6 +103,9 @@ class Odometry:
         self.min_angular_rad_s = min_angular_rad_s
         self.watchdog_s = watchdog_s
         self.one_way_s = 0.0
+        # Robot seconds per second of the clock the events come with: a replay played at 4x
+        # delivers four seconds of the robot's motion in one.
+        self.time_scale = 1.0
         self.reset(now_s)
 
     # ---- inputs ------------------------------------------------------------------------
@@ -206,7 +209,7 @@ class Odometry:
     def _watchdog(self, now_s: float) -> None:
         if self._last_sent_s is None or self._commanded == (0.0, 0.0):
             return
-        stop_s = self._last_sent_s + self.one_way_s + self.watchdog_s
+        stop_s = self._last_sent_s + self.one_way_s + self.watchdog_s / self.time_scale
         if stop_s < now_s:
             self._commanded = (0.0, 0.0)
             self._add(_Segment(stop_s, 0.0, 0.0, STOPPED))
@@ -281,6 +284,7 @@ class Odometry:
     def _step(
         self, pose: Pose, cov: Matrix, distance: float, segment: _Segment, dt_s: float
     ) -> tuple[Pose, Matrix, float]:
+        dt_s *= self.time_scale
         if dt_s <= 0.0 or (segment.linear_m_s == 0.0 and segment.angular_rad_s == 0.0):
             return pose, cov, distance
         settings = self.settings

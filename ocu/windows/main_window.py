@@ -280,6 +280,9 @@ class MainWindow(QMainWindow):
             widget.setEnabled(False)
             widget.setToolTip(REPLAY_DISABLED_TIP)
         self.map_panel.set_replay()
+        # Odometry integrates recorded motion: at 4x, four robot seconds pass in one.
+        self.model.nav.set_time_scale(source.speed)
+        source.speed_changed.connect(self.model.nav.set_time_scale)
         self.link_status.set_replay()
 
     def restore_layout(self) -> bool:

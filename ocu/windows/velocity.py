@@ -36,6 +36,7 @@ SOURCE_TEXT = {
     Source.SWITCH: "switch",
     Source.POSITION: "position",
     Source.ROS: "ROS",
+    Source.ASSIST: "assist",
 }
 STOP_ALL_STYLE = (
     "QPushButton { background: #c62828; color: white; font-size: 16pt; font-weight: bold;"

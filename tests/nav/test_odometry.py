@@ -114,3 +114,10 @@ def test_the_profile_holds_the_settings(profile: RobotProfile) -> None:
     settings = profile.navigation.odometry
     assert settings.stale_after_s == 2.5
     assert settings.imu_heading_sigma_rad == pytest.approx(math.radians(0.5))
+
+
+def test_a_replay_at_four_times_covers_four_robot_seconds_per_second() -> None:
+    odo = odometry(round_trip_s=0.0)
+    odo.time_scale = 4.0
+    drive(odo, 0.3, 0.0, 0.0, 1.0)  # the recording's commands, played four times as fast
+    assert odo.estimate(1.0).pose.x_m == pytest.approx(1.2)

@@ -20,6 +20,7 @@ DOCKS = {
     "event_log_dock",
     "model3d_dock",
     "video_dock",
+    "map_dock",
 }
 
 
