@@ -160,7 +160,8 @@ def test_the_path_mode_yields_at_once(
     start_path(model, clock)
     interrupt(model)
     assert model.assist_mode is None
-    assert model.channel(LINEAR).velocity == 0.0 and model.channel(TURN).velocity == 0.0
+    assert model.channel(LINEAR).velocity == 0.0
+    assert model.channel(TURN).velocity == 0.0
     assert messages[-1] == f"path mode stopped: {reason}"
     clock.now += 0.05
     model.update()  # nothing resumes
@@ -175,13 +176,15 @@ def test_the_path_mode_stops_on_link_lost_and_stale_odometry(
     start_path(model, clock)
     model.robot.on_link_state(LinkState.LOST, "no packets")
     model.update()
-    assert model.assist_mode is None and model.velocities() == {}
+    assert model.assist_mode is None
+    assert model.velocities() == {}
     assert messages[-1] == "path mode stopped: LINK LOST"
     model.robot.on_link_state(LinkState.CONNECTED, "back")
     start_path(model, clock)
     clock.now += 3.0  # no telemetry for longer than odometry.stale_after_s
     model.update()
-    assert model.assist_mode is None and model.velocities() == {}
+    assert model.assist_mode is None
+    assert model.velocities() == {}
     assert messages[-1].startswith("path mode stopped: odometry stale")
 
 

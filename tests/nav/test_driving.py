@@ -53,7 +53,7 @@ def console(profile: RobotProfile, field_sim: RobotSimulator) -> Iterator[Headle
     headless.start()
     wait(lambda: headless.call(lambda: model.nav.zones.text) != "", "zones")
     wait(lambda: headless.call(lambda: model.robot.link_state) is LinkState.CONNECTED, "link")
-    wait(lambda: headless.call(lambda: model.nav.scan_age_s()) is not None, "a scan")
+    wait(lambda: headless.call(model.nav.scan_age_s) is not None, "a scan")
     yield headless
     headless.stop()
 
@@ -113,7 +113,7 @@ def test_the_path_mode_stops_at_once_on_the_emergency_stop(
 ) -> None:
     model = console.model
     console.call(lambda: model.set_waypoints([(2.5, 0.0), (2.5, 1.0)]))
-    console.call(lambda: model.start_path())
+    console.call(model.start_path)
     wait(lambda: field_sim.state().pose[0] > 0.3, "the path mode to move the robot")
     console.call(lambda: model.emergency_stop("Space"))
     stopped_at = time.monotonic()
@@ -129,7 +129,7 @@ def test_the_path_mode_stops_on_link_lost_and_never_resumes(
 ) -> None:
     model = console.model
     console.call(lambda: model.set_waypoints([(2.5, 0.0)]))
-    console.call(lambda: model.start_path())
+    console.call(model.start_path)
     wait(lambda: field_sim.state().pose[0] > 0.3, "the path mode to move the robot")
     field_sim.cut_link()
     wait(lambda: console.call(lambda: model.robot.link_state) is LinkState.LOST, "LINK LOST")

@@ -54,7 +54,8 @@ def test_footprint_collision_follows_the_pose() -> None:
     assert world.touching(footprint, Pose(0.0, 0.0, 0.0)) is None
     # Front edge at 0.61 + 0.3, past the box face at 0.9.
     touched = world.touching(footprint, Pose(0.61, 0.0, 0.0))
-    assert touched is not None and touched.kind == "box"
+    assert touched is not None
+    assert touched.kind == "box"
     assert world.touching(footprint, Pose(0.59, 0.0, 0.0)) is None
     # Turned 90 degrees, the same spot reaches only 0.6 + 0.2 < 0.9.
     assert world.touching(footprint, Pose(0.6, 0.0, math.pi / 2)) is None
@@ -68,7 +69,7 @@ def test_overlap_of_rectangles_by_separating_axes() -> None:
     square = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])
     diamond = np.array([[[2.2, 0.0], [1.1, 1.1], [0.0, 0.0], [1.1, -1.1]]])
     assert overlapping(square, diamond).tolist() == [True]
-    assert overlapping(square, diamond + [1.05, 0.0]).tolist() == [False]
+    assert overlapping(square, diamond + np.array([1.05, 0.0])).tolist() == [False]
 
 
 def test_poses_compose_and_arcs_are_exact() -> None:

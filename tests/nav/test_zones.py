@@ -43,7 +43,8 @@ def test_a_wall_beside_the_robot_matters_to_a_turn_not_to_driving_straight() -> 
     side = wall_y(0.55)
     assert travel_to_contact(side, FOOTPRINT, 0.45, 0.0, 2.0) is None
     turn = travel_to_contact(side, FOOTPRINT, 0.0, 0.8, 2.0)
-    assert turn is not None and turn < 0.3
+    assert turn is not None
+    assert turn < 0.3
 
 
 def test_points_inside_the_footprint_never_stop_it() -> None:
@@ -92,7 +93,8 @@ def test_the_status_words() -> None:
     assert stop.stopped
     assert stop.message() == "stopped: obstacle 0.04 m behind"
     free = apply_zones(0.1, 0.0, wall_x(5.0), FOOTPRINT, ZONES)
-    assert not free.limited and free.message() == ""
+    assert not free.limited
+    assert free.message() == ""
 
 
 def test_the_fastest_point_of_a_turn_is_a_corner() -> None:

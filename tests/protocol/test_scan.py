@@ -48,9 +48,11 @@ def test_status_version_2_carries_the_heading_and_version_1_still_decodes() -> N
     assert CODEC.decode(STATUS_V2_BYTES) == STATUS_V2
     # Without a heading the robot sends version 1, as before.
     v1 = CODEC.encode(StatusPacket(sequence=7))
-    assert len(v1) == 20 and v1[5] == 1
+    assert len(v1) == 20
+    assert v1[5] == 1
     decoded = CODEC.decode(v1)
-    assert isinstance(decoded, StatusPacket) and decoded.yaw_mrad is None
+    assert isinstance(decoded, StatusPacket)
+    assert decoded.yaw_mrad is None
     frame = StatusFrame(STATUS_V2, 0.0, 0.0)
     assert frame.yaw_rad == pytest.approx(-1.571)
 

@@ -42,14 +42,16 @@ def test_the_robot_stops_at_a_wall_and_says_so_once(
     x, _y, _heading = physics.pose
     # The wall's face is at 1.95; the footprint reaches 0.62 ahead of the turn centre.
     assert x == pytest.approx(1.95 - 0.62, abs=0.011)
-    assert physics.in_contact and physics.collisions == 1
+    assert physics.in_contact
+    assert physics.collisions == 1
     assert physics.track_speeds_m_s == (0.0, 0.0)  # stalled, as telemetry will say
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert warnings == [f"collision at ({x:.2f}, 0.00)"]
     # Backing away frees it.
     physics.apply(Command({"drive_linear": -0.4}), t)
     physics.advance(t + 1.0)
-    assert physics.pose[0] < x - 0.3 and not physics.in_contact
+    assert physics.pose[0] < x - 0.3
+    assert not physics.in_contact
 
 
 def test_a_start_inside_an_obstacle_is_refused(profile: RobotProfile) -> None:
