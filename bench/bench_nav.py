@@ -4,6 +4,7 @@
     python bench/bench_nav.py ellipse    # the ellipse of eq. 6.1 at 0 / 10 / 26 % loss
     python bench/bench_nav.py zones      # 50 full-speed drives at walls, zones on and off
     python bench/bench_nav.py odometry   # drift after a 10 m square against ground truth
+    python bench/bench_nav.py gui        # what the map and the zones cost the GUI thread
 
 Everything runs the real console model (ocu.headless) over a real UDP link to the real
 simulator with its fault layer; ground truth is the simulator's pose. Each part prints its
@@ -260,6 +261,8 @@ class Drive:
     collided: bool
     duration_s: float
     gap_m: float
+    # The link's watchdog cut the drive short (a starved console thread on a loaded machine).
+    starved: bool = False
 
 
 def random_starts(world: World, profile: RobotProfile, count: int, seed: int) -> list[Pose]:
@@ -311,7 +314,9 @@ def drive_at_walls(
     ):
         model = headless.model
         headless.call(lambda: model.set_max_velocity(LINEAR, profile.channels[LINEAR].hard_max))
+        starved = watch_starvation(headless)
         for pose in starts:
+            starved_before = len(starved)
             headless.call(lambda: model.halt("next drive"))
             time.sleep(0.2)
             sim.place(pose)
@@ -335,6 +340,7 @@ def drive_at_walls(
                     state.collisions > before,
                     duration,
                     gap_ahead(world, footprint.front_m, footprint.half_width_m, Pose(*state.pose)),
+                    len(starved) > starved_before,
                 )
             )
     return drives
@@ -348,7 +354,7 @@ def bench_zones(profile: RobotProfile, count: int) -> None:
     print("default room from random poses 1-3.5 m away; 60 +- 30 ms each way, 10 % loss")
     print(
         f"{'zones':<6} {'collisions':>10} {'mean s':>7} {'max s':>6} {'gap cm':>7} "
-        f"{'min gap cm':>10}"
+        f"{'min gap cm':>10} {'cut short':>9}"
     )
     results = {}
     for zones in (True, False):
@@ -359,13 +365,15 @@ def bench_zones(profile: RobotProfile, count: int) -> None:
         print(
             f"{'on' if zones else 'off':<6} {sum(d.collided for d in drives):>10d} "
             f"{statistics.mean(durations):7.2f} {max(durations):6.2f} "
-            f"{statistics.mean(gaps) * 100:7.1f} {min(gaps) * 100:10.1f}",
+            f"{statistics.mean(gaps) * 100:7.1f} {min(gaps) * 100:10.1f} "
+            f"{sum(d.starved for d in drives):9d}",
             flush=True,
         )
     cost = statistics.mean(d.duration_s for d in results[True]) - statistics.mean(
         d.duration_s for d in results[False]
     )
     print(f"time the zones cost per drive (until the robot stood still): {cost:+.2f} s")
+    print("cut short: drives the link's 0.5 s watchdog stopped (the console's thread starved)")
 
 
 # ---- odometry ----------------------------------------------------------------------------
@@ -465,10 +473,55 @@ def square_run(
     )
 
 
+def bench_gui_cost(profile: RobotProfile, seconds: float = 10.0) -> None:
+    """What driving with a map costs the GUI thread: a second of scans (10 Hz), control ticks
+    (20 Hz) and map paints (10 Hz), timed on this thread; the baseline is the ticks alone."""
+    import os
+
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    from PySide6.QtGui import QImage
+    from PySide6.QtWidgets import QApplication
+
+    from ocu.records import ScanFrame
+    from ocu.sim.rangefinder import RangeSensor
+    from ocu.widgets.map_view import MapPanel
+
+    app = QApplication.instance() or QApplication([])
+    world = load_world("default")
+    sensor = RangeSensor(world, seed=5)
+    model = ConsoleModel(profile)
+    model.hotkey_down("W", LINEAR, 1)
+    panel = MapPanel(model)
+    panel.resize(460, 420)
+    image = QImage(panel.view.size(), QImage.Format.Format_RGB32)
+    del app
+
+    def run(with_map: bool) -> float:
+        ticks = int(seconds * 20)
+        started = time.process_time()
+        for tick in range(ticks):
+            now = time.monotonic()
+            if with_map and tick % 2 == 0:
+                pose = Pose(0.05 * tick / 20, 0.0, 0.0)
+                model.on_scan(ScanFrame.from_packet(sensor.sweep(pose, 0), now, 0.0))
+                panel.view.render(image)
+            model.update(now)
+        return (time.process_time() - started) / seconds
+
+    baseline = run(False)
+    with_map = run(True)
+    print("GUI-thread cost of driving with a map (10 Hz scans with the grid, 20 Hz control")
+    print("ticks with the zones, 10 Hz paints of a 460x420 map), offscreen:")
+    print(
+        f"  with the map {with_map * 100:.1f} % of a core; ticks alone {baseline * 100:.1f} %; "
+        f"the map's share {(with_map - baseline) * 100:.1f} %"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument(
-        "part", nargs="?", default="all", choices=("all", "ellipse", "zones", "odometry")
+        "part", nargs="?", default="all", choices=("all", "ellipse", "zones", "odometry", "gui")
     )
     parser.add_argument("--drives", type=int, default=50, help="drives at walls (default 50)")
     args = parser.parse_args()
@@ -479,6 +532,8 @@ def main() -> None:
         bench_zones(profile, args.drives)
     if args.part in ("all", "odometry"):
         bench_odometry(profile)
+    if args.part in ("all", "gui"):
+        bench_gui_cost(profile)
 
 
 if __name__ == "__main__":
