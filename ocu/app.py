@@ -77,7 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ARG",
         help="extra argument for the built-in simulator, e.g. --sim-arg=--loss=0.1; "
         "--sim-arg=--extended makes it speak the protocol extension (four cameras, battery, "
-        "headlight, roll/pitch)",
+        "headlight, roll/pitch, IMU heading, range scans); the simulator runs in the shipped "
+        "room unless --sim-arg=--world=FILE names another world",
     )
     parser.add_argument(
         "--quit-after", type=float, metavar="S", help="quit by itself after S seconds"
@@ -193,7 +194,7 @@ def run_console(
     from ocu.link.live import UdpLink
     from ocu.record.errors import RecordingError
     from ocu.record.recorder import Recorder
-    from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
+    from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError, with_default_world
     from ocu.windows.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
@@ -210,7 +211,7 @@ def run_console(
     try:
         if robot is None:
             try:
-                simulator = SimulatorProcess(profile_path, sim_args)
+                simulator = SimulatorProcess(profile_path, with_default_world(sim_args))
             except SimulatorProcessError as err:
                 log.error("%s", err)
                 return 1

@@ -20,6 +20,7 @@ from ocu.console.model import DEFAULT_FINE_FACTOR, ConsoleModel
 from ocu.console.poses import PoseError
 from ocu.kinematics.arm import ArmError
 from ocu.profile import RobotProfile, did_you_mean
+from ocu.records import CommandError
 
 USER_KEY_MAP_NAME = "hotkeys.toml"
 ESTOP_KEY = "Space"
@@ -336,6 +337,45 @@ def _toggle_workspace(arm: ArmConsole) -> None:
     arm.set_show_workspace(not arm.show_workspace)
 
 
+def _refused(model: ConsoleModel, action: Callable[[], None]) -> None:
+    """Run an operator action; a refusal (no points marked, ...) becomes a message."""
+    try:
+        action()
+    except CommandError as err:
+        model.events.message.emit(str(err))
+
+
+def odometry_reset(model: ConsoleModel) -> None:
+    """The robot is at the map's origin again (the operator knows where it is)."""
+    model.reset_odometry()
+
+
+def zones_override(model: ConsoleModel) -> None:
+    """Let the next motion through the safety zones (pushing an object)."""
+    model.override_zones()
+
+
+def assist_linear(model: ConsoleModel) -> None:
+    """Start the linear shuttle between the marked points, or stop it."""
+    if model.assist_mode == "linear":
+        model.stop_assist("L pressed")
+    else:
+        _refused(model, model.start_linear)
+
+
+def assist_path(model: ConsoleModel) -> None:
+    """Follow the waypoints, or stop following them."""
+    if model.assist_mode == "path":
+        model.stop_assist("P pressed")
+    else:
+        _refused(model, model.start_path)
+
+
+def path_clear(model: ConsoleModel) -> None:
+    """Forget the waypoints and shuttle points; a running mode stops."""
+    model.clear_waypoints()
+
+
 COMMANDS: dict[str, Callable[[ConsoleModel], None]] = {
     "emergency_stop": emergency_stop,
     "help": toggle_help,
@@ -349,6 +389,11 @@ COMMANDS: dict[str, Callable[[ConsoleModel], None]] = {
     "pose_ready": _with_arm(_go("ready")),
     "pose_look_forward": _with_arm(_go("look_forward")),
     "pose_look_back": _with_arm(_go("look_back")),
+    "odometry_reset": odometry_reset,
+    "zones_override": zones_override,
+    "assist_linear": assist_linear,
+    "assist_path": assist_path,
+    "path_clear": path_clear,
 }
 COMMAND_TITLES = {
     "emergency_stop": "EMERGENCY STOP (also the StopAll button)",
@@ -363,6 +408,11 @@ COMMAND_TITLES = {
     "pose_ready": "arm: stored pose ready",
     "pose_look_forward": "arm: stored pose look forward",
     "pose_look_back": "arm: stored pose look back",
+    "odometry_reset": "map: reset odometry to (0, 0, 0°)",
+    "zones_override": "map: override the safety zones for the next motion",
+    "assist_linear": "map: linear shuttle between the marked points, start / stop",
+    "assist_path": "map: follow the waypoints, start / stop",
+    "path_clear": "map: clear waypoints and shuttle points",
 }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import itertools
 import math
 import tomllib
 from collections.abc import Collection, Iterable
@@ -38,6 +39,7 @@ TOP_KEYS = (
     "channels",
     "motors",
     "arm",
+    "navigation",
 )
 LINK_KEYS = (
     "address",
@@ -66,6 +68,8 @@ EXTENSION_KEYS = (
     "stream_fps",
 )
 EXTENSION_FRAME_TYPE_KEYS = ("hello", "video_fragment", "status")
+# Frame types an older profile may leave out; the extension then lacks that packet.
+OPTIONAL_EXTENSION_FRAME_TYPE_KEYS = ("scan",)
 VIDEO_KEYS = (
     "no_signal_after_s",
     "battery_warning_percent",
@@ -83,6 +87,7 @@ CAMERA_KEYS = (
     "undistort",
     "colour",
     "fixed_gains_rgb",
+    *("mount_xyz_m", "mount_yaw_deg", "mount_pitch_deg"),
 )
 SI_KEYS = (
     "linear_axis_per_m_s",
@@ -92,6 +97,33 @@ SI_KEYS = (
     "telemetry_current_per_amp",
 )
 CHASSIS_KEYS = ("track_width_m",)
+NAVIGATION_KEYS = (
+    "footprint_front_m",
+    "footprint_rear_m",
+    "footprint_half_width_m",
+    "scan_mount_xy_m",
+    "scan_stale_after_s",
+    "odometry",
+    "zones",
+    "assist",
+)
+ODOMETRY_KEYS = (
+    "stale_after_s",
+    "linear_noise_m2_per_m",
+    "heading_noise_rad2_per_rad",
+    "heading_drift_rad2_per_m",
+    "commanded_noise_factor",
+    "imu_heading_sigma_deg",
+)
+ZONE_KEYS = ("stop_m", "within_m", "max_linear_m_s", "max_angular_rad_s")
+ASSIST_KEYS = (
+    "linear_gain_m_per_s2",
+    "samson_b",
+    "samson_xi",
+    "cruise_m_s",
+    "goal_tolerance_m",
+    "max_lag_m",
+)
 BUTTON_KEYS = ("torch", "camera_select")
 CHANNEL_KEYS = (
     "axis",
@@ -188,6 +220,8 @@ class ExtensionFrameTypes:
     hello: int
     video_fragment: int
     status: int
+    # The planar range scan (robot -> OCU); None: this extension has no range sensor.
+    scan: int | None = None
 
 
 @dataclass(frozen=True)
@@ -226,6 +260,19 @@ class CameraCalibration:
 
 
 @dataclass(frozen=True)
+class CameraMount:
+    """Where a camera sits on the chassis (base_link: x forward, y left, z up) and looks.
+
+    Yaw turns the view left of straight ahead; pitch tilts it down. The simulator draws its
+    world from here (ocu.sim.scene).
+    """
+
+    xyz_m: tuple[float, float, float]
+    yaw_rad: float = 0.0
+    pitch_rad: float = 0.0
+
+
+@dataclass(frozen=True)
 class CameraSettings:
     """One camera: its name, calibration (None = not calibrated) and correction defaults."""
 
@@ -235,6 +282,80 @@ class CameraSettings:
     undistort: bool = False
     colour: str = "off"
     fixed_gains_rgb: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    mount: CameraMount | None = None
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """The chassis outline seen from above, about the turn centre (x forward, y left)."""
+
+    front_m: float
+    rear_m: float
+    half_width_m: float
+
+    @property
+    def corners_m(self) -> tuple[tuple[float, float], ...]:
+        """Front-left, rear-left, rear-right, front-right."""
+        front, rear, half = self.front_m, -self.rear_m, self.half_width_m
+        return ((front, half), (rear, half), (rear, -half), (front, -half))
+
+    @property
+    def swing_radius_m(self) -> float:
+        """How far the farthest corner is from the turn centre (the circle a turn sweeps)."""
+        return math.hypot(max(self.front_m, self.rear_m), self.half_width_m)
+
+
+@dataclass(frozen=True)
+class OdometrySettings:
+    """Dead reckoning: when it is stale, and how its uncertainty grows (variance rates)."""
+
+    stale_after_s: float = 2.5
+    linear_noise_m2_per_m: float = 0.0004
+    heading_noise_rad2_per_rad: float = 0.0025
+    heading_drift_rad2_per_m: float = 0.0001
+    commanded_noise_factor: float = 4.0
+    imu_heading_sigma_rad: float = math.radians(0.5)
+
+
+@dataclass(frozen=True)
+class ZoneSettings:
+    """Seed 002's safety zones (Algorithm 5.1), as travel to contact along the motion.
+
+    Inside `stop_m` nothing moves toward the obstacle; inside `within_m[k]` the speeds are
+    capped at `max_linear_m_s[k]` and `max_angular_rad_s[k]` with their ratio kept.
+    """
+
+    stop_m: float = 0.10
+    within_m: tuple[float, ...] = (0.333, 0.633, 0.933)
+    max_linear_m_s: tuple[float, ...] = (0.2, 0.25, 0.35)
+    max_angular_rad_s: tuple[float, ...] = (0.3, 0.5, 0.8)
+
+
+@dataclass(frozen=True)
+class AssistSettings:
+    """Seed 002's assisted modes: linear shuttle gain (eq. 5.5) and Samson's gains (eq. 3.18)."""
+
+    linear_gain_m_per_s2: float = 0.05
+    samson_b: float = 40.0
+    samson_xi: float = 0.8
+    cruise_m_s: float = 0.25
+    goal_tolerance_m: float = 0.10
+    max_lag_m: float = 0.4
+
+
+@dataclass(frozen=True)
+class NavigationSettings:
+    """Driving with a map: footprint, range sensor, odometry, safety zones, assisted modes.
+
+    `footprint` is None for a profile without a [navigation] table: the zones are then off.
+    """
+
+    footprint: Footprint | None = None
+    scan_mount_xy_m: tuple[float, float] = (0.0, 0.0)
+    scan_stale_after_s: float = 0.5
+    odometry: OdometrySettings = OdometrySettings()
+    zones: ZoneSettings = ZoneSettings()
+    assist: AssistSettings = AssistSettings()
 
 
 @dataclass(frozen=True)
@@ -328,6 +449,7 @@ class RobotProfile:
     video: VideoSettings = VideoSettings()
     cameras: tuple[CameraSettings, ...] = ()
     arm: ArmSettings | None = None
+    navigation: NavigationSettings = NavigationSettings()
 
     def channel_with_role(self, role: str) -> str | None:
         """The channel that plays a role (e.g. "drive_linear"), or None."""
@@ -586,18 +708,24 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
 
 
 def _parse_extension(reader: _Reader, vendor: FrameTypes) -> ExtensionSettings:
-    types_reader = reader.sub("frame_types", EXTENSION_FRAME_TYPE_KEYS)
+    types_reader = reader.sub(
+        "frame_types", (*EXTENSION_FRAME_TYPE_KEYS, *OPTIONAL_EXTENSION_FRAME_TYPE_KEYS)
+    )
     types = ExtensionFrameTypes(
         hello=types_reader.integer("hello", low=0, high=255),
         video_fragment=types_reader.integer("video_fragment", low=0, high=255),
         status=types_reader.integer("status", low=0, high=255),
+        scan=(
+            types_reader.integer("scan", low=0, high=255) if types_reader.optional("scan") else None
+        ),
     )
     ids = [types.hello, types.video_fragment, types.status, vendor.rcp, vendor.telemetry]
     ids.append(vendor.video)
+    if types.scan is not None:
+        ids.append(types.scan)
     if len(set(ids)) != len(ids):
         raise ProfileError(
-            f"{types_reader.where}: the three IDs must differ from each other "
-            "and from link.frame_types"
+            f"{types_reader.where}: the IDs must differ from each other and from link.frame_types"
         )
     return ExtensionSettings(
         probe=reader.boolean("probe"),
@@ -646,6 +774,89 @@ def _parse_camera(name: str, index: int, reader: _Reader) -> CameraSettings:
         undistort=reader.boolean("undistort"),
         colour=reader.choice("colour", COLOUR_MODES),
         fixed_gains_rgb=(gains[0], gains[1], gains[2]),
+        mount=_parse_mount(reader),
+    )
+
+
+def _parse_mount(reader: _Reader) -> CameraMount | None:
+    if not reader.optional("mount_xyz_m"):
+        for key in ("mount_yaw_deg", "mount_pitch_deg"):
+            if reader.optional(key):
+                raise ProfileError(f"{reader.where}.{key}: needs mount_xyz_m")
+        return None
+    xyz = reader.numbers("mount_xyz_m", (3,))
+    yaw = reader.number("mount_yaw_deg", low=-180.0, high=180.0)
+    pitch = (
+        reader.number("mount_pitch_deg", low=-89.0, high=89.0)
+        if reader.optional("mount_pitch_deg")
+        else 0.0
+    )
+    return CameraMount((xyz[0], xyz[1], xyz[2]), math.radians(yaw), math.radians(pitch))
+
+
+def _ascending(reader: _Reader, key: str, count: int | None, low: float) -> tuple[float, ...]:
+    value = reader.table.get(key)
+    lengths = (count,) if count is not None else tuple(range(1, 9))
+    numbers = reader.numbers(key, lengths, low=low)
+    if count is None and any(b <= a for a, b in itertools.pairwise(numbers)):
+        raise ProfileError(f"{reader.where}.{key}: must grow from zone to zone, got {value!r}")
+    return numbers
+
+
+def _parse_navigation(reader: _Reader) -> NavigationSettings:
+    default = NavigationSettings()
+    footprint = Footprint(
+        front_m=reader.number("footprint_front_m", low=0.01),
+        rear_m=reader.number("footprint_rear_m", low=0.01),
+        half_width_m=reader.number("footprint_half_width_m", low=0.01),
+    )
+    mount = reader.numbers("scan_mount_xy_m", (2,)) if reader.optional("scan_mount_xy_m") else None
+    odometry = default.odometry
+    if reader.optional("odometry"):
+        o = reader.sub("odometry", ODOMETRY_KEYS)
+        odometry = OdometrySettings(
+            stale_after_s=o.number("stale_after_s", low=0.05),
+            linear_noise_m2_per_m=o.number("linear_noise_m2_per_m", low=0.0),
+            heading_noise_rad2_per_rad=o.number("heading_noise_rad2_per_rad", low=0.0),
+            heading_drift_rad2_per_m=o.number("heading_drift_rad2_per_m", low=0.0),
+            commanded_noise_factor=o.number("commanded_noise_factor", low=1.0),
+            imu_heading_sigma_rad=math.radians(o.number("imu_heading_sigma_deg", low=0.0)),
+        )
+    zones = default.zones
+    if reader.optional("zones"):
+        z = reader.sub("zones", ZONE_KEYS)
+        within = _ascending(z, "within_m", None, 0.0)
+        stop = z.number("stop_m", low=0.0)
+        if within[0] <= stop:
+            raise ProfileError(f"{z.where}.within_m: the first zone must lie beyond stop_m")
+        zones = ZoneSettings(
+            stop_m=stop,
+            within_m=within,
+            max_linear_m_s=_ascending(z, "max_linear_m_s", len(within), 1e-6),
+            max_angular_rad_s=_ascending(z, "max_angular_rad_s", len(within), 1e-6),
+        )
+    assist = default.assist
+    if reader.optional("assist"):
+        a = reader.sub("assist", ASSIST_KEYS)
+        assist = AssistSettings(
+            linear_gain_m_per_s2=a.number("linear_gain_m_per_s2", low=1e-6),
+            samson_b=a.number("samson_b", low=0.0),
+            samson_xi=a.number("samson_xi", low=0.01, high=1.0),
+            cruise_m_s=a.number("cruise_m_s", low=0.01),
+            goal_tolerance_m=a.number("goal_tolerance_m", low=0.001),
+            max_lag_m=a.number("max_lag_m", low=0.01),
+        )
+    return NavigationSettings(
+        footprint=footprint,
+        scan_mount_xy_m=(mount[0], mount[1]) if mount is not None else default.scan_mount_xy_m,
+        scan_stale_after_s=(
+            reader.number("scan_stale_after_s", low=0.01)
+            if reader.optional("scan_stale_after_s")
+            else default.scan_stale_after_s
+        ),
+        odometry=odometry,
+        zones=zones,
+        assist=assist,
     )
 
 
@@ -834,4 +1045,9 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
         ),
         cameras=_parse_cameras(root, tuple(cameras)),
         arm=_parse_arm(root.sub("arm", ARM_KEYS), motors) if root.optional("arm") else None,
+        navigation=(
+            _parse_navigation(root.sub("navigation", NAVIGATION_KEYS))
+            if root.optional("navigation")
+            else NavigationSettings()
+        ),
     )

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 from enum import Enum
 
 from ocu.protocol import TelemetryPacket
-from ocu.protocol.extended import StatusPacket
+from ocu.protocol.extended import SCAN_INVALID, SCAN_NO_RETURN, ScanPacket, StatusPacket
 
 # ---- commands ----------------------------------------------------------------------------
 
@@ -168,6 +168,57 @@ class StatusFrame:
         mrad = self.packet.pitch_mrad
         return None if mrad is None else mrad / 1000.0
 
+    @property
+    def yaw_rad(self) -> float | None:
+        """The IMU's heading in radians (counter-clockwise; its zero is the IMU's own)."""
+        mrad = self.packet.yaw_mrad
+        return None if mrad is None else mrad / 1000.0
+
+
+# Where a scan came from: the robot over the protocol extension, or another ROS node.
+SCAN_FROM_ROBOT = "robot"
+SCAN_FROM_ROS = "ros"
+
+
+@dataclass(frozen=True)
+class ScanFrame:
+    """One planar range scan in SI units, in the sensor's frame (x forward, y left).
+
+    Beam k points at `angle_min_rad + k * angle_increment_rad`; its range is in metres,
+    `math.inf` when nothing was within `range_max_m`, `math.nan` when it measured nothing.
+    """
+
+    angle_min_rad: float
+    angle_increment_rad: float
+    range_min_m: float
+    range_max_m: float
+    ranges_m: tuple[float, ...]
+    received_at: float
+    wall_time: float
+    source: str = SCAN_FROM_ROBOT
+    sequence: int | None = None
+    capture_time_us: int | None = None
+
+    @classmethod
+    def from_packet(cls, packet: ScanPacket, received_at: float, wall_time: float) -> ScanFrame:
+        """The scan a robot sent, in metres and radians."""
+        ranges = tuple(
+            math.inf if raw == SCAN_NO_RETURN else math.nan if raw == SCAN_INVALID else raw / 1e3
+            for raw in packet.ranges_mm
+        )
+        return cls(
+            angle_min_rad=packet.angle_min_urad / 1e6,
+            angle_increment_rad=packet.angle_increment_urad / 1e6,
+            range_min_m=packet.range_min_mm / 1e3,
+            range_max_m=packet.range_max_mm / 1e3,
+            ranges_m=ranges,
+            received_at=received_at,
+            wall_time=wall_time,
+            source=SCAN_FROM_ROBOT,
+            sequence=packet.sequence,
+            capture_time_us=packet.capture_time_us,
+        )
+
 
 # ---- the link ----------------------------------------------------------------------------
 
@@ -256,6 +307,7 @@ TELEMETRY = "telemetry"
 VIDEO = "video"
 VIDEO_FRAGMENT = "video_fragment"
 STATUS = "status"
+SCAN = "scan"
 OTHER = "other"
 
 
@@ -295,6 +347,7 @@ LinkEvent = (
     TelemetryFrame
     | VideoFrame
     | StatusFrame
+    | ScanFrame
     | LinkStats
     | LinkStateChanged
     | ExtensionChanged

@@ -42,8 +42,16 @@ def model(profile: RobotProfile) -> ConsoleModel:
 
 def test_default_map_is_table_4(key_map: KeyMap) -> None:
     assert {k: (b.channel, b.direction) for k, b in key_map.hold.items()} == TABLE_4
-    table_4 = {k: v for k, v in key_map.commands.items() if v in ("emergency_stop", "help")}
-    assert table_4 == {"Space": "emergency_stop", "F1": "help", "Slash": "help"}
+    paper = {"Space": "emergency_stop", "F1": "help", "Slash": "help"}
+    assert {k: key_map.commands[k] for k in paper} == paper
+    map_keys = {
+        "O": "odometry_reset",
+        "Z": "zones_override",
+        "L": "assist_linear",
+        "P": "assist_path",
+        "X": "path_clear",
+    }
+    assert {k: key_map.commands[k] for k in map_keys} == map_keys
     assert key_map.fine_factor == 0.25
 
 
@@ -216,4 +224,7 @@ def test_help_rows_list_every_binding(key_map: KeyMap) -> None:
     assert rows["F1 or ?"] == "show / hide this help"
     assert "Shift + key" in rows
     arm = [k for k, v in rows.items() if v.startswith(("arm:", "gripper ")) or "Cartesian" in k]
-    assert len(rows) - len(arm) == 10
+    assert rows["O"] == "map: reset odometry to (0, 0, 0°)"
+    assert rows["Z"] == "map: override the safety zones for the next motion"
+    # 7 channels, Shift, Space, help and the five map commands (and the arm's rows).
+    assert len(rows) - len(arm) == 15

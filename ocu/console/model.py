@@ -1,14 +1,14 @@
 """The console model: the whole command and what is known of the robot (no Qt, napari-style).
 
-It owns the one command the link sends — every channel's velocity with its source (a slider,
-a text box, a hotkey, a switch, the game controller, the position controller, a planner
-through ROS), the torch, the selected camera, the video bit-rate, the per-camera stream
-request — bounded by the one set of velocity limits; and the robot's state (`robot`,
-ocu.console.robot). The latest manual input on a channel wins: it takes the joint back from
-the position controller and the channel back from ROS. Views subscribe to `events` and
-`robot.events` and write the operator's input back through the methods below; the window
-sends `command()` to the link whenever `events.command_changed` fires and never reads a
-command back from the link.
+It owns the one command the link sends — every channel's velocity with its source (a slider, a
+text box, a hotkey, a switch, the game controller, the position controller, a planner through
+ROS, an assisted mode), the torch, the selected camera, the video bit-rate, the per-camera
+stream request — bounded by the one set of velocity limits; and the robot's state (`robot`,
+ocu.console.robot). The latest manual input on a channel wins: it takes the joint back from the
+position controller and the channel back from ROS. Views subscribe to `events` and
+`robot.events` and write the operator's input back through the methods below; the window sends
+`command()` to the link whenever `events.command_changed` fires and never reads a command back
+from the link.
 
 The arm (`arm`, ocu.console.arm) moves its joints' channels as one more automatic source,
 `ARM`: Cartesian jogs, pose goals and stored poses. Space, a lost link and any manual input on
@@ -19,6 +19,13 @@ Stops come in two strengths. `emergency_stop()` asks the link for its e-stop bur
 everything and latches: the model commands nothing until the operator acts again (a key
 press, a slider move, Accept, a switch, a new target). `halt()` zeroes everything without the
 burst, for focus loss, minimising, a stalled GUI thread, a lost or closed link.
+
+Driving with a map (`nav`, ocu.nav.navigator): odometry, scans and the occupancy grid are
+fed from the link; the drive pair, once composed from whichever source commands it, passes
+the safety zones last (`_apply_drive`), so keys, sliders, typed values, ROS, the assisted
+modes and any later input are all slowed near an obstacle. The assisted modes (the linear
+shuttle, path following) are one more automatic source: they run in `update()` and yield to
+any operator input, an emergency stop, a halt, LINK LOST and stale odometry.
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
@@ -40,9 +47,20 @@ from ocu.control.drive import DriveBounds, scale_drive
 from ocu.control.position import PositionController
 from ocu.kinematics.arm import ArmError, ArmKinematics
 from ocu.model.urdf import UrdfError, load_urdf
+from ocu.nav.assist import AssistError
+from ocu.nav.navigator import Navigator, ZoneState
+from ocu.nav.tracking import ellipse
 from ocu.profile import RobotProfile
 from ocu.protocol.extended import CameraRequest
-from ocu.records import Command, CommandError, TelemetryFrame
+from ocu.records import (
+    Command,
+    CommandError,
+    LinkState,
+    LinkStats,
+    ScanFrame,
+    StatusFrame,
+    TelemetryFrame,
+)
 
 log = logging.getLogger("ocu.console")
 
@@ -64,6 +82,8 @@ class Source(Enum):
     ARM = "arm"
     # The operator's game controller (ocu.gamepad): a stick or a button held, deadman held.
     GAMEPAD = "gamepad"
+    # An assisted mode (linear shuttle, path following): any operator input ends it.
+    ASSIST = "assist"
 
 
 MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH, Source.GAMEPAD)
@@ -104,6 +124,13 @@ class ConsoleEvents:
         # Before any operator input or emergency stop takes effect (a host hands control back
         # from another commander, e.g. ROS, before the operator's command is sent).
         self.operator_acted: Event[[]] = Event()
+        # Driving with a map: what the safety zones say, the assisted mode running (None)
+        # with a message, the operator's waypoints and shuttle points, an odometry reset.
+        self.zones_changed: Event[[ZoneState]] = Event()
+        self.assist_changed: Event[[str | None, str]] = Event()
+        self.waypoints_changed: Event[[tuple[tuple[float, float], ...]]] = Event()
+        self.shuttle_points_changed: Event[[tuple[tuple[float, float], ...]]] = Event()
+        self.odometry_reset: Event[[]] = Event()
 
 
 def _check_finite(channel: str, value: float) -> float:
@@ -170,6 +197,11 @@ class ConsoleModel:
         self._connected = True
         self._help_visible = False
         self._targets: dict[str, float] = {}
+        self.nav = Navigator(profile, clock=clock)
+        self._waypoints: tuple[tuple[float, float], ...] = ()
+        self._shuttle: tuple[tuple[float, float], ...] = ()
+        self._zone_text = ""
+        self._zone_limiting = False
         self._published: tuple[dict[str, float], bool, int | None, float] = (
             {},
             False,
@@ -504,7 +536,7 @@ class ConsoleModel:
         """Link e-stop at once, everything to zero, targets cancelled, latched until acted."""
         self.events.operator_acted.emit()
         self.events.estop_requested.emit(reason)
-        self._zero_all(reason=f"emergency stop ({reason})")
+        self._zero_all(reason=f"EMERGENCY STOP ({reason})")
         self._estop_reason = reason
         if not self._estopped:
             self._estopped = True
@@ -621,11 +653,196 @@ class ConsoleModel:
     # ---- robot input -----------------------------------------------------------------------
 
     def on_telemetry(self, frame: TelemetryFrame) -> None:
-        """A telemetry frame: the robot's state and the position controller take it."""
+        """A telemetry frame: the robot's state, the position controller and odometry."""
         self.controller.on_telemetry(frame.readings, frame.received_at, frame.delay_s)
         if self.arm is not None:
             self.arm.controller.observe(frame.readings)
+        self.nav.on_telemetry(frame)
         self.robot.on_telemetry(frame)
+
+    def on_status(self, status: StatusFrame) -> None:
+        """An extension status packet: the robot's state, and the IMU heading for odometry."""
+        self.nav.on_status(status)
+        self.robot.on_status(status)
+
+    def on_stats(self, stats: LinkStats) -> None:
+        """The link's statistics (its round trip goes to odometry)."""
+        self.nav.on_round_trip(stats.delay_s)
+        self.robot.on_stats(stats)
+
+    def on_scan(self, scan: ScanFrame) -> None:
+        """A range scan (from the robot, or from ROS): the zones and the map take it."""
+        if self.nav.on_scan(scan):
+            self._apply_drive_now()
+
+    def on_command_sent(self, command: Command, sent_at: float) -> None:
+        """A command the link put on the wire: odometry integrates what was sent."""
+        self.nav.on_command(command, sent_at)
+
+    # ---- driving with a map ----------------------------------------------------------------
+
+    @property
+    def waypoints(self) -> tuple[tuple[float, float], ...]:
+        """The operator's waypoints (odometry frame, m) for the path mode."""
+        return self._waypoints
+
+    def set_waypoints(self, points: Sequence[tuple[float, float]]) -> None:
+        """Replace the waypoints (the map's clicks)."""
+        checked = tuple((float(x), float(y)) for x, y in points)
+        if not all(math.isfinite(v) for point in checked for v in point):
+            raise CommandError("waypoints must be finite numbers")
+        self._waypoints = checked
+        self.events.waypoints_changed.emit(checked)
+
+    def add_waypoint(self, x_m: float, y_m: float) -> None:
+        """One more waypoint at the end."""
+        self.set_waypoints((*self._waypoints, (x_m, y_m)))
+
+    @property
+    def shuttle_points(self) -> tuple[tuple[float, float], ...]:
+        """The linear mode's two points (fewer while the operator marks them)."""
+        return self._shuttle
+
+    def add_shuttle_point(self, x_m: float, y_m: float) -> None:
+        """Mark a point for the linear mode; the last two marked count."""
+        if not (math.isfinite(x_m) and math.isfinite(y_m)):
+            raise CommandError("a shuttle point must be finite")
+        self._shuttle = (*self._shuttle, (float(x_m), float(y_m)))[-2:]
+        self.events.shuttle_points_changed.emit(self._shuttle)
+
+    def clear_waypoints(self) -> None:
+        """No waypoints nor shuttle points; a running mode stops."""
+        self.set_waypoints(())
+        self._shuttle = ()
+        self.events.shuttle_points_changed.emit(())
+        self._end_assist("path cleared")
+        self._publish()
+
+    def reset_odometry(self) -> None:
+        """The operator's odometry reset: the robot is at the origin again, sure of it."""
+        self._end_assist("odometry reset")
+        self.nav.reset_odometry()
+        self.set_waypoints(())
+        self._shuttle = ()
+        self.events.shuttle_points_changed.emit(())
+        self.events.odometry_reset.emit()
+        self.events.message.emit("odometry reset: pose (0, 0, 0°)")
+
+    def override_zones(self) -> None:
+        """The deliberate override: the next motion passes the safety zones (pushing a box)."""
+        self.nav.override_zones()
+        self.events.message.emit(
+            "safety zones OVERRIDDEN for the next motion (it ends when the tracks stop)"
+        )
+        self._apply_drive_now()
+        self._emit_zones(self.nav.zones, force=True)
+
+    @property
+    def assist_mode(self) -> str | None:
+        """The assisted mode running: 'linear', 'path' or None."""
+        return self.nav.assist_kind
+
+    def start_linear(
+        self,
+        start_xy: tuple[float, float] | None = None,
+        stop_xy: tuple[float, float] | None = None,
+        cycles: int | None = None,
+    ) -> None:
+        """The linear shuttle between two points (seed 002, Algorithm 5.4), the marked ones
+        by default; CommandError if it cannot start."""
+        if start_xy is None or stop_xy is None:
+            if len(self._shuttle) < 2:
+                raise CommandError("linear mode: mark two points on the map first")
+            start_xy, stop_xy = self._shuttle
+        self._start_assist(
+            lambda: self.nav.start_shuttle(
+                start_xy, stop_xy, max_linear_m_s=self._max_linear(), cycles=cycles
+            ),
+            f"linear mode: shuttling between ({start_xy[0]:.2f}, {start_xy[1]:.2f}) and "
+            f"({stop_xy[0]:.2f}, {stop_xy[1]:.2f})",
+        )
+
+    def start_path(
+        self, waypoints: Sequence[tuple[float, float]] | None = None, *, external: bool = False
+    ) -> None:
+        """Follow waypoints (the operator's when None) with Samson's controller."""
+        points = tuple(self._waypoints if waypoints is None else waypoints)
+        if not points:
+            raise CommandError("no waypoints: click on the map to set some")
+        self._start_assist(
+            lambda: self.nav.start_path(points, external=external),
+            f"path mode: following {len(points)} waypoint(s)",
+            external=external,
+        )
+
+    def start_ellipse(self) -> None:
+        """Seed 002's test: the ellipse of eq. 6.1 (40 s ideal) from where the robot is."""
+        pose = self.nav.estimate().pose
+        self._start_assist(
+            lambda: self.nav.start_trajectory(ellipse(pose)),
+            "path mode: the ellipse of seed 002 (3.6 m x 2 m, 40 s)",
+        )
+
+    def stop_assist(self, reason: str = "operator") -> None:
+        """End the assisted mode; its channels stop."""
+        self._end_assist(reason)
+        self._publish()
+
+    def _start_assist(
+        self, start: Callable[[], None], message: str, *, external: bool = False
+    ) -> None:
+        if self._drive is None:
+            raise CommandError("the profile has no chassis to drive")
+        if not external:
+            # Starting a mode is the operator's act: it takes over from ROS, ends an e-stop.
+            self._operator_acted()
+        for channel in self._drive:
+            self._take_manual(channel)
+        try:
+            start()
+        except AssistError as err:
+            raise CommandError(str(err)) from err
+        self.events.assist_changed.emit(self.nav.assist_kind, message)
+        self.events.message.emit(message)
+
+    def _end_assist(self, reason: str) -> bool:
+        kind = self.nav.assist_kind
+        if not self.nav.stop_assist(reason):
+            self._zero_assist()
+            return False
+        self._zero_assist()
+        text = f"{kind} mode stopped: {reason}"
+        self.events.assist_changed.emit(None, text)
+        self.events.message.emit(text)
+        return True
+
+    def _zero_assist(self) -> None:
+        for channel in self._drive or ():
+            if self._requested(channel).source is Source.ASSIST:
+                self._set_channel(channel, 0.0, Source.NONE)
+
+    def _max_linear(self) -> float:
+        assert self._drive is not None
+        return self.limits.get(self._drive[0])
+
+    def _assist_tick(self, now: float) -> None:
+        link_ok = self.robot.link_state is LinkState.CONNECTED
+        command = self.nav.assist_step(now, link_ok=link_ok)
+        if command is None or self._drive is None:
+            return
+        if command.done:
+            self._zero_assist()
+            self.events.assist_changed.emit(None, command.message)
+            self.events.message.emit(command.message)
+            return
+        linear_name, turn_name = self._drive
+        for name, value in ((linear_name, command.linear_m_s), (turn_name, command.angular_rad_s)):
+            # A channel the operator holds stays the operator's.
+            if self._requested(name).source in (Source.NONE, Source.ASSIST):
+                self._drive_request[name] = ChannelCommand(
+                    float(value), Source.ASSIST if value else Source.NONE
+                )
+        self._apply_drive()
 
     # ---- a planner (the ROS bridge, through the window) ------------------------------------
 
@@ -670,6 +887,9 @@ class ConsoleModel:
     def update(self, now: float | None = None) -> None:
         """One position-control step: merge the controller's velocities into the channels."""
         now = self.clock() if now is None else now
+        self._assist_tick(now)
+        # The robot moves, scans come: the zones judge the drive command again.
+        self._apply_drive_now()
         output = self.controller.update(now)
         for channel, command in self._channels.items():
             if command.source is not Source.POSITION:
@@ -734,10 +954,11 @@ class ConsoleModel:
             # A move is automatic: any operator motion input stops it.
             self._stop_arm("operator input")
         self.events.operator_acted.emit()
-        # The operator's input wins over a planner's, on every channel at once.
+        # The operator's input wins over a planner's and an assisted mode, at once.
         for channel in self._channels:
             if self._requested(channel).source is Source.ROS:
                 self._set_channel(channel, 0.0, Source.NONE)
+        self._end_assist("operator took over")
         self.release_estop()
 
     def release_estop(self) -> None:
@@ -833,22 +1054,52 @@ class ConsoleModel:
             min_angular_rad_s=channels[turn_name].min_speed,
         )
         v, w = scale_drive(linear.velocity, turn.velocity, bounds)
+        # The safety zones come last, whoever commands: keys, sliders, ROS, assisted modes.
+        zones = self.nav.guard(v, w)
+        if zones.decision is not None:
+            v, w = zones.decision.linear_m_s, zones.decision.angular_rad_s
+        self._emit_zones(zones)
         self._store(linear_name, ChannelCommand(v, linear.source if v else Source.NONE))
         self._store(turn_name, ChannelCommand(w, turn.source if w else Source.NONE))
 
+    def _apply_drive_now(self) -> None:
+        """Compose the drive pair again (a new scan, a tick) if it is asked to move."""
+        if self._drive is None:
+            return
+        if any(self._drive_request[name].velocity for name in self._drive) or any(
+            self._channels[name].velocity for name in self._drive
+        ):
+            self._apply_drive()
+            self._publish()
+        else:
+            self._emit_zones(self.nav.guard(0.0, 0.0))
+
+    def _emit_zones(self, zones: ZoneState, *, force: bool = False) -> None:
+        if zones.text != self._zone_text or force:
+            self._zone_text = zones.text
+            self.events.zones_changed.emit(zones)
+        limiting = zones.limiting
+        if limiting and not self._zone_limiting:
+            self.events.message.emit(zones.text)
+        self._zone_limiting = limiting
+
     def _zero_all(
-        self, *, keep_external: bool = False, keep_gamepad: bool = False, reason: str = "stop"
+        self, *, keep_external: bool = False, keep_gamepad: bool = False, reason: str = "stopped"
     ) -> None:
         had_keys = bool(self.held_keys)
         self._held.clear()
         self._stop_arm(reason)
+        self.nav.cancel_override()
+        if not (keep_external and self.nav.assist_external):
+            self._end_assist(reason)
         self.controller.cancel()
         self._sync_targets()
         for channel in self._channels:
             source = self._requested(channel).source
-            if (keep_external and source is Source.ROS) or (
-                keep_gamepad and source is Source.GAMEPAD
-            ):
+            if (
+                keep_external
+                and (source is Source.ROS or (source is Source.ASSIST and self.nav.assist_external))
+            ) or (keep_gamepad and source is Source.GAMEPAD):
                 continue
             self._set_channel(channel, 0.0, Source.NONE)
         if had_keys:

@@ -5,8 +5,9 @@ recording, the recorder's decoded channels (through the link's events) and `ocu 
 what a replay shows is what the OCU decoded live. It decodes vendor and extension packets,
 counts them (valid, malformed, rates, telemetry loss from the tick counter), drops telemetry
 that comes late or twice, judges each reading's plausibility, measures the round trip from
-the speed commands the robot echoes, detects the protocol extension and reassembles its video
-fragments. No Qt, no sockets, no clock of its own: every call carries its time.
+the speed commands the robot echoes, detects the protocol extension, reassembles its video
+fragments and decodes its range scans (ScanFrame). No Qt, no sockets, no clock of its own:
+every call carries its time.
 
 Thread-safe: the link's loop thread feeds received datagrams while the GUI thread's sends
 are noted with `sent()`; the lock is never held while an event is emitted.
@@ -26,10 +27,11 @@ from ocu.link.reassembly import Reassembler, ReassemblyStats
 from ocu.link.stats import LossEstimator, RateMeter
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket, VideoFramePacket
-from ocu.protocol.extended import HelloPacket, StatusPacket, VideoFragment
+from ocu.protocol.extended import HelloPacket, ScanPacket, StatusPacket, VideoFragment
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import (
     OTHER,
+    SCAN,
     STATUS,
     TELEMETRY,
     VIDEO,
@@ -39,6 +41,7 @@ from ocu.records import (
     ExtensionChanged,
     LinkEvent,
     LinkStats,
+    ScanFrame,
     StatusFrame,
     TelemetryFrame,
     VideoFrame,
@@ -99,6 +102,7 @@ class Receiver:
         self._ext_last_at: float | None = None
         self.ext_received = 0
         self.ext_malformed = 0
+        self.scans = 0
 
     # ---- what the OCU sent (any thread) -----------------------------------------------------
 
@@ -212,9 +216,11 @@ class Receiver:
             return False
         if isinstance(packet, VideoFragment):
             self.emit(DatagramReceived(data, at, VIDEO_FRAGMENT, packet.capture_time_us / 1e6))
+        elif isinstance(packet, ScanPacket):
+            self.emit(DatagramReceived(data, at, SCAN, packet.capture_time_us / 1e6))
         else:
             self.emit(DatagramReceived(data, at, STATUS))
-        event: StatusFrame | VideoFrame | None = None
+        event: StatusFrame | VideoFrame | ScanFrame | None = None
         with self._lock:
             self._received += 1
             self.ext_received += 1
@@ -237,6 +243,9 @@ class Receiver:
                     )
             elif isinstance(packet, StatusPacket):
                 event = StatusFrame(packet, at, wall)
+            elif isinstance(packet, ScanPacket):
+                self.scans += 1
+                event = ScanFrame.from_packet(packet, at, wall)
         if became_active:
             log.info("robot speaks the protocol extension")
             self.emit(ExtensionChanged(True, "extension packets from the robot"))

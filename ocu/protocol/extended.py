@@ -1,6 +1,6 @@
 """Codecs of ocu's open protocol extension (docs/protocol.md, "Extended protocol").
 
-Three packet types beside the vendor's, each one UDP datagram, little-endian, no padding:
+Four packet types beside the vendor's, each one UDP datagram, little-endian, no padding:
 
 - hello (OCU -> robot): the extension probe, repeated alongside the RCPs, carrying the
   per-camera stream request (resolution, frame rate, JPEG quality) and the largest datagram
@@ -8,7 +8,9 @@ Three packet types beside the vendor's, each one UDP datagram, little-endian, no
 - video fragment (robot -> OCU): one piece of one camera's JPEG, tagged with camera id,
   sequence number, capture time, byte offset, fragment index and count;
 - status (robot -> OCU): battery voltage and charge, headlight state, roll and pitch, each
-  with a "not measured" value so the robot never has to invent one.
+  with a "not measured" value so the robot never has to invent one; version 2 adds the
+  heading (yaw) of the robot's IMU;
+- scan (robot -> OCU): one sweep of a planar range sensor, ranges in millimetres.
 
 The vendor packets are unchanged. Pure code: no Qt, no sockets; ProtocolError for bad data.
 """
@@ -28,16 +30,23 @@ HELLO_HEADER_STRUCT = struct.Struct("<B4sBHB")
 CAMERA_REQUEST_STRUCT = struct.Struct("<BHHBB")
 FRAGMENT_HEADER_STRUCT = struct.Struct("<BBIQIIHH")
 STATUS_STRUCT = struct.Struct("<B4sBIHHBhhB")
+# Version 2 of the status packet appends the IMU heading (i16 mrad) to version 1's fields.
+STATUS_YAW_STRUCT = struct.Struct("<h")
+SCAN_HEADER_STRUCT = struct.Struct("<B4sBIQiiHHH")
 
 HELLO_HEADER_SIZE = HELLO_HEADER_STRUCT.size
 CAMERA_REQUEST_SIZE = CAMERA_REQUEST_STRUCT.size
 FRAGMENT_HEADER_SIZE = FRAGMENT_HEADER_STRUCT.size
 STATUS_SIZE = STATUS_STRUCT.size
+STATUS_V2_SIZE = STATUS_SIZE + STATUS_YAW_STRUCT.size
+SCAN_HEADER_SIZE = SCAN_HEADER_STRUCT.size
 
 assert HELLO_HEADER_SIZE == 9
 assert CAMERA_REQUEST_SIZE == 7
 assert FRAGMENT_HEADER_SIZE == 26
 assert STATUS_SIZE == 20
+assert STATUS_V2_SIZE == 22
+assert SCAN_HEADER_SIZE == 32
 
 MAX_CAMERAS = 255
 # Below this a datagram could not carry the fragment header plus a useful payload.
@@ -51,11 +60,18 @@ CHARGE_UNKNOWN = 0xFFFF
 HEADLIGHT_UNKNOWN = 0xFF
 ANGLE_UNKNOWN = -32768
 CHARGE_FULL_PERMILLE = 1000
+STATUS_VERSION_YAW = 2
+# Scan ranges: 0 means no return within range_max, 0xFFFF no measurement at all.
+SCAN_NO_RETURN = 0
+SCAN_INVALID = 0xFFFF
+MAX_SCAN_BEAMS = 8192
 
 _U8 = (0, 255)
 _U32 = (0, 2**32 - 1)
 _U64 = (0, 2**64 - 1)
 _I16 = (-32768, 32767)
+_I32 = (-(2**31), 2**31 - 1)
+TWO_PI_URAD = 6_283_186
 
 
 def _check(name: str, value: int, bounds: tuple[int, int]) -> None:
@@ -236,9 +252,13 @@ class StatusPacket:
     roll_mrad: int | None = None
     pitch_mrad: int | None = None
     camera_count: int = 0
+    # Heading of the robot's IMU, mrad, counter-clockwise seen from above (REP 103), in
+    # [-pi, pi]; its zero is wherever the IMU started. Sent only in version 2.
+    yaw_mrad: int | None = None
 
     def encode(self, frame_type: int) -> bytes:
-        """20 bytes; a None field goes on the wire as its "not measured" value."""
+        """20 bytes (version 1), or 22 with the heading (version 2); a None field goes on the
+        wire as its "not measured" value."""
         _check("sequence", self.sequence, _U32)
         _check("camera_count", self.camera_count, _U8)
         voltage = VOLTAGE_UNKNOWN if self.voltage_mv is None else self.voltage_mv
@@ -255,10 +275,12 @@ class StatusPacket:
             else:
                 _check(name, value, (ANGLE_UNKNOWN + 1, _I16[1]))
                 angles.append(value)
-        return STATUS_STRUCT.pack(
+        if self.yaw_mrad is not None:
+            _check("yaw_mrad", self.yaw_mrad, (ANGLE_UNKNOWN + 1, _I16[1]))
+        packed = STATUS_STRUCT.pack(
             frame_type,
             MAGIC,
-            VERSION,
+            VERSION if self.yaw_mrad is None else STATUS_VERSION_YAW,
             self.sequence,
             voltage,
             charge,
@@ -267,17 +289,30 @@ class StatusPacket:
             angles[1],
             self.camera_count,
         )
+        if self.yaw_mrad is None:
+            return packed
+        return packed + STATUS_YAW_STRUCT.pack(self.yaw_mrad)
 
     @classmethod
     def decode(cls, data: bytes, frame_type: int) -> StatusPacket:
-        """Parse a 20-byte status packet."""
-        if len(data) != STATUS_SIZE:
-            raise ProtocolError(f"status packet must be {STATUS_SIZE} bytes, got {len(data)}")
+        """Parse a status packet: 20 bytes (version 1) or 22 (version 2, with the heading)."""
+        # The version byte says how long the packet must be (version 2 adds the heading).
+        version_2 = len(data) > 5 and data[5] == STATUS_VERSION_YAW
+        expected = STATUS_V2_SIZE if version_2 else STATUS_SIZE
+        if len(data) != expected:
+            raise ProtocolError(f"status packet must be {expected} bytes, got {len(data)}")
         kind, magic, version, sequence, voltage, charge, headlight, roll, pitch, cameras = (
-            STATUS_STRUCT.unpack(data)
+            STATUS_STRUCT.unpack_from(data)
         )
         _expect_type(kind, frame_type, "status")
-        _check_header(magic, version, "status")
+        if not version_2:
+            _check_header(magic, version, "status")
+        elif magic != MAGIC:
+            raise ProtocolError(f"status magic {magic!r} is not {MAGIC!r}")
+        yaw: int | None = None
+        if version == STATUS_VERSION_YAW:
+            (raw_yaw,) = STATUS_YAW_STRUCT.unpack_from(data, STATUS_SIZE)
+            yaw = None if raw_yaw == ANGLE_UNKNOWN else raw_yaw
         if charge != CHARGE_UNKNOWN and charge > CHARGE_FULL_PERMILLE:
             raise ProtocolError(f"status charge {charge} permille over {CHARGE_FULL_PERMILLE}")
         if headlight not in (0, 1, HEADLIGHT_UNKNOWN):
@@ -290,10 +325,106 @@ class StatusPacket:
             roll_mrad=None if roll == ANGLE_UNKNOWN else roll,
             pitch_mrad=None if pitch == ANGLE_UNKNOWN else pitch,
             camera_count=cameras,
+            yaw_mrad=yaw,
         )
 
 
-ExtendedPacket = HelloPacket | VideoFragment | StatusPacket
+@dataclass(frozen=True)
+class ScanPacket:
+    """Robot -> OCU: one sweep of a planar range sensor in the sensor's frame.
+
+    Beam k points at angle_min + k * angle_increment (µrad, counter-clockwise from the
+    sensor's x axis, REP 103); its range is in mm, `SCAN_NO_RETURN` when nothing was within
+    range_max, `SCAN_INVALID` when the beam measured nothing.
+    """
+
+    sequence: int
+    capture_time_us: int
+    angle_min_urad: int
+    angle_increment_urad: int
+    range_min_mm: int
+    range_max_mm: int
+    ranges_mm: tuple[int, ...]
+
+    def check(self) -> None:
+        """ProtocolError unless every field fits the wire format and the ranges make sense."""
+        _check("sequence", self.sequence, _U32)
+        _check("capture_time_us", self.capture_time_us, _U64)
+        _check("angle_min_urad", self.angle_min_urad, _I32)
+        _check("angle_increment_urad", self.angle_increment_urad, _I32)
+        if self.angle_increment_urad == 0:
+            raise ProtocolError("scan angle_increment_urad is 0")
+        _check("range_max_mm", self.range_max_mm, (1, SCAN_INVALID - 1))
+        _check("range_min_mm", self.range_min_mm, (0, self.range_max_mm))
+        count = len(self.ranges_mm)
+        if not 1 <= count <= MAX_SCAN_BEAMS:
+            raise ProtocolError(f"scan beam count {count} outside 1-{MAX_SCAN_BEAMS}")
+        if abs(self.angle_increment_urad) * (count - 1) > 2 * TWO_PI_URAD:
+            raise ProtocolError("scan beams span more than two turns")
+        for index, value in enumerate(self.ranges_mm):
+            if not isinstance(value, int) or isinstance(value, bool):
+                raise ProtocolError(f"scan range #{index}={value!r} is not an integer")
+            if value in (SCAN_NO_RETURN, SCAN_INVALID):
+                continue
+            if not self.range_min_mm <= value <= self.range_max_mm:
+                raise ProtocolError(
+                    f"scan range #{index}={value} mm outside "
+                    f"[{self.range_min_mm}, {self.range_max_mm}] mm"
+                )
+
+    def encode(self, frame_type: int) -> bytes:
+        """32-byte header plus 2 bytes per beam."""
+        self.check()
+        header = SCAN_HEADER_STRUCT.pack(
+            frame_type,
+            MAGIC,
+            VERSION,
+            self.sequence,
+            self.capture_time_us,
+            self.angle_min_urad,
+            self.angle_increment_urad,
+            self.range_min_mm,
+            self.range_max_mm,
+            len(self.ranges_mm),
+        )
+        data = header + struct.pack(f"<{len(self.ranges_mm)}H", *self.ranges_mm)
+        if len(data) > MAX_DATAGRAM:
+            raise ProtocolError(f"scan of {len(self.ranges_mm)} beams does not fit a datagram")
+        return data
+
+    @classmethod
+    def decode(cls, data: bytes, frame_type: int) -> ScanPacket:
+        """Parse a scan datagram; its length must match its beam count."""
+        if len(data) < SCAN_HEADER_SIZE:
+            raise ProtocolError(f"scan packet needs {SCAN_HEADER_SIZE} bytes, got {len(data)}")
+        kind, magic, version, sequence, capture_us, angle_min, increment, low, high, count = (
+            SCAN_HEADER_STRUCT.unpack_from(data)
+        )
+        _expect_type(kind, frame_type, "scan")
+        _check_header(magic, version, "scan")
+        expected = SCAN_HEADER_SIZE + 2 * count
+        if len(data) != expected:
+            raise ProtocolError(
+                f"scan packet with {count} beams must be {expected} bytes, got {len(data)}"
+            )
+        ranges = struct.unpack_from(f"<{count}H", data, SCAN_HEADER_SIZE)
+        packet = cls(
+            sequence=sequence,
+            capture_time_us=capture_us,
+            angle_min_urad=angle_min,
+            angle_increment_urad=increment,
+            range_min_mm=low,
+            range_max_mm=high,
+            ranges_mm=tuple(ranges),
+        )
+        try:
+            packet.check()
+        except ProtocolError as err:
+            raise ProtocolError(f"scan packet: {err}") from err
+        return packet
+
+
+ExtendedPacket = HelloPacket | VideoFragment | StatusPacket | ScanPacket
 
 
 @dataclass(frozen=True)
@@ -303,10 +434,17 @@ class ExtendedCodec:
     hello_type: int = 0x10
     fragment_type: int = 0x11
     status_type: int = 0x12
+    # None: no range scans in this extension (an older profile).
+    scan_type: int | None = 0x13
 
     def handles(self, frame_type: int) -> bool:
         """Whether a datagram's first byte names one of the extension's packets."""
-        return frame_type in (self.hello_type, self.fragment_type, self.status_type)
+        return frame_type in (
+            self.hello_type,
+            self.fragment_type,
+            self.status_type,
+            self.scan_type,
+        )
 
     def encode(self, packet: ExtendedPacket) -> bytes:
         """Bytes on the wire for any extension packet."""
@@ -314,6 +452,10 @@ class ExtendedCodec:
             return packet.encode(self.hello_type)
         if isinstance(packet, VideoFragment):
             return packet.encode(self.fragment_type)
+        if isinstance(packet, ScanPacket):
+            if self.scan_type is None:
+                raise ProtocolError("this extension has no scan packet type")
+            return packet.encode(self.scan_type)
         return packet.encode(self.status_type)
 
     def decode(self, data: bytes) -> ExtendedPacket:
@@ -327,6 +469,8 @@ class ExtendedCodec:
             return StatusPacket.decode(data, frame_type)
         if frame_type == self.hello_type:
             return HelloPacket.decode(data, frame_type)
+        if frame_type == self.scan_type:
+            return ScanPacket.decode(data, frame_type)
         raise ProtocolError(f"frame type 0x{frame_type:02x} is not an extension packet")
 
 

@@ -2,8 +2,9 @@
 
 Link events go into the model's robot state — telemetry at most ~30 times a second, from the
 link's one-frame mailbox, so a robot flooding the link cannot queue work in front of the
-operator's keys. The model's command goes to the link whenever it changes, and nothing is
-ever read back from the link. A read-only link (a replay) gets no commands.
+operator's keys — and into its navigator: status (the IMU heading), range scans and every
+command the link sent (odometry). The model's command goes to the link whenever it changes,
+and nothing is ever read back from the link. A read-only link (a replay) gets no commands.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from ocu.console.events import Event
 from ocu.console.model import ConsoleModel
 from ocu.protocol.extended import CameraRequest
 from ocu.qt.link import QtLink
-from ocu.records import LinkState, LinkStats, StatusFrame
+from ocu.records import CommandSent, LinkState, LinkStats, ScanFrame, StatusFrame
 
 # Telemetry reaches the model at most this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
@@ -41,6 +42,8 @@ class ConsoleBinding(QObject):
             (link.stats_updated, self._on_stats),
             (link.status_received, self._on_status),
             (link.extension_changed, self._on_extension),
+            (link.scan_received, self._on_scan),
+            (link.command_sent, self._on_command_sent),
         )
         for signal, slot in self._wiring:
             signal.connect(slot)
@@ -81,11 +84,20 @@ class ConsoleBinding(QObject):
 
     def _on_stats(self, stats: LinkStats) -> None:
         if self._bound:
-            self.model.robot.on_stats(stats)
+            self.model.on_stats(stats)
 
     def _on_status(self, status: StatusFrame) -> None:
         if self._bound:
-            self.model.robot.on_status(status)
+            self.model.on_status(status)
+
+    def _on_scan(self, scan: ScanFrame) -> None:
+        if self._bound:
+            self.model.on_scan(scan)
+
+    def _on_command_sent(self, sent: CommandSent) -> None:
+        # What went on the wire, the link's own zeros included: odometry integrates it.
+        if self._bound:
+            self.model.on_command_sent(sent.command, sent.sent_at)
 
     def _on_extension(self, active: bool, reason: str) -> None:
         if self._bound:

@@ -10,7 +10,9 @@ link's thread puts the newest telemetry frame in a one-frame slot and emits
 emits `video_frame_ready(camera)` only when that mailbox was empty. At most one such signal
 per mailbox is ever queued; the GUI takes the newest with `take_telemetry()` and
 `take_video_frame(camera)`. `telemetry_received` and `video_frame_received` (one signal per
-frame, which would queue) fire only while something is connected to them.
+frame, which would queue) fire only while something is connected to them, as does
+`command_sent` (a CommandSent record per RCP on the wire, for odometry). Range scans
+(`scan_received`) and status packets come at a few per second and are signalled each.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from ocu.records import (
     LinkStateChanged,
     LinkStats,
     SafetyEvent,
+    ScanFrame,
     StatusFrame,
     TelemetryFrame,
     VideoFrame,
@@ -68,6 +71,7 @@ class QtLink(QObject):
     video_frame_received = Signal(object)
     video_frame_ready = Signal(int)
     status_received = Signal(object)
+    scan_received = Signal(object)
     extension_changed = Signal(bool, str)
     link_state_changed = Signal(object, str)
     stats_updated = Signal(object)
@@ -136,6 +140,8 @@ class QtLink(QObject):
             self.decoder.submit(event)
         elif isinstance(event, StatusFrame):
             self.status_received.emit(event)
+        elif isinstance(event, ScanFrame):
+            self.scan_received.emit(event)
         elif isinstance(event, ExtensionChanged):
             self.extension_changed.emit(event.active, event.reason)
         elif isinstance(event, LinkStateChanged):
@@ -145,7 +151,7 @@ class QtLink(QObject):
         elif isinstance(event, SafetyEvent):
             self.safety_event.emit(event.message)
         elif isinstance(event, CommandSent) and self.isSignalConnected(self._every_command):
-            self.command_sent.emit(event.command)
+            self.command_sent.emit(event)
 
     def _on_decoded(self, decoded: DecodedFrame) -> None:
         # Decoder thread: QImage (unlike QPixmap) may be built outside the GUI thread.

@@ -25,6 +25,7 @@ RAW_TELEMETRY: Final = "/raw/telemetry"
 RAW_VIDEO: Final = "/raw/video"
 RAW_VIDEO_FRAGMENT: Final = "/raw/video_fragment"
 RAW_STATUS: Final = "/raw/status"
+RAW_SCAN: Final = "/raw/scan"
 RAW_OTHER: Final = "/raw/other"
 RAW_TOPICS: Final = (
     RAW_RCP,
@@ -33,6 +34,7 @@ RAW_TOPICS: Final = (
     RAW_VIDEO,
     RAW_VIDEO_FRAGMENT,
     RAW_STATUS,
+    RAW_SCAN,
     RAW_OTHER,
 )
 

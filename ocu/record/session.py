@@ -50,6 +50,7 @@ RECEIVED_TOPICS = {
     r.VIDEO: s.RAW_VIDEO,
     r.VIDEO_FRAGMENT: s.RAW_VIDEO_FRAGMENT,
     r.STATUS: s.RAW_STATUS,
+    r.SCAN: s.RAW_SCAN,
 }
 
 Item = tuple[Any, ...]

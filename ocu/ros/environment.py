@@ -18,6 +18,8 @@ ROS_DEBIAN_PACKAGES = (
     "python3-sensor-msgs",
     "python3-diagnostic-msgs",
     "python3-std-msgs",
+    "python3-nav-msgs",
+    "python3-tf2-msgs",
 )
 ROS_PYTHON_MODULES = (
     "rospy",
@@ -26,6 +28,8 @@ ROS_PYTHON_MODULES = (
     "sensor_msgs",
     "diagnostic_msgs",
     "std_msgs",
+    "nav_msgs",
+    "tf2_msgs",
 )
 DEFAULT_MASTER_URI = "http://localhost:11311"
 INSTALL_HINT = "install Debian's ROS 1: sudo apt-get install " + " ".join(ROS_DEBIAN_PACKAGES)

@@ -58,9 +58,10 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~arm_poses        the operator's stored arm poses (TOML); default: the console's
                     arm_poses.toml in $OCU_CONFIG_DIR or ~/.config/ocu
 
-topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose in; joint_states,
-camera/compressed, camera/<name>/image/compressed, arm/tool_pose, /tf, /diagnostics out
-(see docs/ros.md and docs/arm.md)
+topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose, follow_path
+(nav_msgs/Path in odom), scan (when the robot sends none) in; joint_states, camera/compressed,
+camera/<name>/image/compressed, arm/tool_pose, odom, /tf (odom -> base_link, base_link ->
+tool0), scan (when the robot sends ranges), /diagnostics out (see docs/ros.md and docs/arm.md)
 
 _name:=value arguments hold for this run only: the node puts back (or deletes) what they
 replaced on the parameter server when it exits.
@@ -350,6 +351,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.control.commands import VelocityLimits
     from ocu.link.base import LinkError
     from ocu.link.live import UdpLink
+    from ocu.nav.navigator import Navigator
     from ocu.records import Command
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
@@ -385,12 +387,15 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
                 )
         if config.camera is not None:
             link.set_command(Command(camera=config.camera))  # before anything is sent
+        # Odometry, the safety zones and the path mode, fed from the link (no map: no view).
+        navigator = Navigator(profile, grid=False)
         bridge = RosBridge(
             profile,
             config.bridge,
             hardware_id=f"{robot[0]}:{robot[1]}",
             heartbeat=True,
             arm_poses_path=config.arm_poses_path,
+            navigator=navigator,
         )
         # The link logs its state changes and safety events itself (forwarded to rosout);
         # the bridge subscribes to them: LINK LOST stops what ROS moves.

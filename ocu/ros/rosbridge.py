@@ -20,24 +20,44 @@ The arm (docs/arm.md), when the profile has an [arm] table:
   the angular velocity about its pitch axis; the arm stops 0.1 s after the last one
 - in  `arm/named_pose` std_msgs/String: a stored pose (stow, ready, ... or the operator's)
 - out `arm/tool_pose`  geometry_msgs/PoseStamped: tool0 from each telemetry packet
-- out `/tf`            tf2_msgs/TFMessage: base_link -> tool0 (when tf2_msgs is installed)
+- out `/tf`            tf2_msgs/TFMessage: base_link -> tool0
+
+With a Navigator (driving with a map, ocu.nav.navigator):
+
+- out `odom` nav_msgs/Odometry (frame `odom`, child `base_link`) and `/tf` odom -> base_link
+- out `scan` sensor_msgs/LaserScan, when the robot sends range scans
+- in  `scan` another node's LaserScan, for the safety zones while the robot sends none
+- in  `follow_path` nav_msgs/Path in `odom`: the path mode (Samson's controller) follows it;
+  a cmd_vel, the operator, LINK LOST or stale odometry ends it
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import pathlib
 import threading
 import time
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionError
 from ocu.kinematics.arm import ArmError
 from ocu.link.base import Link
+from ocu.nav.navigator import Navigator
 from ocu.profile import RobotProfile
-from ocu.records import LinkEvent, LinkState, LinkStateChanged, TelemetryFrame, VideoFrame
+from ocu.records import (
+    CommandSent,
+    LinkEvent,
+    LinkState,
+    LinkStateChanged,
+    LinkStats,
+    ScanFrame,
+    StatusFrame,
+    TelemetryFrame,
+    VideoFrame,
+)
 from ocu.ros.bridge import (
     BridgeCore,
     BridgeError,
@@ -53,6 +73,14 @@ from ocu.ros.bridge import (
     quaternion_xyzw,
 )
 from ocu.ros.environment import ensure_ros_path
+from ocu.ros.navigation import (
+    GuardedSink,
+    NavigationError,
+    laser_scan_data,
+    odometry_data,
+    path_points,
+    scan_from_ros,
+)
 
 ensure_ros_path()
 
@@ -64,13 +92,10 @@ from geometry_msgs.msg import (  # noqa: E402
     Twist,
     TwistStamped,
 )
-from sensor_msgs.msg import CompressedImage, JointState  # noqa: E402
+from nav_msgs.msg import Odometry, Path  # noqa: E402
+from sensor_msgs.msg import CompressedImage, JointState, LaserScan  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
-
-try:  # tf2_msgs is a separate Debian package (python3-tf2-msgs): /tf only when it is there.
-    from tf2_msgs.msg import TFMessage
-except ImportError:  # pragma: no cover - depends on the machine
-    TFMessage = None
+from tf2_msgs.msg import TFMessage  # noqa: E402
 
 log = logging.getLogger("ocu.ros")
 
@@ -85,6 +110,10 @@ TWIST_CMD_TOPIC = "arm/twist_cmd"
 NAMED_POSE_TOPIC = "arm/named_pose"
 TOOL_POSE_TOPIC = "arm/tool_pose"
 TF_TOPIC = "/tf"
+ODOM_TOPIC = "odom"
+SCAN_TOPIC = "scan"
+FOLLOW_PATH_TOPIC = "follow_path"
+ODOM_PERIOD_S = 0.05
 DIAGNOSTICS_PERIOD_S = 1.0
 WARNING_INTERVAL_S = 2.0
 STOP_JOIN_TIMEOUT_S = 5.0
@@ -153,14 +182,30 @@ class _Publishers:
         }
         self.diagnostics = rospy.Publisher(DIAGNOSTICS_TOPIC, DiagnosticArray, queue_size=2)
         self.tool_pose: Any = None
+        # /tf carries base_link -> tool0 (the arm) and odom -> base_link (navigation).
         self.tf: Any = None
         if profile.arm is not None:
             self.tool_pose = rospy.Publisher(TOOL_POSE_TOPIC, PoseStamped, queue_size=10)
-            if TFMessage is not None:
-                self.tf = rospy.Publisher(TF_TOPIC, TFMessage, queue_size=10)
+            self.tf = rospy.Publisher(TF_TOPIC, TFMessage, queue_size=10)
+        self.navigation: list[Any] = []
+        self.odom: Any = None
+        self.scan: Any = None
+
+    def add_navigation(self) -> None:
+        self.odom = rospy.Publisher(ODOM_TOPIC, Odometry, queue_size=10)
+        if self.tf is None:
+            self.tf = rospy.Publisher(TF_TOPIC, TFMessage, queue_size=10)
+        self.scan = rospy.Publisher(SCAN_TOPIC, LaserScan, queue_size=2)
+        self.navigation = [self.odom, self.scan]
 
     def unregister(self) -> None:
-        for publisher in (self.joint_states, self.camera, self.diagnostics, *self.cameras.values()):
+        for publisher in (
+            self.joint_states,
+            self.camera,
+            self.diagnostics,
+            *self.cameras.values(),
+            *self.navigation,
+        ):
             publisher.unregister()
         for publisher in (self.tool_pose, self.tf):
             if publisher is not None:
@@ -184,9 +229,21 @@ class RosBridge:
         hardware_id: str = "",
         heartbeat: bool = False,
         on_state_changed: StateCallback | None = None,
-        arm_poses_path: Path | None = None,
+        arm_poses_path: pathlib.Path | None = None,
+        navigator: Navigator | None = None,
+        feed_navigator: bool = True,
+        on_path: Callable[[list[tuple[float, float]]], None] | None = None,
     ) -> None:
+        """`navigator` adds odom, tf, scan and follow_path. `feed_navigator`: the bridge
+        feeds it the link's events (the node); the console's model feeds its own. `on_path`
+        takes a /follow_path for a host that runs the path mode itself (the console);
+        without it the bridge follows the path through its own commands."""
         self.profile = profile
+        self.navigator = navigator
+        self.feed_navigator = feed_navigator
+        self.on_path = on_path
+        self._guarded: GuardedSink | None = None
+        self._path_running = False
         self.core = BridgeCore(
             profile, settings, on_state_changed=on_state_changed, arm_poses_path=arm_poses_path
         )
@@ -218,10 +275,15 @@ class RosBridge:
                 raise RuntimeError("the ROS bridge is already started")
             self._link = link
             self._publishers = _Publishers(self.profile)
+            target: VelocitySink = sink if sink is not None else link
+            navigator = self.navigator
+            if navigator is not None:
+                self._publishers.add_navigation()
+                if sink is None:
+                    # The node commands the link itself: the zones sit in front of it.
+                    self._guarded = target = GuardedSink(link, navigator)
             link.subscribe(self._on_link_event)
-            self.core.attach(
-                sink if sink is not None else link, limits, link_state=lambda: link.state
-            )
+            self.core.attach(target, limits, link_state=lambda: link.state)
             if self.settings.twist_stamped:
                 twist = rospy.Subscriber(
                     CMD_VEL_TOPIC, TwistStamped, self._on_twist_stamped, queue_size=1
@@ -238,8 +300,11 @@ class RosBridge:
                     ),
                     rospy.Subscriber(NAMED_POSE_TOPIC, String, self._on_named_pose),
                 ]
-                if TFMessage is None:
-                    log.warning("tf2_msgs is not installed (python3-tf2-msgs): no /tf")
+            if navigator is not None:
+                self._subscribers += [
+                    rospy.Subscriber(SCAN_TOPIC, LaserScan, self._on_scan, queue_size=1),
+                    rospy.Subscriber(FOLLOW_PATH_TOPIC, Path, self._on_follow_path, queue_size=1),
+                ]
             self._stop.clear()
             self.failed.clear()
             self._thread = threading.Thread(target=self._run, name="ocu-ros-bridge", daemon=True)
@@ -301,10 +366,154 @@ class RosBridge:
         if isinstance(event, LinkStateChanged):
             # A lost link stops what ROS moves, whatever cmd_vel says next.
             self.core.on_link_state(event.state, event.reason)
+            if event.state is not LinkState.CONNECTED and self._stop_path():
+                log.warning("follow_path stopped: %s", event.state.label)
         elif isinstance(event, TelemetryFrame):
             self.on_telemetry(event)
         elif isinstance(event, VideoFrame):
             self.on_video_frame(event)
+        elif isinstance(event, ScanFrame):
+            self.on_robot_scan(event)
+        navigator = self.navigator
+        if navigator is None or not self.feed_navigator:
+            return
+        if isinstance(event, TelemetryFrame):
+            navigator.on_telemetry(event)
+        elif isinstance(event, StatusFrame):
+            navigator.on_status(event)
+        elif isinstance(event, CommandSent):
+            navigator.on_command(event.command, event.sent_at)
+        elif isinstance(event, LinkStats):
+            navigator.on_round_trip(event.delay_s)
+
+    # ---- driving with a map ------------------------------------------------------------
+
+    def on_robot_scan(self, scan: ScanFrame) -> None:
+        """The robot's own scan: to the navigator (the node) and on `scan`."""
+        if self.navigator is not None and self.feed_navigator:
+            self.navigator.on_scan(scan)
+        publishers = self._publishers
+        if publishers is None or publishers.scan is None:
+            return
+        data = laser_scan_data(scan)
+        message = LaserScan()
+        message.header.stamp = _stamp(scan.wall_time)
+        message.header.frame_id = data.frame_id
+        message.angle_min = data.angle_min
+        message.angle_max = data.angle_max
+        message.angle_increment = data.angle_increment
+        message.scan_time = data.scan_time
+        message.range_min = data.range_min
+        message.range_max = data.range_max
+        message.ranges = list(data.ranges)
+        self._publish(publishers.scan, message)
+
+    def _on_scan(self, message: Any) -> None:
+        """Another node's scan: the zones use it while the robot sends none of its own."""
+        navigator = self.navigator
+        if navigator is None or navigator.robot_scans():
+            return
+        header = getattr(message, "_connection_header", None) or {}
+        if header.get("callerid") == rospy.get_name():
+            return  # our own robot's scan coming back
+        try:
+            scan = scan_from_ros(
+                angle_min=float(message.angle_min),
+                angle_increment=float(message.angle_increment),
+                range_min=float(message.range_min),
+                range_max=float(message.range_max),
+                ranges=[float(r) for r in message.ranges],
+                received_at=time.monotonic(),
+                wall_time=message.header.stamp.to_sec() or time.time(),
+            )
+        except NavigationError as err:
+            if self._throttle.allow("scan"):
+                log.warning("scan ignored: %s", err)
+            return
+        navigator.on_scan(scan)
+
+    def _on_follow_path(self, message: Any) -> None:
+        try:
+            points = path_points(
+                str(message.header.frame_id),
+                [(p.pose.position.x, p.pose.position.y) for p in message.poses],
+            )
+        except NavigationError as err:
+            log.error("%s", err)
+            return
+        if self.on_path is not None:
+            self.on_path(points)
+            return
+        navigator = self.navigator
+        assert navigator is not None
+        if self.core.refusal():
+            log.error("follow_path ignored: %s", self.core.refusal())
+            return
+        try:
+            navigator.start_path(points, external=True)
+        except ValueError as err:
+            log.error("follow_path refused: %s", err)
+            return
+        self._path_running = True
+        log.info("follow_path: %d poses in odom, path mode started", len(points))
+
+    def _stop_path(self) -> bool:
+        if not self._path_running or self.navigator is None:
+            return False
+        self._path_running = False
+        self.navigator.stop_assist()
+        return True
+
+    def _step_navigation(self, now: float) -> None:
+        """The node's path mode and zones, each bridge step."""
+        navigator = self.navigator
+        if navigator is None:
+            return
+        if self._path_running and self.on_path is None:
+            link = self._link
+            link_ok = link is not None and link.state is LinkState.CONNECTED
+            command = navigator.assist_step(now, link_ok=link_ok)
+            if command is None:
+                self._path_running = False
+            elif command.done:
+                self._path_running = False
+                log.info("%s", command.message)
+                self.core.on_cmd_vel(0.0, 0.0)
+            elif self.core.on_cmd_vel(command.linear_m_s, command.angular_rad_s) is None:
+                self._stop_path()
+                log.warning("follow_path stopped: %s", self.core.refusal() or "refused")
+        if self._guarded is not None:
+            self._guarded.refresh()
+
+    def publish_odometry(self) -> None:
+        """The navigator's pose on `odom` and as the tf odom -> base_link."""
+        publishers, navigator = self._publishers, self.navigator
+        if publishers is None or navigator is None or publishers.odom is None:
+            return
+        data = odometry_data(navigator.estimate())
+        stamp = rospy.Time.now()
+        odom = Odometry()
+        odom.header.stamp = stamp
+        odom.header.frame_id = data.frame_id
+        odom.child_frame_id = data.child_frame_id
+        pose = odom.pose.pose
+        pose.position.x, pose.position.y, pose.position.z = data.position
+        o = pose.orientation
+        o.x, o.y, o.z, o.w = data.orientation_xyzw
+        odom.pose.covariance = list(data.pose_covariance)
+        twist = odom.twist.twist
+        twist.linear.x, twist.linear.y, twist.linear.z = data.linear
+        twist.angular.x, twist.angular.y, twist.angular.z = data.angular
+        odom.twist.covariance = list(data.twist_covariance)
+        self._publish(publishers.odom, odom)
+        transform = TransformStamped()
+        transform.header.stamp = stamp
+        transform.header.frame_id = data.frame_id
+        transform.child_frame_id = data.child_frame_id
+        t = transform.transform
+        t.translation.x, t.translation.y, t.translation.z = data.position
+        t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w = data.orientation_xyzw
+        self._publish(publishers.tf, TFMessage(transforms=[transform]))
 
     def on_telemetry(self, frame: TelemetryFrame) -> None:
         """Feed the position controller and publish joint_states."""
@@ -405,6 +614,8 @@ class RosBridge:
         self._cmd_vel(message.twist)
 
     def _cmd_vel(self, twist: Any) -> None:
+        if self._stop_path():
+            log.info("follow_path stopped: cmd_vel took over")
         linear, angular = twist.linear, twist.angular
         ignored = (float(linear.y), float(linear.z), float(angular.x), float(angular.y))
         try:
@@ -497,13 +708,18 @@ class RosBridge:
         period_s = 1.0 / self.settings.rate_hz
         next_step = time.monotonic()
         next_diagnostics = next_step
+        next_odometry = next_step
         link = self._link
         while not self._stop.is_set():
             now = time.monotonic()
             if self.heartbeat and link is not None:
                 link.heartbeat()
+            self._step_navigation(now)
             for text in self.core.step(now):
                 log.info("%s", text)
+            if now >= next_odometry:
+                next_odometry = now + ODOM_PERIOD_S
+                self.publish_odometry()
             if now >= next_diagnostics:
                 next_diagnostics = now + DIAGNOSTICS_PERIOD_S
                 try:

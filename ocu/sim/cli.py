@@ -15,10 +15,18 @@ import sys
 import threading
 from collections.abc import Sequence
 
+from ocu.nav.world import DEFAULT_WORLD, WorldError, load_world
 from ocu.net.transport import TransportError
 from ocu.profile import ProfileError, load_profile
 from ocu.sim.extended import DEFAULT_DRAIN_PERCENT_PER_S, DEFAULT_STATUS_HZ
 from ocu.sim.faults import FaultConfig
+from ocu.sim.rangefinder import (
+    DEFAULT_BEAMS,
+    DEFAULT_NOISE_M,
+    DEFAULT_RANGE_MAX_M,
+    DEFAULT_SCAN_HZ,
+    RangeSensorConfig,
+)
 from ocu.sim.simulator import RobotSimulator
 from ocu.sim.video import MAX_FRAME_SIDE_PX, MIN_FRAME_SIDE_PX
 
@@ -174,6 +182,37 @@ def build_parser() -> argparse.ArgumentParser:
         help="battery drain at rest, in percent per second (default %(default)s)",
     )
     parser.add_argument(
+        "--world",
+        metavar="FILE",
+        default=None,
+        help="walls and boxes to drive among (TOML in metres, docs/navigation.md); "
+        f"'{DEFAULT_WORLD}' is the shipped room. Without it: an open plane",
+    )
+    parser.add_argument(
+        "--turn-slip",
+        type=_probability,
+        default=0.0,
+        metavar="FRACTION",
+        help="the tracks skid in turns: the chassis turns this fraction less than its belts "
+        "say (default 0); odometry from track speeds then drifts, an IMU heading does not",
+    )
+    parser.add_argument(
+        "--scan-hz",
+        type=_non_negative,
+        default=DEFAULT_SCAN_HZ,
+        help="range scans per second sent over the extension (default %(default)s; 0 = the "
+        "robot has no range sensor)",
+    )
+    parser.add_argument(
+        "--scan-beams", type=int, default=DEFAULT_BEAMS, help="beams per scan over 360 degrees"
+    )
+    parser.add_argument(
+        "--scan-noise-m",
+        type=_non_negative,
+        default=DEFAULT_NOISE_M,
+        help="range noise, 1 sigma (default %(default)s m)",
+    )
+    parser.add_argument(
         "--exit-with-parent",
         action="store_true",
         help="stop cleanly when standard input reaches its end: started with stdin a pipe "
@@ -215,6 +254,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         duplicate=args.duplicate,
     )
     port = profile.link.port if args.port is None else args.port
+    world = None
+    if args.world is not None:
+        try:
+            world = load_world(args.world)
+        except WorldError as err:
+            parser.error(f"--world: {err}")
+    range_sensor = None
+    if args.scan_hz > 0.0:
+        try:
+            range_sensor = RangeSensorConfig(
+                beams=args.scan_beams,
+                scan_hz=args.scan_hz,
+                range_max_m=DEFAULT_RANGE_MAX_M,
+                noise_m=args.scan_noise_m,
+            )
+        except ValueError as err:
+            parser.error(f"range sensor: {err}")
     # Block the handled signals before the loop thread exists so it inherits the mask and the
     # main thread alone takes them, synchronously, with sigwait.
     previous_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _HANDLED_SIGNALS)
@@ -239,10 +295,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                 battery_percent=args.battery_percent,
                 battery_drain_percent_per_s=args.battery_drain,
                 noise_deg=args.noise_deg,
+                world=world,
+                range_sensor=range_sensor,
+                turn_slip=min(args.turn_slip, 0.99),
             )
         except TransportError as err:
             print(f"ocu-sim: cannot listen: {err}", file=sys.stderr)
             return 1
+        except ValueError as err:
+            parser.error(str(err))
         for joint, raw in args.raw_position:
             try:
                 simulator.set_raw_position(joint, raw)

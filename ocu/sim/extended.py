@@ -6,9 +6,11 @@ while hellos keep coming (within the robot watchdog time) it sends no vendor vid
 client. Without hellos it behaves exactly like the vendor robot.
 
 The synthetic cameras show what the documents complain about (seed 001 section IV.D): the
-scene, a colour test pattern with straight grid lines and a ball circling, is seen through
-the lens model of the camera's profile calibration (fisheye or standard distortion) with a
-green cast that is exactly what the profile's fixed gains undo. Camera name, frame counter
+scene is seen through the lens model of the camera's profile calibration (fisheye or
+standard distortion) with a green cast that is exactly what the profile's fixed gains undo.
+In a world (`ocu-sim --world`) the scene is the world from the camera's mount as the robot
+moves (ocu.sim.scene); without one, a colour test pattern with straight grid lines and a
+ball circling. Camera name, frame counter
 and capture time are burned in, like a camera's on-screen display, and repeated in a
 JPEG comment (``ocu-sim camera=<name> index=<k> frame=<n> t_mono=<s> quality=<q>
 size=<w>x<h> torch=<0|1>``) for tests and tools.
@@ -33,6 +35,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from ocu.nav.geometry import Pose
 from ocu.profile import CameraCalibration, CameraSettings, RobotProfile
 from ocu.protocol.extended import (
     CameraRequest,
@@ -41,6 +44,8 @@ from ocu.protocol.extended import (
     StatusPacket,
     fragment_frame,
 )
+from ocu.sim.rangefinder import RangeSensor
+from ocu.sim.scene import WorldView
 from ocu.sim.video import MAX_FRAME_SIDE_PX, MIN_FRAME_SIDE_PX
 
 Pixels = npt.NDArray[np.uint8]
@@ -53,6 +58,8 @@ BATTERY_EMPTY_V = 21.0
 DEFAULT_DRAIN_PERCENT_PER_S = 0.02
 MOTION_DRAIN_FACTOR = 3.0
 DARK_GAIN = 0.6
+# The simulated IMU's heading noise (1 sigma).
+IMU_NOISE_RAD = 0.002
 TERRAIN_PITCH_RAD = 0.12
 TERRAIN_ROLL_RAD = 0.08
 TERRAIN_WAVELENGTH_M = 2.0
@@ -168,8 +175,12 @@ class SyntheticCameras:
     text are added before the JPEG encoding, so four 30 fps cameras stay cheap.
     """
 
-    def __init__(self, cameras: tuple[CameraSettings, ...]) -> None:
+    def __init__(self, cameras: tuple[CameraSettings, ...], world: WorldView | None = None) -> None:
         self.cameras = cameras
+        self.world = world
+        self._maps: dict[tuple[int, tuple[int, int]], Maps | None] = {}
+        # The last world view per camera and size, reused while the robot stands still.
+        self._world_views: dict[tuple[int, tuple[int, int], bool], tuple[Pose, Pixels]] = {}
         self._views: dict[tuple[int, tuple[int, int], bool], Pixels] = {}
         self._casts = [(cast_table(c, torch=False), cast_table(c, torch=True)) for c in cameras]
 
@@ -208,6 +219,39 @@ class SyntheticCameras:
             self._views[key] = view
         return view
 
+    def world_view(self, camera: int, size_px: tuple[int, int], torch: bool, pose: Pose) -> Pixels:
+        """The world from the camera's mount on the robot at `pose`: lens and cast applied."""
+        assert self.world is not None
+        key = (camera, size_px, torch)
+        cached = self._world_views.get(key)
+        if cached is not None and cached[0] == pose:
+            return cached[1]
+        settings = self.cameras[camera]
+        width, height = size_px
+        calibration = settings.calibration
+        if calibration is not None:
+            sx, sy = width / calibration.size_px[0], height / calibration.size_px[1]
+            focal = (
+                calibration.focal_px[0] * sx * SCENE_FOCAL_SCALE,
+                calibration.focal_px[1] * sy * SCENE_FOCAL_SCALE,
+            )
+            centre = (calibration.centre_px[0] * sx, calibration.centre_px[1] * sy)
+        else:
+            focal, centre = (width / 2.0, width / 2.0), (width / 2.0, height / 2.0)
+        view = self.world.render(pose, settings.mount, size_px, focal, centre)
+        if (camera, size_px) not in self._maps:
+            self._maps[(camera, size_px)] = distortion_maps(settings, size_px)
+        maps = self._maps[(camera, size_px)]
+        if maps is not None:
+            view = cast(
+                Pixels, cv2.remap(view, *maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            )
+        cv2.LUT(view, self._casts[camera][int(torch)], dst=view)
+        if len(self._world_views) >= VIEW_CACHE_SIZE:
+            self._world_views.pop(next(iter(self._world_views)))
+        self._world_views[key] = (pose, view)
+        return view
+
     def _colour(self, camera: int, torch: bool, bgr: tuple[int, int, int]) -> tuple[int, ...]:
         pixel = np.array([[bgr]], dtype=np.uint8)
         return tuple(int(v) for v in cv2.LUT(pixel, self._casts[camera][int(torch)])[0, 0])
@@ -229,10 +273,38 @@ class SyntheticCameras:
         quality: int,
         *,
         torch: bool = False,
+        pose: Pose | None = None,
     ) -> bytes:
-        """One JPEG of a camera: the lens view, the ball, on-screen text, comment."""
+        """One JPEG of a camera: the lens view (the world at `pose`, or the test pattern and
+        its ball), on-screen text, comment."""
         width, height = size_px
-        image = self.view(camera, size_px, torch).copy()
+        if self.world is not None and pose is not None:
+            image = self.world_view(camera, size_px, torch, pose).copy()
+        else:
+            image = self.view(camera, size_px, torch).copy()
+            self._ball(camera, image, size_px, frame_number, torch)
+        name = self.cameras[camera].name
+        lines = (
+            f"{name} (camera {camera + 1})",
+            f"frame {frame_number}",
+            f"capture t={capture_s:.3f} s",
+            "torch ON" if torch else "torch off",
+        )
+        self._osd(camera, image, lines, torch, corner=self.world is not None and pose is not None)
+        ok, encoded = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+        if not ok:
+            raise RuntimeError("JPEG encoding failed")
+        comment = (
+            f"ocu-sim camera={name} index={camera} frame={frame_number} "
+            f"t_mono={capture_s:.6f} quality={quality} size={width}x{height} torch={int(torch)}"
+        ).encode("ascii")
+        return jpeg_with_comment(encoded.tobytes(), comment)
+
+    def _ball(
+        self, camera: int, image: Pixels, size_px: tuple[int, int], frame_number: int, torch: bool
+    ) -> None:
+        """The test pattern's ball, circling, drawn through the lens."""
+        width, height = size_px
         angle = frame_number * BALL_STEP_RAD
         ball_x = width / 2 + math.cos(angle) * width / 4
         ball_y = height / 2 + math.sin(angle) * height / 4
@@ -254,29 +326,22 @@ class SyntheticCameras:
         white = self._colour(camera, torch, (255, 255, 255))
         cv2.fillPoly(image, [polygon], white, lineType=cv2.LINE_AA, shift=4)
         cv2.polylines(image, [polygon], True, (0, 0, 0), 2, lineType=cv2.LINE_AA, shift=4)
-        name = self.cameras[camera].name
-        lines = (
-            f"{name} (camera {camera + 1})",
-            f"frame {frame_number}",
-            f"capture t={capture_s:.3f} s",
-            "torch ON" if torch else "torch off",
-        )
-        self._osd(camera, image, lines, torch)
-        ok, encoded = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
-        if not ok:
-            raise RuntimeError("JPEG encoding failed")
-        comment = (
-            f"ocu-sim camera={name} index={camera} frame={frame_number} "
-            f"t_mono={capture_s:.6f} quality={quality} size={width}x{height} torch={int(torch)}"
-        ).encode("ascii")
-        return jpeg_with_comment(encoded.tobytes(), comment)
 
-    def _osd(self, camera: int, image: Pixels, lines: tuple[str, ...], torch: bool) -> None:
+    def _osd(
+        self,
+        camera: int,
+        image: Pixels,
+        lines: tuple[str, ...],
+        torch: bool,
+        *,
+        corner: bool = False,
+    ) -> None:
         height, width = image.shape[:2]
-        scale = max(0.35, height / 480 * 0.7)
+        scale = max(0.35, height / 480 * (0.5 if corner else 0.7))
         thickness = max(1, round(scale * 2))
         line_px = round(28 * scale) + 4
-        left, top = width // 4, height // 4
+        # Over the world the text keeps to the top-left corner, out of the way.
+        left, top = (12, line_px + 4) if corner else (width // 4, height // 4)
         text_w = max(cv2.getTextSize(t, OSD_FONT, scale, thickness)[0][0] for t in lines)
         box_bottom = top + (len(lines) - 1) * line_px + line_px // 3
         cv2.rectangle(image, (left - 8, top - line_px), (left + text_w + 4, box_bottom), 0, -1)
@@ -323,6 +388,7 @@ class ExtendedCounters:
     active: bool
     hellos: int
     status_sent: int
+    scans_sent: int
     fragments_sent: int
     frames_sent: tuple[int, ...]
     corrupt_sent: int
@@ -346,12 +412,24 @@ class ExtendedServer:
         drain_percent_per_s: float = DEFAULT_DRAIN_PERCENT_PER_S,
         corrupt: float = 0.0,
         seed: int | None = None,
+        world: WorldView | None = None,
+        range_sensor: RangeSensor | None = None,
+        imu_noise_rad: float = IMU_NOISE_RAD,
     ) -> None:
         if not (math.isfinite(status_hz) and status_hz > 0.0):
             raise ValueError(f"status_hz must be > 0, got {status_hz!r}")
         self.profile = profile
         self.codec = codec
-        self.cameras = SyntheticCameras(profile.cameras)
+        self.cameras = SyntheticCameras(profile.cameras, world)
+        # Scans go out only where the extension has a scan packet type.
+        self.range_sensor = range_sensor if codec.scan_type is not None else None
+        self._scan_period_s = (
+            1.0 / self.range_sensor.config.scan_hz if self.range_sensor is not None else math.inf
+        )
+        self._next_scan_s = math.inf
+        self._scans_sent = 0
+        self._imu_noise_rad = imu_noise_rad
+        self._imu_rng = random.Random(seed)
         self.watchdog_s = profile.link.robot_watchdog_s
         self._status_period_s = 1.0 / status_hz
         self._lock = threading.Lock()
@@ -424,12 +502,14 @@ class ExtendedServer:
                 stream.request = request
         if fresh:
             self._next_status_s = now_s  # answer at once: the OCU detects the extension
+            if self.range_sensor is not None:
+                self._next_scan_s = now_s
 
     def next_due_s(self) -> float:
         """When poll() next has something to send."""
         if self._client is None:
             return math.inf
-        due = [self._next_status_s, self._last_hello_s + self.watchdog_s]
+        due = [self._next_status_s, self._next_scan_s, self._last_hello_s + self.watchdog_s]
         due.extend(s.next_due_s for s in self._streams.values() if s.request.fps > 0)
         return min(due)
 
@@ -453,6 +533,7 @@ class ExtendedServer:
                 self._client = None
                 self._streams.clear()
                 self._next_status_s = math.inf
+                self._next_scan_s = math.inf
             return
         client = self._client
         assert client is not None
@@ -460,6 +541,11 @@ class ExtendedServer:
             self._next_status_s = max(self._next_status_s + self._status_period_s, now_s)
             send(self.codec.encode(self._status(torch, pose)), client)
             self._status_sent += 1
+        if self.range_sensor is not None and now_s >= self._next_scan_s:
+            self._next_scan_s = max(self._next_scan_s + self._scan_period_s, now_s)
+            scan = self.range_sensor.sweep(Pose(*pose), int(time.monotonic() * 1_000_000))
+            send(self.codec.encode(scan), client)
+            self._scans_sent += 1
         with self._lock:
             stopped = set(self._stopped)
             corrupt = self._corrupt
@@ -473,11 +559,11 @@ class ExtendedServer:
                 stream.next_due_s = now_s + period_s  # skip a backlog rather than burst
             if camera in stopped:
                 continue
-            jpeg, capture_s = self._render(camera, stream, torch, rcp_quality)
+            jpeg, capture_s = self._render(camera, stream, torch, rcp_quality, Pose(*pose))
             self._send_frame(stream, jpeg, capture_s, corrupt, lambda d: send(d, client))
 
     def _render(
-        self, camera: int, stream: _Stream, torch: bool, rcp_quality: int
+        self, camera: int, stream: _Stream, torch: bool, rcp_quality: int, pose: Pose
     ) -> tuple[bytes, float]:
         request = stream.request
         capture_s = time.monotonic()
@@ -488,6 +574,7 @@ class ExtendedServer:
             capture_s,
             request.quality or rcp_quality,
             torch=torch,
+            pose=pose,
         )
         return jpeg, capture_s
 
@@ -533,7 +620,13 @@ class ExtendedServer:
             roll_mrad=round(roll * 1000),
             pitch_mrad=round(pitch * 1000),
             camera_count=len(self.cameras.cameras),
+            # The IMU's heading: the true one with a little noise (its zero is the world's).
+            yaw_mrad=round(self._imu_heading(heading) * 1000),
         )
+
+    def _imu_heading(self, heading_rad: float) -> float:
+        noise = self._imu_rng.gauss(0.0, self._imu_noise_rad) if self._imu_noise_rad else 0.0
+        return math.remainder(heading_rad + noise, math.tau)
 
     def _clamp(self, request: CameraRequest) -> CameraRequest:
         return CameraRequest(
@@ -554,6 +647,7 @@ class ExtendedServer:
             active=self.active(now_s),
             hellos=self._hellos,
             status_sent=self._status_sent,
+            scans_sent=self._scans_sent,
             fragments_sent=self._fragments_sent,
             frames_sent=tuple(self._frames_sent),
             corrupt_sent=self._corrupt_sent,

@@ -13,11 +13,19 @@ import selectors
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 log = logging.getLogger("ocu.sim")
 
 LISTENING_LINE = re.compile(r"ocu-sim listening on (?P<host>[^:\s]+):(?P<port>\d+)")
+
+
+def with_default_world(sim_args: Sequence[str]) -> list[str]:
+    """The console's simulator arguments: the shipped room unless they name a world."""
+    if any(arg == "--world" or arg.startswith("--world=") for arg in sim_args):
+        return list(sim_args)
+    return ["--world", "default", *sim_args]
 
 
 class SimulatorProcessError(RuntimeError):

@@ -5,6 +5,11 @@ Pure: no sockets, no threads and no clock of its own; every call says what time 
 `robot_watchdog_s` passes without one, then stops every motor until the next command.
 Below a channel's `min_speed` a servo does not start; the drive pair moves together; the
 `locked_while_driving` channels (the waist) do not move while the chassis does.
+
+In a world (ocu.nav.world) the chassis is the profile's footprint: a motion that would make
+it overlap a wall or a box is not made — the robot stops at the contact, its tracks stall
+(telemetry reports them still) and `collision at (x, y)` is logged at WARNING once per
+contact; a command that moves it away frees it.
 """
 
 from __future__ import annotations
@@ -15,6 +20,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ocu.control.commands import track_speeds
+from ocu.nav.geometry import Pose, advance
+from ocu.nav.world import EMPTY_WORLD, World
 from ocu.profile import Motor, RobotProfile
 from ocu.records import Command
 
@@ -25,6 +32,9 @@ JOINT_IDLE_CURRENT_A = 0.3
 JOINT_CURRENT_A_PER_RAD_S = 2.0
 TRACK_IDLE_CURRENT_A = 0.5
 TRACK_CURRENT_A_PER_M_S = 8.0
+# Collision checks along the chassis' path: at most this far (m, or rad of turn) per check.
+CONTACT_STEP_M = 0.01
+CONTACT_STEP_RAD = 0.02
 
 
 @dataclass(frozen=True)
@@ -63,8 +73,26 @@ class RobotPhysics:
         initial_joints: Mapping[str, float] | None = None,
         *,
         now_s: float = 0.0,
+        world: World | None = None,
+        turn_slip: float = 0.0,
     ) -> None:
+        if not 0.0 <= turn_slip < 1.0:
+            raise ValueError(f"turn_slip must be in [0, 1), got {turn_slip!r}")
         self.profile = profile
+        # Tracks skid in a turn: the chassis turns this fraction less than its belts say
+        # (the belts' speeds, which telemetry reports, are unchanged).
+        self.turn_slip = turn_slip
+        self.world = world if world is not None else EMPTY_WORLD
+        self._footprint = profile.navigation.footprint
+        if self.world.obstacles and self._footprint is None:
+            raise ValueError("a world needs the profile's footprint ([navigation] table)")
+        if self._footprint is not None:
+            touched = self.world.touching(self._footprint, self.world.start)
+            if touched is not None:
+                raise ValueError(
+                    f"the robot's start pose {tuple(round(v, 3) for v in self.world.start)} "
+                    f"overlaps a {touched.kind} of {self.world.name}"
+                )
         self._channel_motors = {
             motor.channel: motor for motor in profile.positioned_motors if motor.channel
         }
@@ -75,7 +103,12 @@ class RobotPhysics:
         self._commanded = dict.fromkeys(profile.channels, 0.0)
         self._track_speeds_m_s = (0.0, 0.0)
         self._commanded_tracks_m_s = (0.0, 0.0)
-        self._pose = (0.0, 0.0, 0.0)
+        start = self.world.start
+        self._pose = (start.x_m, start.y_m, start.heading_rad)
+        self._in_contact = False
+        # The belt speeds that ran into the obstacle: they stay stalled until they change.
+        self._stalled: tuple[float, float] | None = None
+        self._collisions = 0
         self._waist_suppressed = False
         self._command: Command | None = None
         self._last_command_s = now_s
@@ -131,6 +164,16 @@ class RobotPhysics:
     def pose(self) -> tuple[float, float, float]:
         """Ground truth of the chassis: x_m, y_m and heading_rad from where it started."""
         return self._pose
+
+    @property
+    def in_contact(self) -> bool:
+        """Whether the chassis is pressed against an obstacle (its tracks stall)."""
+        return self._in_contact
+
+    @property
+    def collisions(self) -> int:
+        """How many times the chassis ran into an obstacle."""
+        return self._collisions
 
     @property
     def watchdog_stopped(self) -> bool:
@@ -209,6 +252,8 @@ class RobotPhysics:
         self._commanded = commanded
         self._velocities = effective
         self._track_speeds_m_s = track_speeds(self.profile, effective)
+        if self._stalled is not None and self._track_speeds_m_s == self._stalled:
+            self._track_speeds_m_s = (0.0, 0.0)  # still pushing against the obstacle
         self._commanded_tracks_m_s = track_speeds(self.profile, commanded)
 
     def _integrate(self, dt_s: float) -> None:
@@ -225,15 +270,49 @@ class RobotPhysics:
         if left_m_s == 0.0 and right_m_s == 0.0:
             return
         speed_m_s = (left_m_s + right_m_s) / 2.0
-        turn_rad_s = (right_m_s - left_m_s) / self.profile.track_width_m
-        x_m, y_m, heading_rad = self._pose
-        # Mid-step heading: exact for straight lines and turns in place, close for arcs.
-        mid_heading_rad = heading_rad + turn_rad_s * dt_s / 2.0
-        self._pose = (
-            x_m + speed_m_s * math.cos(mid_heading_rad) * dt_s,
-            y_m + speed_m_s * math.sin(mid_heading_rad) * dt_s,
-            math.remainder(heading_rad + turn_rad_s * dt_s, math.tau),
+        turn_rad_s = (right_m_s - left_m_s) / self.profile.track_width_m * (1.0 - self.turn_slip)
+        footprint = self._footprint
+        if footprint is None or not self.world.obstacles:
+            moved = advance(Pose(*self._pose), speed_m_s * dt_s, turn_rad_s * dt_s)
+            self._pose = (moved.x_m, moved.y_m, moved.heading_rad)
+            return
+        # In small steps, so a fast robot cannot jump through a thin wall.
+        steps = max(
+            1,
+            math.ceil(abs(speed_m_s) * dt_s / CONTACT_STEP_M),
+            math.ceil(abs(turn_rad_s) * dt_s / CONTACT_STEP_RAD),
         )
+        h = dt_s / steps
+        pose = Pose(*self._pose)
+        for _ in range(steps):
+            moved = advance(pose, speed_m_s * h, turn_rad_s * h)
+            if self.world.touching(footprint, moved) is not None:
+                self._contact(pose)
+                break
+            pose = moved
+            self._in_contact = False
+            self._stalled = None
+        self._pose = (pose.x_m, pose.y_m, pose.heading_rad)
+
+    def place(self, pose: Pose) -> None:
+        """Put the chassis somewhere (a test's or a benchmark's hand); ValueError if that
+        overlaps an obstacle."""
+        if self._footprint is not None:
+            touched = self.world.touching(self._footprint, pose)
+            if touched is not None:
+                raise ValueError(f"{tuple(pose)} overlaps a {touched.kind}")
+        self._pose = (pose.x_m, pose.y_m, pose.heading_rad)
+        self._in_contact = False
+        self._stalled = None
+
+    def _contact(self, pose: Pose) -> None:
+        """The chassis ran into something: it stops there and its tracks stall."""
+        if not self._in_contact:
+            self._collisions += 1
+            log.warning("collision at (%.2f, %.2f)", pose.x_m, pose.y_m)
+        self._in_contact = True
+        self._stalled = self._track_speeds_m_s
+        self._track_speeds_m_s = (0.0, 0.0)
 
     # ---- sensors ----------------------------------------------------------------------------
 

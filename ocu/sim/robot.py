@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ocu.control.commands import CommandMapper, rad_to_ticks, speed_to_raw
+from ocu.nav.geometry import Pose
 from ocu.net.transport import Address
 from ocu.profile import Motor, RobotProfile
 from ocu.protocol import (
@@ -243,7 +244,12 @@ class RobotServer:
         if self.extension is not None and self.extension.active(now_s):
             return None  # the client gets every camera through the extension instead
         jpeg = self._renderer.render(
-            self.camera, self._frame_number, self.video_quality, torch=self.torch, time_s=now_s
+            self.camera,
+            self._frame_number,
+            self.video_quality,
+            torch=self.torch,
+            time_s=now_s,
+            pose=Pose(*self.physics.pose),
         )
         self._frame_number += 1
         self.counters.video_sent += 1

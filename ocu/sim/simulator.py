@@ -16,10 +16,12 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import NamedTuple
 
+from ocu.nav.geometry import Pose
+from ocu.nav.world import World
 from ocu.net.loop import SelectLoop
 from ocu.net.transport import Address, Transport, UdpTransport
 from ocu.profile import RobotProfile
@@ -33,7 +35,9 @@ from ocu.sim.extended import (
 )
 from ocu.sim.faults import Direction, FaultConfig, FaultLayer
 from ocu.sim.physics import RobotPhysics
+from ocu.sim.rangefinder import DEFAULT_RANGE_SENSOR, RangeSensor, RangeSensorConfig
 from ocu.sim.robot import RobotServer
+from ocu.sim.scene import WorldView
 from ocu.sim.video import FrameRenderer
 
 log = logging.getLogger("ocu.sim")
@@ -69,6 +73,7 @@ class SimState:
     velocities: dict[str, float]
     commanded_velocities: dict[str, float]
     track_speeds_m_s: tuple[float, float]
+    # Ground truth of the chassis in the world: x_m, y_m, heading_rad.
     pose: tuple[float, float, float]
     torch: bool
     camera: int
@@ -92,6 +97,9 @@ class SimState:
     send_errors: int
     internal_errors: int
     extended: ExtendedCounters | None = None
+    # Times the chassis ran into a wall or a box, and whether it is pressed against one now.
+    collisions: int = 0
+    in_contact: bool = False
 
 
 @dataclass
@@ -124,6 +132,13 @@ class _Periodic:
         return True
 
 
+@dataclass
+class _PlaceRequest:
+    pose: Pose
+    done: threading.Event = field(default_factory=threading.Event)
+    error: ValueError | None = None
+
+
 class RobotSimulator:
     """A simulated Engineer robot server on a UDP socket (or a given transport)."""
 
@@ -146,8 +161,16 @@ class RobotSimulator:
         battery_drain_percent_per_s: float = DEFAULT_DRAIN_PERCENT_PER_S,
         noise_deg: float = 0.0,
         transport: Transport | None = None,
+        world: World | None = None,
+        range_sensor: RangeSensorConfig | None = DEFAULT_RANGE_SENSOR,
+        turn_slip: float = 0.0,
     ) -> None:
-        """Bind host:port over UDP, or serve `transport` (host and port are then ignored)."""
+        """Bind host:port over UDP, or serve `transport` (host and port are then ignored).
+
+        In a `world` the robot starts at its start pose and stops against its walls and
+        boxes; the cameras draw it. An extended robot also sends range scans of it
+        (`range_sensor`, None: no sensor).
+        """
         self.profile = profile
         rate_hz = profile.link.telemetry_rate_hz if telemetry_hz is None else telemetry_hz
         if not (math.isfinite(rate_hz) and rate_hz > 0.0):
@@ -164,6 +187,11 @@ class RobotSimulator:
         self._telemetry_timer = _Periodic(1.0 / rate_hz)
         self._video_timer = _Periodic(1.0 / video_fps if video_fps > 0.0 else None)
 
+        self._start_s = time.monotonic()
+        self._physics = RobotPhysics(
+            profile, initial_joints, now_s=self._start_s, world=world, turn_slip=turn_slip
+        )
+        view = WorldView(world) if world is not None and world.obstacles else None
         extension: ExtendedServer | None = None
         if extended:
             codec = make_extension_codec(profile)
@@ -176,16 +204,32 @@ class RobotSimulator:
                 battery_percent=battery_percent,
                 drain_percent_per_s=battery_drain_percent_per_s,
                 seed=seed,
+                world=view,
+                range_sensor=(
+                    RangeSensor(
+                        self._physics.world,
+                        range_sensor,
+                        mount_xy_m=profile.navigation.scan_mount_xy_m,
+                        seed=seed,
+                    )
+                    if range_sensor is not None
+                    else None
+                ),
             )
-        self._start_s = time.monotonic()
-        self._physics = RobotPhysics(profile, initial_joints, now_s=self._start_s)
-        renderer = FrameRenderer(profile.link.camera_names, video_size)
+        renderer = FrameRenderer(
+            profile.link.camera_names,
+            video_size,
+            world=view,
+            mounts=tuple(camera.mount for camera in profile.cameras),
+        )
         self._robot = RobotServer(
             profile, self._physics, renderer, extension, seed=seed, noise_deg=noise_deg
         )
         self._fault_layer = FaultLayer(faults or FaultConfig(), seed, self._deliver)
         self._counters = _Counters()
 
+        self._place_lock = threading.Lock()
+        self._place_requests: list[_PlaceRequest] = []
         self._received: deque[ReceivedRcp] = deque(maxlen=RECEIVED_LOG_LENGTH)
         self._received_lock = threading.Lock()
         self._condition = threading.Condition()
@@ -296,6 +340,18 @@ class RobotSimulator:
         """Reported positions get uniform noise of ±noise_deg (the true angle is unchanged)."""
         self._robot.set_noise_deg(noise_deg)
 
+    def place(self, pose: Pose) -> None:
+        """Put the robot somewhere in its world (tests, benchmarks); ValueError if it would
+        overlap an obstacle. Thread-safe: done on the simulator's loop thread."""
+        request = _PlaceRequest(pose)
+        with self._place_lock:
+            self._place_requests.append(request)
+        self._loop.wake()
+        if not request.done.wait(5.0):
+            raise RuntimeError("the simulator did not place the robot")
+        if request.error is not None:
+            raise request.error
+
     def cut_link(self) -> None:
         """Drop every datagram in both directions until restore_link()."""
         self._fault_layer.set_cut(True)
@@ -342,6 +398,16 @@ class RobotSimulator:
         return True
 
     def _step(self, now_s: float) -> float:
+        with self._place_lock:
+            requests, self._place_requests = self._place_requests, []
+        for request in requests:
+            self._physics.advance(now_s)
+            try:
+                self._physics.place(request.pose)
+            except ValueError as err:
+                request.error = err
+            self._publish()
+            request.done.set()
         self._fault_layer.release_due(now_s)
         if self._physics_timer.due(now_s):
             self._physics.advance(now_s)
@@ -431,6 +497,8 @@ class RobotSimulator:
             send_errors=self._counters.send_errors,
             internal_errors=self._counters.internal_errors,
             extended=None if robot.extension is None else robot.extension.counters(physics.time_s),
+            collisions=physics.collisions,
+            in_contact=physics.in_contact,
         )
 
     def _publish(self) -> None:

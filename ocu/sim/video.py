@@ -1,5 +1,8 @@
 """Synthetic camera frames: JPEGs that show the camera, a frame counter and moving content.
 
+In a world (ocu.sim.scene) the picture is the world from the camera's mount as the robot
+moves; without one, a tinted, scrolling noise pattern with a ball circling.
+
 Each JPEG carries a comment (JPEG COM segment) with the same facts in machine-readable form,
 ``ocu-sim camera=<name> index=<k> frame=<n> t_mono=<s> quality=<q> torch=<0|1>``, so tests
 and tools can check which camera sent a frame and when without reading pixels.
@@ -12,7 +15,12 @@ import io
 import math
 import time
 
+import numpy as np
 from PIL import Image, ImageDraw, ImageFont
+
+from ocu.nav.geometry import Pose
+from ocu.profile import CameraMount
+from ocu.sim.scene import WorldView
 
 DEFAULT_QUALITY = 75
 MIN_QUALITY = 10
@@ -52,7 +60,14 @@ def _gain_table(gain: float) -> list[int]:
 class FrameRenderer:
     """Draws and encodes frames for a fixed set of cameras and one frame size."""
 
-    def __init__(self, camera_names: tuple[str, ...], size_px: tuple[int, int]) -> None:
+    def __init__(
+        self,
+        camera_names: tuple[str, ...],
+        size_px: tuple[int, int],
+        *,
+        world: WorldView | None = None,
+        mounts: tuple[CameraMount | None, ...] = (),
+    ) -> None:
         width_px, height_px = size_px
         for side in (width_px, height_px):
             if not MIN_FRAME_SIDE_PX <= side <= MAX_FRAME_SIDE_PX:
@@ -62,6 +77,8 @@ class FrameRenderer:
                 )
         self.camera_names = camera_names
         self.size_px = size_px
+        self.world = world
+        self.mounts = mounts
         self._backgrounds: dict[int, Image.Image] = {}
         self._font = ImageFont.load_default(size=max(10, height_px // 16))
         self._torch_table = _gain_table(TORCH_GAIN)
@@ -91,11 +108,12 @@ class FrameRenderer:
         *,
         torch: bool = False,
         time_s: float | None = None,
+        pose: Pose | None = None,
     ) -> bytes:
         """One JPEG of a camera that fits a single datagram (quality or size lowered if needed)."""
         mono_s = time.monotonic() if time_s is None else time_s
         name = self.camera_names[camera]
-        image = self._draw(camera, name, frame_number, torch)
+        image = self._draw(camera, name, frame_number, torch, pose)
         quality = min(max(quality, 1), 100)
         while True:
             comment = (
@@ -118,8 +136,25 @@ class FrameRenderer:
                     )
                 )
 
-    def _draw(self, camera: int, name: str, frame_number: int, torch: bool) -> Image.Image:
+    def _world(self, camera: int, pose: Pose) -> Image.Image:
+        assert self.world is not None
+        width_px = self.size_px[0]
+        mount = self.mounts[camera] if camera < len(self.mounts) else None
+        # A 90-degree wide, undistorted view (the vendor stream's lens is not modelled).
+        bgr = self.world.render(pose, mount, self.size_px, (width_px / 2.0, width_px / 2.0))
+        return Image.fromarray(np.ascontiguousarray(bgr[..., ::-1]), "RGB")
+
+    def _draw(
+        self, camera: int, name: str, frame_number: int, torch: bool, pose: Pose | None = None
+    ) -> Image.Image:
         width_px, height_px = self.size_px
+        if self.world is not None and pose is not None:
+            # The world is drawn fully lit; without the headlight it is darker.
+            image = self._world(camera, pose)
+            if not torch:
+                image = image.point(self._dark_table)
+            self._text(image, camera, name, frame_number, torch)
+            return image
         background = self._background(camera)
         # Scroll the background so consecutive frames differ (moving content).
         shift_px = (frame_number * SCROLL_PX_PER_FRAME) % width_px
@@ -145,6 +180,14 @@ class FrameRenderer:
             fill=(255, 255, 255),
             outline=(0, 0, 0),
         )
+        self._text(image, camera, name, frame_number, torch)
+        return image
+
+    def _text(
+        self, image: Image.Image, camera: int, name: str, frame_number: int, torch: bool
+    ) -> None:
+        height_px = self.size_px[1]
+        draw = ImageDraw.Draw(image)
         wall_clock = time.strftime("%H:%M:%S") + f".{int(time.time() * 1000) % 1000:03d}"
         lines = (
             f"{name} (camera {camera + 1})",
@@ -163,4 +206,3 @@ class FrameRenderer:
                 stroke_width=1,
                 stroke_fill=(0, 0, 0),
             )
-        return image

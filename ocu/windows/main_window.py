@@ -55,6 +55,7 @@ from ocu.record.replay_link import ReplayLink
 from ocu.records import LinkState
 from ocu.widgets.gamepad import GamepadPanel, PadIndicator
 from ocu.widgets.link_status import LinkStatus
+from ocu.widgets.map_view import MapPanel, NavStatus
 from ocu.widgets.model3d import Model3DWidget
 from ocu.widgets.replay import ReplayBanner, ReplayControls
 from ocu.widgets.video import VideoPanel
@@ -71,7 +72,7 @@ log = logging.getLogger("ocu.console")
 CONTROL_PERIOD_MS = 50
 # The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
-LAYOUT_VERSION = 3  # 2: the Video dock; 3: the Arm dock
+LAYOUT_VERSION = 4  # 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
@@ -142,6 +143,7 @@ class MainWindow(QMainWindow):
             calibration_for=lambda info: _calibration(pad_calibrations, info),
         )
         self.gamepad_panel = GamepadPanel(self.teleop, pad_calibrations)
+        self.map_panel = MapPanel(self.model)
         self.event_log = QListWidget()
         self.event_log.setObjectName("event_log")
         self.event_log.setFocusPolicy(Qt.FocusPolicy.NoFocus)
@@ -155,6 +157,7 @@ class MainWindow(QMainWindow):
         self.log_dock = self._dock("event_log_dock", "Events", self.event_log)
         self.video_dock = self._dock("video_dock", "Video", self.video_panel)
         self.gamepad_dock = self._dock("gamepad_dock", "Gamepad", self.gamepad_panel)
+        self.map_dock = self._dock("map_dock", "Map", self.map_panel)
         # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
         # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
@@ -164,6 +167,8 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.model_dock, self.max_dock)
         self.tabifyDockWidget(self.max_dock, self.log_dock)
         self.tabifyDockWidget(self.log_dock, self.gamepad_dock)
+        # The map beside the 3D model: the robot's pose in the room, its arm in the other.
+        self.tabifyDockWidget(self.model_dock, self.map_dock)
         self.model_dock.raise_()
         self.resizeDocks(
             [self.velocity_dock, self.video_dock], [500, 1100], Qt.Orientation.Horizontal
@@ -211,6 +216,8 @@ class MainWindow(QMainWindow):
         if self.model.arm is not None:
             self.arm_indicator = ArmModeIndicator(self.model.arm)
             self.link_status.add_indicator(self.arm_indicator)
+        self.nav_status = NavStatus(self.model)
+        self.link_status.add_indicator(self.nav_status)
         self.pad_indicator = PadIndicator(self.teleop)
         self.link_status.add_indicator(self.pad_indicator)
         self.teleop.events.message.connect(self.log_event)
@@ -329,6 +336,10 @@ class MainWindow(QMainWindow):
         for widget in disabled:
             widget.setEnabled(False)
             widget.setToolTip(REPLAY_DISABLED_TIP)
+        self.map_panel.set_replay()
+        # Odometry integrates recorded motion: at 4x, four robot seconds pass in one.
+        self.model.nav.set_time_scale(source.speed)
+        source.speed_changed.connect(self.model.nav.set_time_scale)
         self.link_status.set_replay()
 
     def restore_layout(self) -> bool:

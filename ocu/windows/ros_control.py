@@ -69,6 +69,7 @@ class RosControl(QObject):
     state_changed = Signal(object, str)
     _probed = Signal(object)
     _velocities = Signal(object)
+    _path = Signal(object)
 
     def __init__(
         self,
@@ -104,6 +105,7 @@ class RosControl(QObject):
         self.state_changed.connect(self._on_state)
         self._probed.connect(self._on_probed)
         self._velocities.connect(self._apply_velocities)
+        self._path.connect(self._follow_path)
         self._sink = _ModelSink(self._velocities.emit)
         self._show_availability()
         self.probe()
@@ -235,12 +237,30 @@ class RosControl(QObject):
         if not rospy.core.is_initialized():
             init_node(NODE_NAME, anonymous=True)  # rospy allows one node per process
         arm = self.model.arm
+        # The model feeds its own navigator; the bridge publishes from it (odom, tf, scan),
+        # hands it other nodes' scans and passes /follow_path to the model's path mode.
         return RosBridge(
             self.profile,
             hardware_id=self.hardware_id,
             on_state_changed=self.state_changed.emit,
             arm_poses_path=arm.poses.path if arm is not None else None,
+            navigator=self.model.nav,
+            feed_navigator=False,
+            on_path=self._path.emit,
         )
+
+    def _follow_path(self, points: list[tuple[float, float]]) -> None:
+        """/follow_path while ROS has control: the model's path mode, a planner's input."""
+        if self.bridge is None or self.bridge.state not in (
+            BridgeState.LISTENING,
+            BridgeState.COMMANDING,
+        ):
+            self.log_event("ROS follow_path ignored: ROS control is not on")
+            return
+        try:
+            self.model.start_path(points, external=True)
+        except CommandError as err:
+            self.log_event(f"ROS follow_path refused: {err}")
 
     def _on_state(self, state: BridgeState, text: str) -> None:
         if self.bridge is None:
@@ -264,6 +284,7 @@ class RosControl(QObject):
         if self.bridge is not None:
             self.bridge.stop()
         self._velocities.disconnect(self._apply_velocities)
+        self._path.disconnect(self._follow_path)
         thread, self._probe_thread = self._probe_thread, None
         if thread is not None:
             thread.join(PROBE_JOIN_S)

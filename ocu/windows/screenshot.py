@@ -121,12 +121,12 @@ def _shoot(
     from ocu.link.base import Link
     from ocu.link.live import UdpLink
     from ocu.record.recorder import Recorder
-    from ocu.sim.launcher import SimulatorProcess
+    from ocu.sim.launcher import SimulatorProcess, with_default_world
     from ocu.windows.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
-    with SimulatorProcess(args.profile, args.sim_arg) as simulator:
+    with SimulatorProcess(args.profile, with_default_world(args.sim_arg)) as simulator:
         address = simulator.address
 
         def make_link() -> Link:

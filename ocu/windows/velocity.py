@@ -38,6 +38,7 @@ SOURCE_TEXT = {
     Source.ROS: "ROS",
     Source.ARM: "arm",
     Source.GAMEPAD: "pad",
+    Source.ASSIST: "assist",
 }
 STOP_ALL_STYLE = (
     "QPushButton { background: #c62828; color: white; font-size: 16pt; font-weight: bold;"

@@ -1,0 +1,206 @@
+"""The ROS side of driving with a map, without ROS or Qt: messages as plain data, the zones
+between the bridge and the robot, and the path mode for /follow_path.
+
+- `odometry_data`: nav_msgs/Odometry (frame `odom`, child `base_link`) and the matching tf.
+- `laser_scan_data` / `scan_from_ros`: sensor_msgs/LaserScan both ways.
+- `path_points`: a nav_msgs/Path in `odom` as waypoints (other frames are refused: the node
+  keeps no tf tree to transform them).
+- `GuardedSink`: the bridge's velocity sink with the safety zones in front of it — the same
+  Navigator.guard the console's model applies — so cmd_vel, joint goals and /follow_path are
+  slowed near obstacles in `ocu-ros` too.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ocu.nav.navigator import Navigator
+from ocu.nav.odometry import OdometryEstimate
+from ocu.records import SCAN_FROM_ROS, ScanFrame
+from ocu.ros.bridge import VelocitySink
+
+ODOM_FRAME = "odom"
+BASE_FRAME = "base_link"
+# The covariance ROS wants is 6x6 over (x, y, z, roll, pitch, yaw); a crawler on the floor
+# knows z, roll and pitch only loosely: this large variance says "not estimated".
+UNKNOWN_VARIANCE = 1e6
+
+
+class NavigationError(ValueError):
+    """A message the node cannot use (a path in another frame, a malformed scan)."""
+
+
+@dataclass(frozen=True)
+class OdometryData:
+    """nav_msgs/Odometry's contents (and the tf odom -> base_link)."""
+
+    frame_id: str
+    child_frame_id: str
+    position: tuple[float, float, float]
+    orientation_xyzw: tuple[float, float, float, float]
+    pose_covariance: tuple[float, ...]
+    linear: tuple[float, float, float]
+    angular: tuple[float, float, float]
+    twist_covariance: tuple[float, ...]
+
+
+def yaw_quaternion(yaw_rad: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation about z."""
+    return (0.0, 0.0, math.sin(yaw_rad / 2.0), math.cos(yaw_rad / 2.0))
+
+
+def quaternion_yaw(x: float, y: float, z: float, w: float) -> float:
+    """The rotation about z of a quaternion."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def odometry_data(estimate: OdometryEstimate) -> OdometryData:
+    """The estimate as nav_msgs/Odometry: pose with its covariance, the speeds in base_link."""
+    pose = estimate.pose
+    cov = estimate.covariance
+    pose_cov = [0.0] * 36
+    index = {0: 0, 1: 1, 2: 5}  # x, y, yaw in the 6x6 matrix
+    for row, r in index.items():
+        for column, c in index.items():
+            pose_cov[r * 6 + c] = float(cov[row, column])
+    for axis in (2, 3, 4):
+        pose_cov[axis * 6 + axis] = UNKNOWN_VARIANCE
+    twist_cov = [0.0] * 36
+    for axis in (1, 2, 3, 4):
+        twist_cov[axis * 6 + axis] = UNKNOWN_VARIANCE
+    return OdometryData(
+        frame_id=ODOM_FRAME,
+        child_frame_id=BASE_FRAME,
+        position=(pose.x_m, pose.y_m, 0.0),
+        orientation_xyzw=yaw_quaternion(pose.heading_rad),
+        pose_covariance=tuple(pose_cov),
+        linear=(estimate.linear_m_s, 0.0, 0.0),
+        angular=(0.0, 0.0, estimate.angular_rad_s),
+        twist_covariance=tuple(twist_cov),
+    )
+
+
+@dataclass(frozen=True)
+class LaserScanData:
+    """sensor_msgs/LaserScan's contents (ranges: inf beyond range_max, nan unmeasured)."""
+
+    frame_id: str
+    angle_min: float
+    angle_max: float
+    angle_increment: float
+    scan_time: float
+    range_min: float
+    range_max: float
+    ranges: tuple[float, ...]
+
+
+def laser_scan_data(scan: ScanFrame, scan_period_s: float = 0.0) -> LaserScanData:
+    """A robot's scan as sensor_msgs/LaserScan, in base_link (the sensor's mount is in the
+    profile; a static transform for it is the launch file's business)."""
+    count = len(scan.ranges_m)
+    return LaserScanData(
+        frame_id=BASE_FRAME,
+        angle_min=scan.angle_min_rad,
+        angle_max=scan.angle_min_rad + scan.angle_increment_rad * (count - 1),
+        angle_increment=scan.angle_increment_rad,
+        scan_time=scan_period_s,
+        range_min=scan.range_min_m,
+        range_max=scan.range_max_m,
+        ranges=scan.ranges_m,
+    )
+
+
+def scan_from_ros(
+    *,
+    angle_min: float,
+    angle_increment: float,
+    range_min: float,
+    range_max: float,
+    ranges: Sequence[float],
+    received_at: float,
+    wall_time: float,
+) -> ScanFrame:
+    """Another node's LaserScan for the zones; NavigationError if it makes no sense."""
+    values = (angle_min, angle_increment, range_min, range_max)
+    if not all(math.isfinite(v) for v in values) or angle_increment == 0.0 or not ranges:
+        raise NavigationError("LaserScan: angles and limits must be finite, beams present")
+    if not 0.0 <= range_min < range_max:
+        raise NavigationError(f"LaserScan: range_min {range_min} not below range_max {range_max}")
+    # REP 117: below range_min or nan is no measurement; above range_max, or +inf, no return.
+    cleaned = tuple(
+        math.nan if math.isnan(r) or r < range_min else math.inf if r > range_max else float(r)
+        for r in ranges
+    )
+    return ScanFrame(
+        angle_min_rad=angle_min,
+        angle_increment_rad=angle_increment,
+        range_min_m=range_min,
+        range_max_m=range_max,
+        ranges_m=cleaned,
+        received_at=received_at,
+        wall_time=wall_time,
+        source=SCAN_FROM_ROS,
+    )
+
+
+def path_points(frame_id: str, points: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
+    """A nav_msgs/Path's positions as waypoints in odom; NavigationError otherwise."""
+    frame = frame_id.lstrip("/")
+    if frame not in (ODOM_FRAME, ""):
+        raise NavigationError(f"follow_path: the path is in {frame_id!r}; give it in 'odom'")
+    checked = [(float(x), float(y)) for x, y in points]
+    if not checked:
+        raise NavigationError("follow_path: the path has no poses")
+    if not all(math.isfinite(v) for point in checked for v in point):
+        raise NavigationError("follow_path: a pose is not finite")
+    return checked
+
+
+class GuardedSink:
+    """A VelocitySink that passes the drive pair through the safety zones first.
+
+    The bridge holds the last drive it asked for; `refresh()` (every bridge step) judges it
+    again, so a robot driving on under a steady cmd_vel is slowed and stopped as it nears an
+    obstacle.
+    """
+
+    def __init__(self, sink: VelocitySink, navigator: Navigator) -> None:
+        self.sink = sink
+        self.navigator = navigator
+        self.drive = navigator.drive
+        self._lock = threading.Lock()
+        self._wanted: tuple[float, float] = (0.0, 0.0)
+        self._sent: tuple[float, float] | None = None
+
+    def set_velocities(self, **velocities: float) -> None:
+        """The bridge's command: the drive pair judged by the zones, the rest as it is."""
+        with self._lock:
+            if self.drive is not None and any(name in velocities for name in self.drive):
+                linear, turn = self.drive
+                self._wanted = (
+                    float(velocities.get(linear, self._wanted[0])),
+                    float(velocities.get(turn, self._wanted[1])),
+                )
+                velocities = {**velocities, **self._guarded()}
+            self.sink.set_velocities(**velocities)
+
+    def refresh(self) -> None:
+        """Judge the drive again (new scans, the robot moved); send it if it changed."""
+        with self._lock:
+            if self.drive is None or self._wanted == (0.0, 0.0):
+                return
+            before = self._sent
+            guarded = self._guarded()
+            if tuple(guarded.values()) != before:
+                self.sink.set_velocities(**guarded)
+
+    def _guarded(self) -> dict[str, float]:
+        assert self.drive is not None
+        state = self.navigator.guard(*self._wanted)
+        decision = state.decision
+        values = (decision.linear_m_s, decision.angular_rad_s) if decision else self._wanted
+        self._sent = values
+        return dict(zip(self.drive, values, strict=True))

@@ -1,0 +1,240 @@
+"""Driving with a map through ROS: odom, tf, scan, follow_path and the zones in `ocu-ros`.
+
+The pure parts (messages as data, the guarded sink) run without ROS; the node runs as a
+child process against a real roscore and the simulator in this process.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from ocu.control.commands import CommandMapper
+from ocu.nav.geometry import Pose
+from ocu.nav.navigator import Navigator
+from ocu.nav.world import load_world, parse_world
+from ocu.profile import RobotProfile
+from ocu.records import ScanFrame
+from ocu.ros.master import RosMaster
+from ocu.ros.navigation import (
+    GuardedSink,
+    NavigationError,
+    odometry_data,
+    path_points,
+    quaternion_yaw,
+    scan_from_ros,
+)
+from ocu.sim.rangefinder import RangeSensor, RangeSensorConfig
+from ocu.sim.simulator import RobotSimulator
+from tests.ros.conftest import ROSPY_WARNINGS, Collector, NodeProcess, needs_ros, wait_for
+
+pytestmark = ROSPY_WARNINGS
+LINEAR = "drive_linear"
+
+
+class Recording:
+    """A VelocitySink that keeps what it was told."""
+
+    def __init__(self) -> None:
+        self.calls: list[dict[str, float]] = []
+
+    def set_velocities(self, **velocities: float) -> None:
+        self.calls.append(velocities)
+
+
+def test_odometry_as_a_ros_message(profile: RobotProfile) -> None:
+    navigator = Navigator(profile, clock=lambda: 10.0, grid=False)
+    navigator.reset_odometry(Pose(1.0, 2.0, 0.5))
+    data = odometry_data(navigator.estimate())
+    assert (data.frame_id, data.child_frame_id) == ("odom", "base_link")
+    assert data.position == (1.0, 2.0, 0.0)
+    assert quaternion_yaw(*data.orientation_xyzw) == pytest.approx(0.5)
+    assert len(data.pose_covariance) == 36
+    assert data.pose_covariance[2 * 6 + 2] > 1e3  # z is not estimated
+
+
+def test_scans_and_paths_from_other_nodes() -> None:
+    scan = scan_from_ros(
+        angle_min=-1.0,
+        angle_increment=0.5,
+        range_min=0.1,
+        range_max=5.0,
+        ranges=[1.0, 0.05, math.inf, 9.0, math.nan],
+        received_at=1.0,
+        wall_time=2.0,
+    )
+    ranges = scan.ranges_m
+    assert ranges[0] == 1.0
+    assert math.isnan(ranges[1])  # below range_min: no measurement
+    assert math.isinf(ranges[2])
+    assert math.isinf(ranges[3])  # beyond range_max: no return
+    assert math.isnan(ranges[4])
+    with pytest.raises(NavigationError, match=r"range_min 5\.0 not below range_max 1\.0"):
+        scan_from_ros(
+            angle_min=0.0,
+            angle_increment=1.0,
+            range_min=5.0,
+            range_max=1.0,
+            ranges=[1.0],
+            received_at=0.0,
+            wall_time=0.0,
+        )
+    assert path_points("/odom", [(1, 2)]) == [(1.0, 2.0)]
+    with pytest.raises(NavigationError, match="the path is in 'map'; give it in 'odom'"):
+        path_points("map", [(1, 2)])
+    with pytest.raises(NavigationError, match="no poses"):
+        path_points("odom", [])
+
+
+def test_the_guarded_sink_slows_a_steady_command_as_the_wall_nears(profile: RobotProfile) -> None:
+    now = [0.0]
+    navigator = Navigator(profile, clock=lambda: now[0], grid=False)
+    sink = Recording()
+    guarded = GuardedSink(sink, navigator)
+
+    def wall(gap_m: float) -> ScanFrame:
+        x = 0.67 + gap_m
+        world = parse_world({"wall": [{"from_m": [x, -3.0], "to_m": [x, 3.0]}]})
+        packet = RangeSensor(world, RangeSensorConfig(noise_m=0.0)).sweep(Pose(0, 0, 0), 0)
+        return ScanFrame.from_packet(packet, now[0], 0.0)
+
+    navigator.on_scan(wall(2.0))
+    guarded.set_velocities(drive_linear=0.45, drive_turn=0.0, waist=0.1)
+    assert sink.calls[-1] == {"drive_linear": 0.45, "drive_turn": 0.0, "waist": 0.1}
+    now[0] += 0.1
+    navigator.on_scan(wall(0.25))
+    guarded.refresh()  # the same command, judged again
+    assert sink.calls[-1] == {"drive_linear": pytest.approx(0.2), "drive_turn": 0.0}
+    now[0] += 0.1
+    navigator.on_scan(wall(0.02))
+    guarded.refresh()
+    assert sink.calls[-1] == {"drive_linear": 0.0, "drive_turn": 0.0}
+
+
+# ---- the node ----------------------------------------------------------------------------
+
+
+def path_message(points: list[tuple[float, float]], frame: str = "odom") -> Any:
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Path as PathMessage
+
+    message = PathMessage()
+    message.header.frame_id = frame
+    for x, y in points:
+        pose = PoseStamped()
+        pose.header.frame_id = frame
+        pose.pose.position.x, pose.pose.position.y = x, y
+        pose.pose.orientation.w = 1.0
+        message.poses.append(pose)
+    return message
+
+
+@pytest.mark.slow
+def test_the_node_publishes_odom_tf_and_scan_and_follows_a_path(
+    profile: RobotProfile, ros_master: RosMaster, ros_client: None, tmp_path: Path
+) -> None:
+    import rospy
+    from nav_msgs.msg import Odometry
+    from nav_msgs.msg import Path as PathMessage
+    from sensor_msgs.msg import LaserScan
+    from tf2_msgs.msg import TFMessage
+
+    needs_ros()
+    sim = RobotSimulator(
+        profile, extended=True, world=load_world("default"), telemetry_hz=10.0, video_fps=0.0
+    )
+    assert sim.extension is not None
+    for camera in range(len(profile.link.camera_names)):
+        sim.extension.stop_camera(camera)
+    sim.start()
+    odom = Collector("odom", Odometry)
+    tf = Collector("/tf", TFMessage)
+    scan = Collector("scan", LaserScan)
+    follow = rospy.Publisher("follow_path", PathMessage, queue_size=1, latch=True)
+    process = NodeProcess(tmp_path, sim.address, "_extension:=true")
+    try:
+        process.wait_connected(follow)
+        laser = scan.wait(lambda m: len(m.ranges) == 360, 20.0)
+        assert laser.header.frame_id == "base_link"
+        ahead = laser.ranges[len(laser.ranges) // 2]  # angle_min is -pi: the middle is ahead
+        assert ahead == pytest.approx(4.95, abs=0.05)
+        first = odom.wait(lambda m: True, 10.0)
+        assert (first.header.frame_id, first.child_frame_id) == ("odom", "base_link")
+        transform = tf.wait(lambda m: bool(m.transforms), 10.0).transforms[0]
+        assert (transform.header.frame_id, transform.child_frame_id) == ("odom", "base_link")
+        follow.publish(path_message([(1.0, 0.0), (1.5, 0.5)]))
+        assert sim.wait_until(lambda s: math.dist(s.pose[:2], (1.5, 0.5)) < 0.2, 30.0), (
+            f"the robot is at {sim.state().pose}:\n{process.output()}"
+        )
+        assert wait_for(lambda: sim.state().all_stopped, 10.0)
+        moved = odom.wait(lambda m: m.pose.pose.position.x > 1.3, 5.0, after=odom.count() - 1)
+        assert moved.pose.pose.position.y == pytest.approx(sim.state().pose[1], abs=0.1)
+    finally:
+        follow.unregister()
+        for collector in (odom, tf, scan):
+            collector.close()
+        code = process.stop()
+        sim.stop()
+    assert code == 0, process.output()
+    assert "follow_path: 2 poses in odom, path mode started" in process.output()
+    assert "path done" in process.output()
+
+
+@pytest.mark.slow
+def test_a_vendor_robot_takes_scan_from_another_node_for_the_zones(
+    profile: RobotProfile, ros_master: RosMaster, ros_client: None, tmp_path: Path
+) -> None:
+    import rospy
+    from geometry_msgs.msg import Twist
+    from sensor_msgs.msg import LaserScan
+
+    needs_ros()
+    # A wall 0.3 m ahead of the footprint; the vendor robot has no range sensor of its own.
+    world = parse_world({"wall": [{"from_m": [0.97, -3.0], "to_m": [0.97, 3.0]}]})
+    sim = RobotSimulator(profile, world=world, telemetry_hz=10.0, video_fps=0.0)
+    sim.start()
+    sensor = RangeSensor(world, RangeSensorConfig(noise_m=0.0))
+    scan_pub = rospy.Publisher("scan", LaserScan, queue_size=1)
+    cmd_vel = rospy.Publisher("cmd_vel", Twist, queue_size=1)
+    process = NodeProcess(tmp_path, sim.address)
+    try:
+        process.wait_connected(scan_pub)
+        process.wait_connected(cmd_vel)
+        twist = Twist()
+        twist.linear.x = 0.45
+        started = time.monotonic()
+        deadline = started + 6.0
+        while time.monotonic() < deadline:
+            # Another node's laser on the robot: what it sees from where the robot truly is.
+            packet = sensor.sweep(Pose(*sim.state().pose), 0)
+            frame = ScanFrame.from_packet(packet, 0.0, 0.0)
+            message = LaserScan()
+            message.header.frame_id = "base_link"
+            message.header.stamp = rospy.Time.now()
+            message.angle_min = frame.angle_min_rad
+            message.angle_increment = frame.angle_increment_rad
+            message.angle_max = frame.angle_min_rad + frame.angle_increment_rad * 359
+            message.range_min, message.range_max = frame.range_min_m, frame.range_max_m
+            message.ranges = list(frame.ranges_m)
+            scan_pub.publish(message)
+            cmd_vel.publish(twist)
+            time.sleep(0.1)
+        mapper = CommandMapper(profile)
+        speeds = [
+            mapper.to_command(r.packet).velocity(LINEAR)
+            for r in sim.received_commands()
+            if r.time_s > started
+        ]
+    finally:
+        for publisher in (scan_pub, cmd_vel):
+            publisher.unregister()
+        code = process.stop()
+        sim.stop()
+    assert code == 0, process.output()
+    assert speeds
+    assert max(speeds) <= 0.2 + 1e-3  # capped by the innermost zone at most
+    assert sim.state().collisions == 0
