@@ -286,10 +286,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if reason is not None:
         print(f"ocu-ros: {reason}", file=sys.stderr)
         return 1
-    stop = threading.Event()
+    stop = SignalStop()
 
     def request_stop(signum: int, _frame: FrameType | None) -> None:
-        log.info("%s: shutting down", signal.Signals(signum).name)
+        # Nothing that takes a lock here: the handler runs between two bytecodes of the main
+        # thread, which may hold rospy's XML-RPC lock, and logging goes to /rosout through
+        # it (a deadlock seen when SIGTERM came while the bridge was subscribing).
+        stop.signal_name = signal.Signals(signum).name
         stop.set()
 
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -298,6 +301,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+class SignalStop(threading.Event):
+    """Set by SIGINT/SIGTERM; remembers which, for the log line written outside the handler."""
+
+    signal_name = ""
+
+    def log_reason(self) -> None:
+        if self.signal_name:
+            log.info("%s: shutting down", self.signal_name)
 
 
 def _wait_for_master(stop: threading.Event) -> bool:
@@ -405,6 +418,8 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         while not stop.wait(STOP_POLL_S):
             if bridge.failed.is_set():
                 return 1
+        if isinstance(stop, SignalStop):
+            stop.log_reason()
         return 0
     finally:
         if bridge is not None:
