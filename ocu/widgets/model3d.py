@@ -42,6 +42,9 @@ from ocu.render.scene import RenderFrame, build_frame, model_bounds
 
 FRESHNESS_CHECK_MS = 250
 SOFTWARE_FRAME_INTERVAL_MS = 33  # at most ~30 OSMesa frames per second
+# A joint moving less than this is not drawn again: 0.01°, a tenth of a millimetre at the
+# tip of a metre-long arm (the prediction wanders by less at every telemetry frame).
+REDRAW_EPSILON_RAD = 2e-4
 
 
 class TelemetryFrameLike(Protocol):
@@ -141,7 +144,7 @@ class Model3DWidget(QWidget):
         for name, value in angles_rad.items():
             if name not in self.live.actuated_joints or not math.isfinite(value):
                 continue
-            if self.live.position(name) != value:
+            if abs(self.live.position(name) - value) > REDRAW_EPSILON_RAD:
                 self.live.set_position(name, value)
                 changed = True
             if name in self.tracked_joints:
@@ -183,6 +186,11 @@ class Model3DWidget(QWidget):
         )
         if self.reading is None:
             self.reading = self.live.copy()
+        elif faults == self._faults and all(
+            abs(self.reading.position(name) - value) <= REDRAW_EPSILON_RAD
+            for name, value in angles.items()
+        ):
+            return  # nothing the eye could see moved
         self.reading.set_positions(angles)
         self._faults = faults
         self.request_render()
