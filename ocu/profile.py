@@ -63,6 +63,7 @@ EXTENSION_KEYS = (
     "probe",
     "frame_types",
     "max_datagram_bytes",
+    "fit_datagrams_to_path",
     "stream_width_px",
     "stream_height_px",
     "stream_fps",
@@ -76,6 +77,8 @@ VIDEO_KEYS = (
     "reassembly_max_frames",
     "reassembly_max_bytes",
     "reassembly_timeout_s",
+    "decode_at_display_size",
+    "opencv_threads",
 )
 CAMERA_KEYS = (
     "model",
@@ -234,6 +237,9 @@ class ExtensionSettings:
     stream_width_px: int
     stream_height_px: int
     stream_fps: int
+    # Ask for datagrams as large as the route's MTU carries unfragmented (65507 bytes on the
+    # loopback, 1472 on a 1500-byte link); max_datagram_bytes where the MTU is unknown.
+    fit_datagrams_to_path: bool = True
 
 
 @dataclass(frozen=True)
@@ -245,6 +251,10 @@ class VideoSettings:
     reassembly_max_frames: int = 16
     reassembly_max_bytes: int = 8 * 1024 * 1024
     reassembly_timeout_s: float = 0.5
+    # Decode each JPEG at the size its cell shows it (libjpeg DCT scaling, 1/2 to 1/8).
+    decode_at_display_size: bool = True
+    # OpenCV's worker threads for decoding and correction; 0: OpenCV's own choice.
+    opencv_threads: int = 1
 
 
 @dataclass(frozen=True)
@@ -735,6 +745,11 @@ def _parse_extension(reader: _Reader, vendor: FrameTypes) -> ExtensionSettings:
         stream_width_px=reader.integer("stream_width_px", low=16, high=4096),
         stream_height_px=reader.integer("stream_height_px", low=16, high=4096),
         stream_fps=reader.integer("stream_fps", low=0, high=255),
+        fit_datagrams_to_path=(
+            reader.boolean("fit_datagrams_to_path")
+            if reader.optional("fit_datagrams_to_path")
+            else ExtensionSettings.fit_datagrams_to_path
+        ),
     )
 
 
@@ -745,6 +760,16 @@ def _parse_video(reader: _Reader) -> VideoSettings:
         reassembly_max_frames=reader.integer("reassembly_max_frames", low=1, high=1024),
         reassembly_max_bytes=reader.integer("reassembly_max_bytes", low=65536, high=2**30),
         reassembly_timeout_s=reader.number("reassembly_timeout_s", low=0.001),
+        decode_at_display_size=(
+            reader.boolean("decode_at_display_size")
+            if reader.optional("decode_at_display_size")
+            else VideoSettings.decode_at_display_size
+        ),
+        opencv_threads=(
+            reader.integer("opencv_threads", low=0, high=64)
+            if reader.optional("opencv_threads")
+            else VideoSettings.opencv_threads
+        ),
     )
 
 

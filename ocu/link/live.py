@@ -33,8 +33,9 @@ from ocu.net.transport import (
     is_loopback,
     resolve,
 )
-from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest, HelloPacket
+from ocu.profile import ExtensionSettings, RobotProfile
+from ocu.protocol.extended import MIN_DATAGRAM, CameraRequest, HelloPacket
+from ocu.protocol.packets import MAX_DATAGRAM
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import (
     HELLO,
@@ -118,7 +119,7 @@ class LiveLink(Link):
                     )
                     for index in range(len(settings.camera_names))
                 ),
-                max_datagram_bytes=ext.max_datagram_bytes,
+                max_datagram_bytes=_path_datagram_bytes(ext, transport, robot_address),
             )
 
         self._lock = threading.RLock()
@@ -503,6 +504,16 @@ class LinkOptions(TypedDict, total=False):
     send_on_change: bool
     extension: bool
     clock: Callable[[], float]
+
+
+def _path_datagram_bytes(ext: ExtensionSettings, transport: Transport, robot: Address) -> int:
+    """The video datagram size to ask for: the path's when known and wanted, else the profile's."""
+    if not ext.fit_datagrams_to_path:
+        return ext.max_datagram_bytes
+    path = transport.path_payload_bytes(robot)
+    if path is None or path < MIN_DATAGRAM:
+        return ext.max_datagram_bytes
+    return min(path, MAX_DATAGRAM)
 
 
 class UdpLink(LiveLink):

@@ -20,6 +20,12 @@ VIRTUAL_OCU: Address = ("virtual-ocu", 1)
 VIRTUAL_ROBOT: Address = ("virtual-robot", 1)
 # Room for a burst of video frames; the kernel caps this at net.core.rmem_max.
 RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
+# IPv4 and UDP headers: a datagram's payload is the path MTU less these.
+IP_UDP_HEADER_BYTES = 28
+# Linux's IP_MTU socket option (not in Python's socket module): a connected socket's path MTU.
+_IP_MTU = 14
+# The largest payload asked of an in-process wire (as large as a UDP datagram may be).
+VIRTUAL_PAYLOAD_BYTES = 65_507
 
 
 class TransportError(OSError):
@@ -65,6 +71,10 @@ class Transport(ABC):
         """Release the socket; safe to call twice."""
         self.socket.close()
 
+    def path_payload_bytes(self, to: Address) -> int | None:
+        """The largest datagram payload that reaches `to` unfragmented; None if unknown."""
+        return None
+
 
 class UdpTransport(Transport):
     """A UDP socket bound to `bind` (port 0: any free port)."""
@@ -91,6 +101,17 @@ class UdpTransport(Transport):
     def send(self, data: bytes, to: Address) -> None:
         self.socket.sendto(data, to)
 
+    def path_payload_bytes(self, to: Address) -> int | None:
+        """From the route's MTU (Linux IP_MTU on a connected probe socket): 65507 on the
+        loopback, 1472 on a 1500-byte Ethernet or radio link."""
+        try:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                probe.connect(to)
+                mtu = probe.getsockopt(socket.IPPROTO_IP, _IP_MTU)
+        except OSError:
+            return None
+        return max(0, min(mtu, 65_535) - IP_UDP_HEADER_BYTES) or None
+
 
 class VirtualEndpoint(Transport):
     """One end of a VirtualWire: whatever it sends arrives at the other end, from it."""
@@ -112,6 +133,10 @@ class VirtualEndpoint(Transport):
         if to != self.peer:
             raise OSError(f"{self.address[0]} is wired to {self.peer[0]}, not {to[0]}")
         self.socket.send(data)
+
+    def path_payload_bytes(self, to: Address) -> int | None:
+        """An in-process wire carries any UDP-sized datagram whole."""
+        return VIRTUAL_PAYLOAD_BYTES
 
 
 class VirtualWire:

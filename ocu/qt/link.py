@@ -86,7 +86,13 @@ class QtLink(QObject):
         cameras = len(profile.link.camera_names)
         self.corrector = Corrector(profile.cameras)
         self.frames: LatestFrames[DecodedVideoFrame] = LatestFrames(cameras)
-        self.decoder = VideoDecoder(cameras, self.corrector, self._on_decoded, self._on_corrupt)
+        self.decoder = VideoDecoder(
+            cameras,
+            self.corrector,
+            self._on_decoded,
+            self._on_corrupt,
+            opencv_threads=profile.video.opencv_threads,
+        )
         self._telemetry: LatestFrames[TelemetryFrame] = LatestFrames(1)
         self._every_frame = QMetaMethod.fromSignal(self.telemetry_received)
         self._every_video = QMetaMethod.fromSignal(self.video_frame_received)
@@ -117,6 +123,14 @@ class QtLink(QObject):
     def take_video_frame(self, camera: int) -> DecodedVideoFrame | None:
         """The newest decoded frame of a camera not yet taken, or None (any thread)."""
         return self.frames.take(camera)
+
+    def full_size(self, frame: DecodedVideoFrame) -> DecodedVideoFrame | None:
+        """The frame decoded again at its full size (a snapshot); None if it cannot be."""
+        decoded = frame.decoded
+        if decoded is None:
+            return None
+        again = self.decoder.decode_now(frame.frame, decoded.slot, learn=False)
+        return None if again is None else DecodedVideoFrame(frame.frame, wrap_pixels(again), again)
 
     def shutdown(self, timeout_s: float = 2.0) -> None:
         """Stop the heartbeat, the link (zeros last) and the decoder; idempotent."""

@@ -207,8 +207,13 @@ class Corrector:
         """The camera's map cache, or None without a calibration."""
         return self._undistorters[camera]
 
-    def apply(self, camera: int, image: Pixels) -> tuple[Pixels, CorrectionTimings]:
-        """The corrected frame (the input may be changed in place) and the time per stage."""
+    def apply(
+        self, camera: int, image: Pixels, *, learn: bool = True
+    ) -> tuple[Pixels, CorrectionTimings]:
+        """The corrected frame (the input may be changed in place) and the time per stage.
+
+        `learn=False` uses the camera's smoothed gray-world gains without updating them.
+        """
         if not 0 <= camera < len(self._settings):
             return image, CorrectionTimings()
         settings = self.settings(camera)
@@ -219,7 +224,11 @@ class Corrector:
             red, green, blue = settings.fixed_gains_rgb
             gains = (blue, green, red)
             if settings.colour == "gray_world":
-                gains = self._smooth(camera, gray_world_gains_bgr(image))
+                measured = gray_world_gains_bgr(image)
+                if learn:
+                    gains = self._smooth(camera, measured)
+                else:
+                    gains = self._smoothed[camera] or measured
             apply_gains(image, gains)
             colour_ms = (time.perf_counter() - start) * 1000.0
         undistorter = self._undistorters[camera]

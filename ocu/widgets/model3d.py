@@ -54,6 +54,9 @@ WORKSPACE_ALPHA = 0.13
 # The jog arrow: this long at the jog's full speed, never shorter than the minimum.
 ARROW_M_PER_M_S = 3.0
 ARROW_MIN_M = 0.08
+# A joint moving less than this is not drawn again: 0.01°, a tenth of a millimetre at the
+# tip of a metre-long arm (the prediction wanders by less at every telemetry frame).
+REDRAW_EPSILON_RAD = 2e-4
 
 
 class TelemetryFrameLike(Protocol):
@@ -171,7 +174,7 @@ class Model3DWidget(QWidget):
         for name, value in angles_rad.items():
             if name not in self.live.actuated_joints or not math.isfinite(value):
                 continue
-            if self.live.position(name) != value:
+            if abs(self.live.position(name) - value) > REDRAW_EPSILON_RAD:
                 self.live.set_position(name, value)
                 changed = True
             if name in self.tracked_joints:
@@ -213,6 +216,11 @@ class Model3DWidget(QWidget):
         )
         if self.reading is None:
             self.reading = self.live.copy()
+        elif faults == self._faults and all(
+            abs(self.reading.position(name) - value) <= REDRAW_EPSILON_RAD
+            for name, value in angles.items()
+        ):
+            return  # nothing the eye could see moved
         self.reading.set_positions(angles)
         self._faults = faults
         self.request_render()

@@ -1,19 +1,30 @@
 """Live plots of every motor's position, speed and current: a view of the robot's history.
 
 The samples live in the console model (ocu.console.robot.RobotState.history); the plots
-redraw from it at most four times a second.
+redraw from it at most four times a second, and only while they are on screen. The value
+axes move in steps (a range is kept until the data leaves it or fills less than a quarter of
+it), so the axes — most of a plot's painting cost — are not laid out again at every redraw.
 """
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QTimer
+from PySide6.QtGui import QShowEvent
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from ocu.console.robot import RobotState
 from ocu.records import TelemetryFrame
 
 REDRAW_PERIOD_MS = 250
+# A value range is widened with this margin (fraction of the data's span) when data leaves it.
+RANGE_MARGIN = 0.25
+# ...and narrowed again when the data fills less than this fraction of it.
+RANGE_SHRINK_BELOW = 0.25
+MIN_SPAN = 1e-3
 QUANTITIES = (
     ("position", "angle", "°"),
     ("speed", "speed", "rad/s · m/s"),
@@ -51,6 +62,7 @@ class TelemetryPlots(QWidget):
             plot.showGrid(x=True, y=True, alpha=0.3)
             plot.setXRange(-window_s, 0.0, padding=0.0)
             plot.setMouseEnabled(x=False, y=True)
+            plot.enableAutoRange(y=False)  # stepped ranges instead (see the module docstring)
             if first is None:
                 first = plot
                 plot.addLegend(offset=(2, 2), labelTextSize="7pt", colCount=4)
@@ -62,8 +74,11 @@ class TelemetryPlots(QWidget):
                 if key == "position" and not motor.has_position:
                     continue
                 curve = plot.plot([], [], pen=pg.mkPen(colours[name], width=2), name=name)
+                curve.setClipToView(True)
+                curve.setDownsampling(auto=True, method="peak")
                 self.curves[(key, name)] = curve
             self.plots[key] = plot
+        self._ranges: dict[str, tuple[float, float]] = {}
         self._timer = QTimer(self)
         self._timer.setInterval(REDRAW_PERIOD_MS)
         self._timer.timeout.connect(self.redraw)
@@ -77,18 +92,49 @@ class TelemetryPlots(QWidget):
         """Samples of one motor in the model's history (bounded by its window)."""
         return len(self.robot.history[name])
 
-    def redraw(self) -> None:
-        """Re-plot the curves if new samples arrived."""
+    def redraw(self, *, force: bool = False) -> None:
+        """Re-plot the curves if new samples arrived (and the plots are on screen)."""
         latest = self.robot.last_telemetry_at
         if not self._dirty or latest is None:
             return
+        if not force and self.graphics.visibleRegion().isEmpty():
+            return  # hidden (a closed dock, another tab): drawn when shown again
         self._dirty = False
+        spans: dict[str, list[float]] = {key: [] for key, _, _ in QUANTITIES}
         for name, series in self.robot.history.items():
-            times = [s[0] - latest for s in series]
+            if not series:
+                continue
+            samples = np.array(
+                [(s[0], math.nan if s[1] is None else s[1], s[2], s[3]) for s in series],
+                dtype=np.float64,
+            )
+            times = samples[:, 0] - latest
             for index, (key, _, _) in enumerate(QUANTITIES, start=1):
                 curve = self.curves.get((key, name))
                 if curve is None:
                     continue
-                values = [s[index] for s in series]
-                points = [(t, v) for t, v in zip(times, values, strict=True) if v is not None]
-                curve.setData([p[0] for p in points], [p[1] for p in points])
+                values = samples[:, index]
+                known = np.isfinite(values)
+                curve.setData(times[known], values[known])
+                if known.any():
+                    spans[key] += [float(values[known].min()), float(values[known].max())]
+        for key, extremes in spans.items():
+            if extremes:
+                self._step_range(key, min(extremes), max(extremes))
+
+    def showEvent(self, event: QShowEvent) -> None:
+        super().showEvent(event)
+        self.redraw()
+
+    def _step_range(self, key: str, low: float, high: float) -> None:
+        """Keep the value axis still unless the data leaves it or shrinks far inside it."""
+        current = self._ranges.get(key)
+        span = max(high - low, MIN_SPAN)
+        if current is not None:
+            shown_low, shown_high = current
+            inside = shown_low <= low and high <= shown_high
+            if inside and span >= RANGE_SHRINK_BELOW * (shown_high - shown_low):
+                return
+        margin = RANGE_MARGIN * span
+        self._ranges[key] = (low - margin, high + margin)
+        self.plots[key].setYRange(low - margin, high + margin, padding=0.0)

@@ -404,6 +404,8 @@ class VideoPanel(QWidget):
         self.link = link
         self.controls.link = link
         self.view.set_source(link.take_video_frame if link is not None else None)
+        if self.profile.video.decode_at_display_size:
+            self.view.set_display_sink(link.decoder.set_display if link is not None else None)
         if link is not None:
             link.video_frame_ready.connect(self.view.on_frame_ready)
         self._show_status(self.model.robot.status)
@@ -452,7 +454,22 @@ class VideoPanel(QWidget):
             self._snapshot_failed(f"snapshot: cannot create {self.snapshot_dir}: {err.strerror}")
             return None
         path = self.snapshot_dir / snapshot_name(name, datetime.now())
-        if not frame.image.save(str(path)):  # the format follows the .png suffix
+        # The view may show a frame decoded at a fraction of its size: save it whole.
+        image = frame.image
+        decoded = frame.decoded
+        if (
+            self.link is not None
+            and decoded is not None
+            and decoded.source_px
+            != (
+                decoded.width,
+                decoded.height,
+            )
+        ):
+            full = self.link.full_size(frame)
+            if full is not None:
+                image = full.image
+        if not image.save(str(path)):  # the format follows the .png suffix
             self._snapshot_failed(f"snapshot: cannot write {path}")
             return None
         self.message_label.setText(f"Saved {path}")

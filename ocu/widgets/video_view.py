@@ -17,14 +17,19 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import TypeVar
 
-from PySide6.QtCore import QRect, QRectF, QSize, Qt, QTimer, Signal
+from PySide6.QtCore import QPoint, QRect, QRectF, QSize, Qt, QTimer, Signal
 from PySide6.QtGui import (
     QColor,
     QFont,
+    QFontMetrics,
+    QHideEvent,
+    QImage,
     QMouseEvent,
     QPainter,
     QPaintEvent,
     QPen,
+    QResizeEvent,
+    QShowEvent,
 )
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
@@ -32,6 +37,7 @@ from ocu.link.stats import RateMeter
 from ocu.qt.link import DecodedVideoFrame
 
 REFRESH_PERIOD_MS = 250
+OVERLAY_PERIOD_S = 0.25
 AGE_SAMPLES = 600
 FPS_WINDOW_S = 1.0
 GRID_COLUMNS = 2
@@ -45,6 +51,8 @@ NO_SIGNAL = "no signal"
 NOT_STREAMED = "not streamed"
 
 FrameSource = Callable[[int], DecodedVideoFrame | None]
+# Told how large each camera is shown (device pixels), None when no cell shows it.
+DisplaySink = Callable[[int, tuple[int, int] | None], None]
 W = TypeVar("W", bound=QWidget)
 
 
@@ -103,6 +111,11 @@ class _CameraState:
         self.shown_rate = RateMeter(window_s=FPS_WINDOW_S)
         self.ages_ms: deque[float] = deque(maxlen=AGE_SAMPLES)
         self.last_age_ms: float | None = None
+        # The text box drawn over the picture, rendered once and redrawn as an image until
+        # its text changes (at most every OVERLAY_PERIOD_S): text is costly, 120 frames/s.
+        self.overlay: QImage | None = None
+        self.overlay_key: tuple[tuple[str, ...], int] | None = None
+        self.overlay_at = -math.inf
 
 
 class VideoView(QWidget):
@@ -131,6 +144,7 @@ class VideoView(QWidget):
         self.not_live_text = "not streamed"
         self.extra_lines: dict[int, str] = {}
         self._source: FrameSource | None = None
+        self._display_sink: DisplaySink | None = None
         self._cameras = [_CameraState() for _ in camera_names]
         self.setMinimumSize(QSize(320, 240))
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
@@ -148,15 +162,48 @@ class VideoView(QWidget):
         self._cameras = [_CameraState() for _ in self.camera_names]
         self.update()
 
+    def set_display_sink(self, sink: DisplaySink | None) -> None:
+        """Who decodes for this view: told each camera's cell size whenever it changes."""
+        self._display_sink = sink
+        self._report_display()
+
     def set_grid(self, grid: bool) -> None:
         """All cameras in a grid (True) or the selected one alone."""
         self.grid = grid
+        self._report_display()
         self.update()
 
     def set_selected(self, camera: int) -> None:
         """Select the camera shown alone (and framed in the grid)."""
         self.selected = camera
+        self._report_display()
         self.update()
+
+    def _report_display(self) -> None:
+        """Tell the decoder how large each camera is shown: it decodes no more than that."""
+        sink = self._display_sink
+        if sink is None:
+            return
+        cells = self.cell_rects() if self.isVisible() else {}
+        ratio = self.devicePixelRatioF()
+        for camera in range(len(self.camera_names)):
+            cell = cells.get(camera)
+            size = None
+            if cell is not None:
+                size = (round(cell.width() * ratio), round(cell.height() * ratio))
+            sink(camera, size)
+
+    def resizeEvent(self, event: QResizeEvent) -> None:
+        super().resizeEvent(event)
+        self._report_display()
+
+    def showEvent(self, event: QShowEvent) -> None:
+        super().showEvent(event)
+        self._report_display()
+
+    def hideEvent(self, event: QHideEvent) -> None:
+        super().hideEvent(event)
+        self._report_display()
 
     def set_live(self, cameras: frozenset[int], not_live_text: str) -> None:
         """Which cameras are streamed; the others say not_live_text instead of NO SIGNAL."""
@@ -239,7 +286,6 @@ class VideoView(QWidget):
         painter = QPainter(self)
         dirty = event.rect()
         painter.fillRect(dirty, Qt.GlobalColor.black)
-        painter.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform)
         first_paints: list[tuple[int, DecodedVideoFrame]] = []
         for camera, cell in self.cell_rects().items():
             if not cell.intersects(dirty):
@@ -248,7 +294,22 @@ class VideoView(QWidget):
             frame = state.frame
             if frame is not None and not frame.image.isNull():
                 image = frame.image
-                painter.drawImage(fit_rect(cell, image.width(), image.height()), image)
+                target = fit_rect(cell, image.width(), image.height())
+                # Decoded at the size the cell shows it, the image is drawn 1:1, centred: a
+                # copy, no filtering (a pixel or two of rounding is not worth a rescale).
+                one_to_one = (
+                    abs(target.width() - image.width()) <= 2
+                    and abs(target.height() - image.height()) <= 2
+                )
+                if one_to_one:
+                    corner = QPoint(
+                        cell.x() + (cell.width() - image.width()) // 2,
+                        cell.y() + (cell.height() - image.height()) // 2,
+                    )
+                    painter.drawImage(corner, image)
+                else:
+                    painter.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform)
+                    painter.drawImage(target, image)
                 if not state.painted:
                     first_paints.append((camera, frame))
             self._paint_overlay(painter, camera, cell)
@@ -271,28 +332,16 @@ class VideoView(QWidget):
         state = self._cameras[camera]
         frame = state.frame
         now = self.clock()
-        name = self.camera_names[camera]
-        if frame is not None and frame.frame.camera is None:
-            name = f"{name} (assumed: no camera was selected)"
-        lines = [name]
         if frame is not None:
-            age_ms = (now - frame.frame.received_at) * 1000.0
-            state.last_age_ms = age_ms
-            fps = state.shown_rate.rate(now)
-            lines[0] += f" · {frame.image.width()}×{frame.image.height()} · {fps:.1f} fps"
-            timing = f"age {age_ms:.0f} ms"
-            decoded = frame.decoded
-            if decoded is not None:
-                timing += f" · decode {decoded.decode_ms:.1f} ms"
-                if decoded.correction.colour_ms is not None:
-                    timing += f" · colour {decoded.correction.colour_ms:.1f} ms"
-                if decoded.correction.undistort_ms is not None:
-                    timing += f" · undistort {decoded.correction.undistort_ms:.1f} ms"
-            lines.append(timing)
-        extra = self.extra_lines.get(camera)
-        if extra:
-            lines.append(extra)
-        self._draw_text_box(painter, cell, lines)
+            state.last_age_ms = (now - frame.frame.received_at) * 1000.0
+        if state.overlay is None or now - state.overlay_at >= OVERLAY_PERIOD_S:
+            state.overlay_at = now
+            key = (tuple(self._overlay_lines(camera, now)), cell.width())
+            if key != state.overlay_key:
+                state.overlay_key = key
+                state.overlay = self._text_box(list(key[0]), cell.width())
+        if state.overlay is not None:
+            painter.drawImage(cell.topLeft(), state.overlay)
         state_text = self.signal_state(camera)
         if state_text == NOT_STREAMED:
             self._draw_centre(
@@ -306,20 +355,62 @@ class VideoView(QWidget):
             )
             self._draw_centre(painter, cell, "NO SIGNAL", detail, NO_SIGNAL_COLOUR)
 
-    def _draw_text_box(self, painter: QPainter, cell: QRect, lines: list[str]) -> None:
-        metrics = painter.fontMetrics()
+    def _overlay_lines(self, camera: int, now: float) -> list[str]:
+        """Name, size and rate; age and the time each stage took; the counters."""
+        frame = self._cameras[camera].frame
+        name = self.camera_names[camera]
+        if frame is not None and frame.frame.camera is None:
+            name = f"{name} (assumed: no camera was selected)"
+        lines = [name]
+        if frame is not None:
+            fps = self._cameras[camera].shown_rate.rate(now)
+            width, height = frame.image.width(), frame.image.height()
+            size = f"{width}×{height}"
+            decoded = frame.decoded
+            if decoded is not None and decoded.source_px != (width, height):
+                source_width, source_height = decoded.source_px
+                size = f"{source_width}×{source_height} shown {size}"
+                if decoded.reduction > 1:
+                    size += f" (decoded 1/{decoded.reduction})"
+            lines[0] += f" · {size} · {fps:.1f} fps"
+            timing = f"age {(now - frame.frame.received_at) * 1000.0:.0f} ms"
+            decoded = frame.decoded
+            if decoded is not None:
+                timing += f" · decode {decoded.decode_ms:.1f} ms"
+                if decoded.correction.colour_ms is not None:
+                    timing += f" · colour {decoded.correction.colour_ms:.1f} ms"
+                if decoded.correction.undistort_ms is not None:
+                    timing += f" · undistort {decoded.correction.undistort_ms:.1f} ms"
+            lines.append(timing)
+        extra = self.extra_lines.get(camera)
+        if extra:
+            lines.append(extra)
+        return lines
+
+    def _text_box(self, lines: list[str], max_width: int) -> QImage:
+        """White lines on a translucent box, as an image to draw at a cell's corner."""
+        metrics = QFontMetrics(self.font())
         line_px = metrics.height()
         width = max(metrics.horizontalAdvance(line) for line in lines) + 2 * OVERLAY_MARGIN_PX
-        width = min(width, cell.width())
-        box = QRect(cell.x(), cell.y(), width, line_px * len(lines) + OVERLAY_MARGIN_PX)
-        painter.fillRect(box, OVERLAY_BACKGROUND)
+        width = max(1, min(width, max_width))
+        height = line_px * len(lines) + OVERLAY_MARGIN_PX
+        ratio = self.devicePixelRatioF()
+        image = QImage(
+            round(width * ratio), round(height * ratio), QImage.Format.Format_ARGB32_Premultiplied
+        )
+        image.setDevicePixelRatio(ratio)
+        image.fill(OVERLAY_BACKGROUND)
+        painter = QPainter(image)
+        painter.setFont(self.font())
         painter.setPen(Qt.GlobalColor.white)
         for index, line in enumerate(lines):
             painter.drawText(
-                cell.x() + OVERLAY_MARGIN_PX,
-                cell.y() + OVERLAY_MARGIN_PX // 2 + metrics.ascent() + index * line_px,
+                OVERLAY_MARGIN_PX,
+                OVERLAY_MARGIN_PX // 2 + metrics.ascent() + index * line_px,
                 line,
             )
+        painter.end()
+        return image
 
     def _draw_centre(
         self, painter: QPainter, cell: QRect, title: str, detail: str, colour: QColor

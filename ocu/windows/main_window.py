@@ -45,6 +45,8 @@ from ocu.gamepad.teleop import GamepadTeleop
 from ocu.hotkeys import KeyMap
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
+from ocu.protocol import ProtocolError
+from ocu.protocol.extended import CameraRequest
 from ocu.qt.console import ConsoleBinding
 from ocu.qt.gamepad import QtGamepad
 from ocu.qt.link import QtLink
@@ -52,7 +54,7 @@ from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
 from ocu.record.replay_link import ReplayLink
-from ocu.records import LinkState
+from ocu.records import CommandError, LinkState
 from ocu.widgets.gamepad import GamepadPanel, PadIndicator
 from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.map_view import MapPanel, NavStatus
@@ -79,6 +81,27 @@ MINIMUM_SIZE = (800, 560)
 REPLAY_DISABLED_TIP = "Replay: commands are disabled"
 
 LinkFactory = Callable[[], Link]
+
+
+STREAMS_KEY = "video/streams"
+
+
+def format_stream_setting(request: CameraRequest) -> str:
+    """A stream request as the settings keep it: "CAMERA:WIDTHxHEIGHT@FPS"."""
+    return f"{request.camera}:{request.width_px}x{request.height_px}@{request.fps}"
+
+
+def parse_stream_setting(text: str) -> CameraRequest:
+    """The stream request of a "CAMERA:WIDTHxHEIGHT@FPS" setting; ValueError if malformed."""
+    try:
+        camera, rest = text.split(":", 1)
+        size, fps = rest.split("@", 1)
+        width, height = size.lower().split("x", 1)
+        request = CameraRequest(int(camera), int(width), int(height), int(fps))
+        request.check()
+    except (ValueError, ProtocolError) as err:
+        raise ValueError(f"not CAMERA:WIDTHxHEIGHT@FPS: {text!r} ({err})") from err
+    return request
 
 
 class MainWindow(QMainWindow):
@@ -275,6 +298,9 @@ class MainWindow(QMainWindow):
         self.layout_restored = self.restore_layout()
         if self.gamepad is not None:
             self.gamepad.start()
+        # The stream size and rate asked of each camera are remembered between sessions.
+        self.restore_streams()
+        self.model.events.stream_request_changed.connect(lambda _streams: self.save_streams())
         if connect:
             self._start_link()
         else:
@@ -358,6 +384,25 @@ class MainWindow(QMainWindow):
         self.settings.setValue("main_window/geometry", self.saveGeometry())
         self.settings.setValue("main_window/state", self.saveState(LAYOUT_VERSION))
         self.settings.sync()
+
+    def restore_streams(self) -> None:
+        """The stream request of each camera from the settings (what the operator chose)."""
+        saved = self.settings.value(STREAMS_KEY)
+        if saved is None:
+            return
+        texts = saved if isinstance(saved, list) else [saved]
+        for text in texts:
+            try:
+                request = parse_stream_setting(str(text))
+                self.model.set_stream_request(request)
+            except (ValueError, CommandError) as err:
+                log.warning("settings %s: %s ignored (%s)", STREAMS_KEY, text, err)
+
+    def save_streams(self) -> None:
+        """Remember each camera's stream request."""
+        self.settings.setValue(
+            STREAMS_KEY, [format_stream_setting(r) for r in self.model.stream_request]
+        )
 
     def reset_layout(self) -> None:
         """Back to the default dock layout."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -170,6 +171,10 @@ def test_bad_bounds_are_refused() -> None:
 
 def test_real_simulator_with_loss_duplicates_and_reordering(profile: RobotProfile) -> None:
     # Jitter (up to 80 ms) reorders fragments and whole frames (33 ms apart); loss truncates.
+    # Datagrams of a 1500-byte link (not the loopback's 64 KiB), so frames are fragmented.
+    assert profile.extension is not None
+    fixed = replace(profile.extension, fit_datagrams_to_path=False)
+    profile = replace(profile, extension=fixed)
     faults = FaultConfig(loss=0.03, duplicate=0.2, jitter_ms=80.0)
     sim = RobotSimulator(profile, extended=True, video_fps=0.0, faults=faults, seed=11)
     sim.start()
@@ -202,3 +207,29 @@ def test_real_simulator_with_loss_duplicates_and_reordering(profile: RobotProfil
         assert image is not None
         assert image.shape == (180, 240, 3)
     assert set(last) == {0, 1, 2, 3}
+
+
+def test_datagrams_as_large_as_the_path_allows(profile: RobotProfile) -> None:
+    from ocu.link.live import VirtualLink
+    from ocu.net.transport import VirtualWire
+
+    assert profile.extension is not None
+    loopback = UdpLink(profile, ("127.0.0.1", 9), extension=True)
+    wire = VirtualWire()
+    virtual = VirtualLink(profile, wire.ocu, extension=True)
+    fixed_profile = replace(
+        profile, extension=replace(profile.extension, fit_datagrams_to_path=False)
+    )
+    fixed = UdpLink(fixed_profile, ("127.0.0.1", 9), extension=True)
+    try:
+        # The loopback's MTU is 64 KiB: one datagram carries a whole 640x480 JPEG.
+        assert loopback.stream_request.max_datagram_bytes == 65507
+        assert virtual.stream_request.max_datagram_bytes == 65507
+        assert fixed.stream_request.max_datagram_bytes == profile.extension.max_datagram_bytes
+        # A stream request keeps the size asked for.
+        loopback.set_stream_request([CameraRequest(0, 320, 240, 10)])
+        assert loopback.stream_request.max_datagram_bytes == 65507
+    finally:
+        for link in (loopback, virtual, fixed):
+            link.shutdown()
+        wire.close()

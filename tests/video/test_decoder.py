@@ -91,3 +91,63 @@ def test_corrupt_jpegs_are_counted(profile: RobotProfile) -> None:
     assert decoder.stats(2).decoded == 1
     assert decode_jpeg(b"") is None
     assert not decoder.submit(frame(jpeg(), 7, at=3.0))  # no such camera
+
+
+# ---- decoding at the size a cell shows --------------------------------------------------------
+
+
+def test_jpeg_size_is_read_from_the_frame_header() -> None:
+    from ocu.video.decoder import jpeg_size
+
+    assert jpeg_size(jpeg(640, 480)) == (640, 480)
+    assert jpeg_size(jpeg(1280, 720)) == (1280, 720)
+    image = np.zeros((90, 160, 3), np.uint8)
+    ok, progressive = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_PROGRESSIVE, 1])
+    assert ok
+    assert jpeg_size(progressive.tobytes()) == (160, 90)
+    assert jpeg_size(b"") is None
+    assert jpeg_size(b"\xff\xd8\xff\xda\x00\x02") is None  # scan before any frame header
+    assert jpeg_size(jpeg(64, 48)[:8]) is None  # cut short
+    assert jpeg_size(b"not a jpeg at all") is None
+
+
+def test_the_plan_decodes_no_more_than_the_cell_shows() -> None:
+    from ocu.video.decoder import FULL_SIZE, DecodePlan, plan_for
+
+    # A 2x2 grid cell of 219x164: 1/2 by the DCT (320x240), then down to 219x164.
+    assert plan_for((640, 480), (440, 164)) == DecodePlan(2, (219, 164))
+    # Exactly half: the DCT alone does it.
+    assert plan_for((640, 480), (320, 240)) == DecodePlan(2, (320, 240))
+    # HD in a small cell: 1/4.
+    assert plan_for((1280, 720), (292, 164)) == DecodePlan(4, (292, 164))
+    # Never enlarged: a big cell gets the picture as sent.
+    assert plan_for((640, 480), (1600, 1000)) == DecodePlan(1, (640, 480))
+    # A size the DCT cannot divide is only resized.
+    assert plan_for((641, 481), (320, 240)).reduction == 1
+    assert plan_for((0, 0), (100, 100)) == FULL_SIZE
+
+
+def test_hidden_cameras_are_not_decoded_and_shown_ones_come_at_the_cell_size(
+    profile: RobotProfile,
+) -> None:
+    collector = Collector()
+    decoder = make(profile, collector)
+    decoder.set_display(0, (219, 164))
+    decoder.set_display(1, None)  # no cell shows camera 1
+    decoder.start()
+    try:
+        decoder.submit(frame(jpeg(640, 480), 1, at=1.0))
+        decoder.submit(frame(jpeg(640, 480), 0, at=2.0))
+        decoder.submit(frame(jpeg(640, 480), 2, at=3.0))  # never told: decoded whole
+        assert collector.wait(decoded=2)
+    finally:
+        decoder.stop()
+    by_slot = {d.slot: d for d in collector.decoded}
+    assert set(by_slot) == {0, 2}
+    assert (by_slot[0].width, by_slot[0].height) == (219, 164)
+    assert by_slot[0].reduction == 2
+    assert by_slot[0].source_px == (640, 480)
+    assert (by_slot[2].width, by_slot[2].height) == (640, 480)
+    assert decoder.stats(1).hidden == 1
+    assert decoder.stats(1).decoded == 0
+    assert decoder.stats(0).last_size_px == (219, 164)

@@ -174,3 +174,55 @@ def test_snapshot_names_and_no_picture(qtbot: QtBot, profile: RobotProfile, tmp_
         assert panel.save_snapshot() is None
     assert "no picture" in panel.message_label.text()
     assert panel.battery.text() == "Battery not reported"
+
+
+def test_frames_are_decoded_at_the_cells_size_and_snapshots_saved_whole(
+    qtbot: QtBot, profile: RobotProfile, start_panel: object
+) -> None:
+    from ocu.widgets.video_view import fit_rect
+
+    sim = RobotSimulator(profile, extended=True, telemetry_hz=5.0, video_fps=0.0, seed=4)
+    sim.start()
+    try:
+        model = ConsoleModel(profile)
+        model.set_stream_request(CameraRequest(0, 640, 480, 15))
+        for camera in (1, 2, 3):
+            model.set_stream_request(CameraRequest(camera, 320, 240, 0))
+        panel: VideoPanel = start_panel(model, UdpLink(profile, sim.address, extension=True))  # type: ignore[operator]
+        panel.resize(640, 480)  # grid cells under half of 640x480
+        view = panel.view
+        qtbot.waitUntil(lambda: panel.extension_active, timeout=WAIT_MS)
+        qtbot.waitUntil(lambda: view.stats(0).shown >= 3, timeout=WAIT_MS)
+        link = panel.link
+        assert link is not None
+
+        def shown_at_cell_size() -> bool:
+            frame = view.current_frame(0)
+            if frame is None or frame.decoded is None:
+                return False
+            cell = view.cell_rects()[0]
+            fit = fit_rect(cell, 640, 480)
+            image = frame.image
+            return abs(image.width() - fit.width()) <= 2 and abs(image.height() - fit.height()) <= 2
+
+        qtbot.waitUntil(shown_at_cell_size, timeout=WAIT_MS)
+        frame = view.current_frame(0)
+        assert frame is not None
+        assert frame.decoded is not None
+        assert frame.decoded.source_px == (640, 480)
+        assert frame.decoded.reduction >= 2  # libjpeg's DCT scaling did the first halving
+
+        # A snapshot is the whole picture, not what the cell shows.
+        view.set_selected(0)
+        path = panel.save_snapshot()
+        assert path is not None
+        image = QImage(str(path))
+        assert (image.width(), image.height()) == (640, 480)
+
+        # Another camera alone on screen: camera 0 is no longer decoded at all.
+        panel.set_grid(False)
+        view.set_selected(1)
+        hidden_before = link.decoder.stats(0).hidden
+        qtbot.waitUntil(lambda: link.decoder.stats(0).hidden > hidden_before + 3, timeout=WAIT_MS)
+    finally:
+        sim.stop()

@@ -59,6 +59,15 @@ def test_four_streams_arrive_in_the_console_and_the_headlight_is_the_robots(
     console.velocity_panel.torch_box.setChecked(False)
     qtbot.waitUntil(lambda: headlight.text() == "Headlight: off", timeout=DEADLINE_MS)
 
+    # The stream sizes and rates chosen are remembered: the next console asks for them.
+    panel.set_stream_request(2, 1280, 720, 15)
+    console.shutdown()
+    again = make_console(extended_sim, extension=True)
+    request = again.model.stream_request[2]
+    assert (request.width_px, request.height_px, request.fps) == (1280, 720, 15)
+    assert again.model.stream_request[0].fps == 10
+    assert again.video_panel.controls.size_box.currentData() is not None
+
 
 def test_headlight_not_reported_by_a_vendor_robot(
     make_console: ConsoleFactory, sim: RobotSimulator, qtbot: QtBot
@@ -94,3 +103,14 @@ def test_a_camera_switch_survives_hotkeys(
     assert {mapper.to_command(r.packet).camera for r in after} == {2}
     assert console.link is not None
     assert console.link.link.command.camera == 2
+
+
+def test_stream_settings_text_is_checked() -> None:
+    from ocu.windows.main_window import format_stream_setting, parse_stream_setting
+
+    request = parse_stream_setting("3:1280x720@30")
+    assert (request.camera, request.width_px, request.height_px, request.fps) == (3, 1280, 720, 30)
+    assert parse_stream_setting(format_stream_setting(request)) == request
+    for bad in ("", "3:1280x720", "x:1x1@1", "3:0x720@30", "300:640x480@30"):
+        with pytest.raises(ValueError, match="CAMERA:WIDTHxHEIGHT@FPS"):
+            parse_stream_setting(bad)

@@ -122,7 +122,7 @@ def test_every_motor_shown_in_the_table_and_the_plots(console: MainWindow, qtbot
     rows = {panel.table.cell_text(row, "joint") for row in range(panel.table.rowCount())}
     assert rows == set(console.profile.motors)
     assert panel.table.cell_text(0, "state") == "1"
-    panel.plots.redraw()
+    panel.plots.redraw(force=True)
     xs, _ys = panel.plots.curves[("position", "waist")].getData()
     assert xs is not None
     assert len(xs) >= 2
