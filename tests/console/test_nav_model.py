@@ -64,6 +64,7 @@ SOURCES: dict[str, Callable[[ConsoleModel], object]] = {
     "slider": lambda m: m.set_velocity(LINEAR, 0.3),
     "typed": lambda m: m.set_velocities({LINEAR: 0.3}),
     "ros": lambda m: m.set_external_velocities({LINEAR: 0.3}),
+    "gamepad": lambda m: m.set_gamepad({LINEAR: 1.0}),
 }
 
 
@@ -148,6 +149,7 @@ def start_path(model: ConsoleModel, clock: Clock) -> None:
     [
         (lambda m: m.hotkey_down("Q", "waist", 1), "operator took over"),
         (lambda m: m.set_velocity("shoulder", 0.1), "operator took over"),
+        (lambda m: m.set_gamepad({"shoulder": 0.5}), "operator took over"),
         (lambda m: m.emergency_stop("Space"), "EMERGENCY STOP (Space)"),
         (lambda m: m.halt("console lost focus"), "console lost focus"),
     ],
