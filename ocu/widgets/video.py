@@ -498,10 +498,20 @@ class VideoPanel(QWidget):
             self.view.extra_lines[camera] = " · ".join(parts)
         video = link.link.video_stats()
         if self.model.robot.extension_active or video.fragments:
+            # Short beside the attitude (the dock may be narrow): the rare counters only when
+            # they are not zero; all of them in the tooltip.
+            counts = {
+                "duplicates": video.duplicates,
+                "out of order": video.out_of_order,
+                "inconsistent": video.inconsistent,
+            }
+            lost = video.truncated + video.expired
+            text = f"fragments {video.fragments} · lost frames {lost}"
             self.counters_label.setText(
-                f"fragments {video.fragments} · lost frames {video.truncated + video.expired}"
-                f" · duplicates {video.duplicates} · out of order {video.out_of_order}"
-                f" · inconsistent {video.inconsistent}"
+                " · ".join([text, *(f"{name} {n}" for name, n in counts.items() if n)])
+            )
+            self.counters_label.setToolTip(
+                " · ".join([text, *(f"{name} {n}" for name, n in counts.items())])
             )
         else:
             stats = self.model.robot.stats
