@@ -624,6 +624,16 @@ class ConsoleModel:
                 self._set_channel(channel, self._pad_velocity(channel), Source.GAMEPAD)
         self._publish()
 
+    def stop_arm(self, reason: str) -> bool:
+        """The arm's automatic motion (a jog, a goal, a stored pose) stops now; True if it
+        was moving. For inputs that started a move and let go (the pad's deadman)."""
+        if self.arm is None:
+            return False
+        moving = any(self._channels[c].source is Source.ARM for c in self.arm.channels)
+        self._stop_arm(reason)
+        self._publish()
+        return moving
+
     def stop_gamepad(self, reason: str) -> bool:
         """The pad lets go (deadman released, unplugged, stalled): its channels stop now.
 

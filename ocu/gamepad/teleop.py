@@ -52,7 +52,10 @@ class PadStatus(Enum):
     ERROR = "error"  # an SDL call failed
 
 
-Hook = Callable[[str], None]
+# A hook command's handler: called with the mapping's argument; it may return how to stop
+# what it started (called when the pad lets go: deadman released, unplugged, stalled).
+Stopper = Callable[[str], object]
+Hook = Callable[[str], Stopper | None]
 
 
 class TeleopEvents:
@@ -96,6 +99,8 @@ class GamepadTeleop:
         self._hooks: dict[str, Hook] = {}
         # Joints whose position targets a stored pose started during this engagement.
         self._pose_joints: set[str] = set()
+        # How to stop what hooks started during this engagement (an arm move).
+        self._hook_stops: list[Stopper] = []
         model.events.estop_changed.connect(self._on_estop)
 
     # ---- what the views read ---------------------------------------------------------------
@@ -287,8 +292,10 @@ class GamepadTeleop:
             self.events.message.emit(f"gamepad: hold the deadman for '{name} {argument}'")
             return
         before = set(self.model.targets)
-        hook(argument)
+        stop = hook(argument)
         self._pose_joints |= set(self.model.targets) - before
+        if stop is not None:
+            self._hook_stops.append(stop)
 
     def _engage_without_deadman(self) -> None:
         """With no deadman configured, the pad engages as soon as it may (still armed)."""
@@ -322,6 +329,9 @@ class GamepadTeleop:
             self.events.message.emit(f"{joint}: stored pose stopped ({reason})")
             stopped = True
         self._pose_joints.clear()
+        hook_stops, self._hook_stops = self._hook_stops, []
+        for stop in hook_stops:
+            stopped = bool(stop(reason)) or stopped
         if was_engaged:
             self._refresh_status()
         return stopped

@@ -37,12 +37,13 @@ from PySide6.QtWidgets import (
 from ocu import hotkeys
 from ocu.console.arm import ArmGoal
 from ocu.console.model import ConsoleModel
-from ocu.console.poses import ARM_POSES_NAME
+from ocu.console.poses import ARM_POSES_NAME, PoseError
 from ocu.gamepad.calibration import CalibrationError, CalibrationStore, PadCalibration
 from ocu.gamepad.mapping import PadMapping, load_pad_mapping
 from ocu.gamepad.pad import PadInfo
-from ocu.gamepad.teleop import GamepadTeleop
+from ocu.gamepad.teleop import GamepadTeleop, Stopper
 from ocu.hotkeys import KeyMap
+from ocu.kinematics.arm import ArmError
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError
@@ -165,6 +166,7 @@ class MainWindow(QMainWindow):
             pad_mapping or load_pad_mapping(profile),
             calibration_for=lambda info: _calibration(pad_calibrations, info),
         )
+        self.teleop.register_hook("pose", self._pad_pose)
         self.gamepad_panel = GamepadPanel(self.teleop, pad_calibrations)
         self.map_panel = MapPanel(self.model)
         self.event_log = QListWidget()
@@ -642,6 +644,19 @@ class MainWindow(QMainWindow):
         self._shut = True
 
     # ---- messages --------------------------------------------------------------------------
+
+    def _pad_pose(self, name: str) -> Stopper | None:
+        """The pad's "pose NAME" button: the arm's stored pose, stopped when the pad lets go."""
+        arm = self.model.arm
+        if arm is None:
+            self.log_event(self.model.arm_error or "this robot has no arm profile")
+            return None
+        try:
+            arm.go_to(name)
+        except (ArmError, PoseError) as err:
+            self.log_event(f"arm: {err}")
+            return None
+        return lambda reason: self.model.stop_arm(f"stored pose {name} stopped ({reason})")
 
     def log_event(self, text: str) -> None:
         """A line in the Events dock and the status bar."""

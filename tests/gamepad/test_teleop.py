@@ -320,6 +320,26 @@ def test_pose_hook_needs_the_deadman_and_stops_with_it(
     assert set(model.targets) == {"waist"}
 
 
+def test_a_hook_move_stops_when_the_deadman_is_released(
+    model: ConsoleModel, mapping: PadMapping, profile: RobotProfile
+) -> None:
+    """A hook that returns a stopper (the console's arm move) is stopped on letting go."""
+    mapping = parse_pad_mapping({"buttons": {"a": "pose ready"}}, profile, mapping, "test")
+    teleop = GamepadTeleop(model, mapping)
+    stops: list[str] = []
+    teleop.register_hook("pose", lambda name: stops.append)
+    pad = Pad(teleop)
+    pad.plug()
+    pad.set(leftshoulder=True)
+    pad.set(a=True)
+    assert stops == []
+    pad.set(leftshoulder=False)
+    assert len(stops) == 1
+    pad.set(leftshoulder=True)
+    pad.set(leftshoulder=False)
+    assert len(stops) == 1  # stopped once, not again
+
+
 def test_no_deadman_mapping_engages_with_sticks_armed(
     model: ConsoleModel, mapping: PadMapping, profile: RobotProfile
 ) -> None:

@@ -336,3 +336,32 @@ def test_calibration_from_the_dock_is_saved_and_used(
         ),
         "the shoulder at full speed from a worn stick",
     )
+
+
+def test_a_stored_pose_from_the_pad_stops_when_the_deadman_is_released(
+    make_pad_console: PadConsoleFactory,
+    sim: RobotSimulator,
+    profile: RobotProfile,
+    virtual_pad: VirtualPad,
+    qtbot: QtBot,
+) -> None:
+    """The pad's "pose NAME" button moves the arm (Source ARM) only while the deadman is
+    held: letting go stops the move at once, read from the datagrams the simulator got."""
+    mapping = parse_pad_mapping(
+        {"buttons": {"a": "pose ready"}}, profile, pad_mapping(profile), "test"
+    )
+    console = make_pad_console(sim, mapping)
+    plug(qtbot, console, virtual_pad)
+    virtual_pad.set_button("leftshoulder", True)
+    qtbot.waitUntil(lambda: console.teleop.engaged, timeout=DEADLINE_MS)
+    virtual_pad.set_button("a", True)
+    wait_sim(
+        qtbot,
+        sim,
+        lambda s: any(s.velocities[c] != 0 for c in ("waist", "shoulder", "elbow", "neck")),
+        "the arm moving to its ready pose",
+    )
+    since = time.monotonic()
+    virtual_pad.set_button("leftshoulder", False)
+    assert_stops_promptly(qtbot, sim, since, "deadman released during a stored pose")
+    assert_still(qtbot, sim, "deadman up after a stored pose")
