@@ -121,3 +121,41 @@ def test_a_replay_at_four_times_covers_four_robot_seconds_per_second() -> None:
     odo.time_scale = 4.0
     drive(odo, 0.3, 0.0, 0.0, 1.0)  # the recording's commands, played four times as fast
     assert odo.estimate(1.0).pose.x_m == pytest.approx(1.2)
+
+
+def test_the_estimate_reuses_past_segments_only_while_they_are_unchanged() -> None:
+    """Estimates reuse the integration of complete segments; whatever arrives in between
+    (commands, track speeds, headings, a new round trip, replay speed, a reset) gives the
+    same estimate as integrating everything again."""
+    import random
+
+    rng = random.Random(3)
+    odo = odometry()
+    t = tracks_at = 0.0
+    for _ in range(1500):
+        t += rng.uniform(0.005, 0.08)
+        r = rng.random()
+        if r < 0.1:
+            odo.on_command(t, rng.uniform(-0.4, 0.4), rng.uniform(-0.8, 0.8))
+        elif r < 0.4:
+            odo.on_tracks(t, rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3))
+            tracks_at = t
+        elif r < 0.5:
+            odo.on_heading(t, rng.uniform(-3.0, 3.0))
+        elif r < 0.55:
+            # The IMU's reading of the moment the last track speeds were taken, late: it
+            # changes a segment that may have been integrated already.
+            odo.on_heading(tracks_at, rng.uniform(-3.0, 3.0))
+        elif r < 0.57:
+            odo.set_round_trip(rng.uniform(0.0, 0.4))
+        elif r < 0.575:
+            odo.time_scale = rng.choice((1.0, 4.0))
+        elif r < 0.578:
+            odo.reset(t)
+        at = t + rng.uniform(-0.05, 0.3)
+        cached = odo.estimate(at)
+        odo._cache.clear()
+        fresh = odo.estimate(at)
+        assert cached.pose == fresh.pose
+        assert cached.distance_m == fresh.distance_m
+        assert (cached.covariance == fresh.covariance).all()
