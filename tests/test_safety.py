@@ -174,9 +174,12 @@ def test_closing_the_window_sends_zeros_last(
     since = time.monotonic()
     console.close()
     state = wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped on close")
+    # The closing zeros are a burst: wait for all of them, not only the first to arrive.
+    repeats = profile.link.estop_repeats
+    wait_sim(qtbot, sim, lambda s: len(zeros_after(sim, since)) >= repeats, "the closing burst")
     received = sim.received_commands()
     tail = [(round(r.time_s - since, 4), r.packet.axes[:8], r.address) for r in received[-8:]]
-    assert all(is_zero(r) for r in received[-profile.link.estop_repeats :]), tail
+    assert all(is_zero(r) for r in received[-repeats:]), tail
     assert not motion_after(sim, since)
     assert not state.watchdog_stopped
     assert drive_axis(profile, received[0], "drive_linear") == 0  # sanity: axes decoded

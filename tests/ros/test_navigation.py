@@ -164,8 +164,12 @@ def test_the_node_publishes_odom_tf_and_scan_and_follows_a_path(
         assert ahead == pytest.approx(4.95, abs=0.05)
         first = odom.wait(lambda m: True, 10.0)
         assert (first.header.frame_id, first.child_frame_id) == ("odom", "base_link")
-        transform = tf.wait(lambda m: bool(m.transforms), 10.0).transforms[0]
-        assert (transform.header.frame_id, transform.child_frame_id) == ("odom", "base_link")
+
+        # /tf also carries base_link -> tool0 (the arm): look for the odometry's transform.
+        def frames(message: Any) -> set[tuple[str, str]]:
+            return {(t.header.frame_id, t.child_frame_id) for t in message.transforms}
+
+        tf.wait(lambda m: ("odom", "base_link") in frames(m), 10.0)
         follow.publish(path_message([(1.0, 0.0), (1.5, 0.5)]))
         assert sim.wait_until(lambda s: math.dist(s.pose[:2], (1.5, 0.5)) < 0.2, 30.0), (
             f"the robot is at {sim.state().pose}:\n{process.output()}"
