@@ -24,29 +24,50 @@ def _table(rows: list[tuple[str, str]], key_pt: int, text_pt: int) -> str:
     return (
         "<table>"
         + "".join(
-            f"<tr><td align='right' style='padding:3px 18px;font-weight:bold;font-size:{key_pt}pt;"
+            f"<tr><td align='right' style='padding:2px 12px;font-weight:bold;font-size:{key_pt}pt;"
             f"color:#ffd54f'>{escape(keys)}</td>"
-            f"<td style='padding:3px 6px;font-size:{text_pt}pt'>{escape(what)}</td></tr>"
+            f"<td style='padding:2px 4px;font-size:{text_pt}pt'>{escape(what)}</td></tr>"
             for keys, what in rows
         )
         + "</table>"
     )
 
 
+def _title(text: str) -> str:
+    return (
+        "<div style='font-size:14pt;font-weight:bold;color:#90caf9;margin-top:8px'>"
+        f"{escape(text)}</div>"
+    )
+
+
+def _column(sections: list[tuple[str, list[tuple[str, str]]]], key_pt: int, text_pt: int) -> str:
+    body = "".join(_title(title) + _table(rows, key_pt, text_pt) for title, rows in sections)
+    return f"<td valign='top' style='padding:0px 16px'>{body}</td>"
+
+
+def _groups(rows: list[tuple[str, str]]) -> list[list[tuple[str, list[tuple[str, str]]]]]:
+    """The key map's rows in columns: driving and joints with the map under them, the arm
+    beside (as the key map's descriptions prefix them)."""
+    basic: list[tuple[str, str]] = []
+    arm: list[tuple[str, str]] = []
+    nav: list[tuple[str, str]] = []
+    for keys, what in rows:
+        if what.startswith("arm: ") or "(Cartesian)" in keys:
+            arm.append((keys, what.removeprefix("arm: ")))
+        elif what.startswith("map: "):
+            nav.append((keys, what.removeprefix("map: ")))
+        else:
+            basic.append((keys, what))
+    first = [("Driving and joints", basic)] + ([("Map", nav)] if nav else [])
+    return [first] + ([[("Arm", arm)]] if arm else [])
+
+
 def help_html(key_map: KeyMap, pad_rows: list[tuple[str, str]] | None = None) -> str:
-    """The key map as an HTML table (keys by US position), the pad's mapping beside it."""
-    keys = _table(key_map.help_rows(), 17, 15)
+    """The key map as HTML tables in columns (keys by US position), the pad's mapping beside."""
+    columns = [_column(sections, 14, 12) for sections in _groups(key_map.help_rows())]
     if pad_rows:
-        pad = (
-            "<div style='font-size:15pt;font-weight:bold'>Gamepad — hold the deadman</div>"
-            + _table(pad_rows, 12, 12)
-        )
-        body = (
-            "<table align='center'><tr><td valign='top'>" + keys + "</td>"
-            "<td valign='top' style='padding-left:40px'>" + pad + "</td></tr></table>"
-        )
-    else:
-        body = "<table align='center'><tr><td>" + keys + "</td></tr></table>"
+        columns.append(_column([("Gamepad — hold the deadman", pad_rows)], 11, 11))
+    body = "<table align='center'><tr>" + "".join(columns) + "</tr></table>"
     sources = "<br>".join(escape(s) for s in key_map.sources)
     return (
         "<div style='font-size:20pt;font-weight:bold'>Hotkeys — hold to move, release to stop"
