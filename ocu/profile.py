@@ -807,9 +807,11 @@ def _parse_measured(
         return {}
     table = root.sub("measured", None)
     measured: dict[str, Measurement] = {}
-    for key in table.table:
-        reader = table.sub(key, MEASUREMENT_KEYS)
+    for key, entry in table.table.items():
         where = f'profile.measured."{key}"'
+        if not isinstance(entry, dict):
+            raise ProfileError(f"{where}: must be a table (how, when, residual, ...)")
+        reader = _Reader(entry, where, MEASUREMENT_KEYS)
         value: Any = data
         for part in key.split("."):
             if not isinstance(value, dict) or part not in value:

@@ -67,6 +67,10 @@ class Operator(Protocol):
         `profile_name`)? None: the profile is right."""
         ...
 
+    def checks_angle(self, joint: str) -> bool:
+        """Move the joint through a known angle for the operator to measure?"""
+        ...
+
     def measured_angle(self, joint: str, moved_deg: float) -> float | None:
         """The angle the operator measured after a move the OCU reckons as moved_deg; None
         accepts the OCU's figure."""
@@ -107,6 +111,10 @@ class AutoOperator:
     ) -> str | None:
         """The profile's device ID -> joint map is kept."""
         return None
+
+    def checks_angle(self, joint: str) -> bool:
+        """Needs a person."""
+        return False
 
     def measured_angle(self, joint: str, moved_deg: float) -> float | None:
         """Not asked."""
@@ -205,6 +213,10 @@ class AnswersOperator(AutoOperator):
         """The file's answer for this device, if any."""
         return self.joints.get(device_id)
 
+    def checks_angle(self, joint: str) -> bool:
+        """The joints the file has an angle for."""
+        return joint in self.angles
+
     def measured_angle(self, joint: str, moved_deg: float) -> float | None:
         """The file's measured angle for this joint, if any."""
         return self.angles.get(joint)
@@ -291,6 +303,13 @@ class TerminalOperator(AutoOperator):
             if answer in choices:
                 return answer
             self._print(f"unknown joint {answer!r}; {did_you_mean(answer, choices)}")
+
+    def checks_angle(self, joint: str) -> bool:
+        """Check the joint against a protractor? (Enter = yes)."""
+        return self._ask(f"Move the {joint} about 8° for you to measure? [Y/n]").lower() not in (
+            "n",
+            "no",
+        )
 
     def measured_angle(self, joint: str, moved_deg: float) -> float | None:
         """Degrees measured (Enter: accept)."""

@@ -72,8 +72,11 @@ class CalibrationConfig:
     # 0.08 rad/s for a joint scale half the profile's.
     scan_axis_value: int = 800
     joint_speed_rad_s: float = 0.1
-    # Time allowed for a command to reach the robot and its effect to come back.
-    latency_margin_s: float = 0.3
+    # Time allowed for a command to reach the robot and its effect to come back: this much
+    # until the axis scan has measured the round trip (from the speed commands the robot
+    # echoes), then 1.5 times the shortest round trip seen, and at least `min_margin_s`.
+    latency_margin_s: float = 0.5
+    min_margin_s: float = 0.12
     min_leg_s: float = 0.4
     # Noisy readings: runs long enough for this relative error each, never slower than this.
     noisy_run_error: float = 0.02
@@ -207,6 +210,9 @@ class Calibrator:
         self._period_s = 1.0 / profile.link.telemetry_rate_hz
         self._axis_map: dict[str, tuple[int, int]] = {}
         self._listened: list[Sample] = []
+        self._margin_s = self.config.latency_margin_s
+        # Round trips seen: from a pulse's command to the first reading that echoes it.
+        self._round_trips: list[float] = []
         # The last sample in which nothing moved, until the next motion command.
         self._settled: Sample | None = None
         # While searching hard stops the excursion budget does not apply (guided only).
@@ -400,7 +406,7 @@ class Calibrator:
             latest = self.log.latest()
             return (
                 latest is not None
-                and latest.received_at >= zeroed + self.config.latency_margin_s
+                and latest.received_at >= zeroed + self._margin_s
                 and all(
                     abs(r.speed) <= noise and abs(r.speed_command) <= noise
                     for r in latest.motors.values()
@@ -541,6 +547,26 @@ class Calibrator:
 
     def _scan(self) -> None:
         """Pulse each axis in turn; map the channels from the motors that answer."""
+        try:
+            self._scan_axes()
+        except _RescanError as err:
+            self.operator.say(
+                f"the robot answers slowly (round trip up to {err.margin_s:.2f} s): "
+                "scanning again with a longer wait"
+            )
+            self._axis_map.clear()
+            for key in [k for k in self.result.measured if k.startswith("channels.")]:
+                del self.result.measured[key]
+            self.result.findings = [
+                f for f in self.result.findings if not f.text.startswith("axis ")
+            ]
+            for joint in self._joints.values():
+                joint.channel = joint.axis = None
+                joint.free.clear()
+            self._round_trips.clear()
+            self._scan_axes()
+
+    def _scan_axes(self) -> None:
         found_joint_axes: dict[int, _Joint] = {}
         for axis in range(AXIS_COUNT):
             responses = self._pulse(axis)
@@ -586,7 +612,7 @@ class Calibrator:
         self._allowed = None
         before = self._settle()
         start = self.clock()
-        margin = self.config.latency_margin_s
+        margin = self._margin_s
         try:
             self._command({axis: value})
 
@@ -598,7 +624,9 @@ class Calibrator:
             self._zero()
         duration = self.clock() - start
         after = self._settle()
-        first = self._responses(before, after, self.log.samples(start))
+        during = self.log.samples(start)
+        first = self._responses(before, after, during)
+        self._learn_round_trip(start, during)
         joints = [d for d, r in first.items() if d in self._joints and r.direction()]
         moved_tracks = [d for d, r in first.items() if self._is_track(d) and r.speed_raw]
         if not joints and not moved_tracks:
@@ -632,6 +660,25 @@ class Calibrator:
                 self._legs(axis, [(value, duration)])
                 self._settle()
         return first
+
+    def _learn_round_trip(self, start: float, during: Sequence[Sample]) -> None:
+        """The round trip from a pulse's first echo; the scan restarts if it was too slow."""
+        noise = self.config.speed_noise_raw
+        for sample in during:
+            if any(
+                abs(r.speed_command) > noise or abs(r.speed) > noise for r in sample.motors.values()
+            ):
+                self._round_trips.append(sample.received_at - start)
+                break
+        if len(self._round_trips) < 2:
+            return
+        margin = max(self.config.min_margin_s, 1.5 * min(self._round_trips) + 0.05)
+        if margin > self._margin_s:
+            # The pulses so far were judged with too short a wait: a reply may have been
+            # counted as the next axis's. Scan again with the longer wait.
+            self._margin_s = margin
+            raise _RescanError(margin)
+        self._margin_s = margin
 
     def _responses(
         self, before: Sample, after: Sample, during: Iterable[Sample]
@@ -785,7 +832,7 @@ class Calibrator:
         """Axis value, legs of one cycle, and the speed aimed at (rad/s)."""
         config = self.config
         assert joint.axis is not None
-        margin = config.latency_margin_s
+        margin = self._margin_s
         symmetric = len(joint.free) != 1
         # A leg long enough for two readings at a constant speed (the middle leg of a
         # symmetric cycle is twice as long as the outer ones).
@@ -1004,7 +1051,8 @@ class Calibrator:
         for joint in self._joints.values():
             if joint.ticks_per_rad is None or joint.axis is None or joint.channel is None:
                 continue
-            self._known_angle(joint)
+            if self.operator.checks_angle(joint.motor.name):
+                self._known_angle(joint)
 
     def _known_angle(self, joint: _Joint) -> None:
         assert joint.axis is not None
@@ -1130,7 +1178,7 @@ class Calibrator:
             self._command({joint.axis: value})
             while True:
                 self._poll()
-                samples = self.log.samples(start + self.config.latency_margin_s)
+                samples = self.log.samples(start + self._margin_s)
                 still = [
                     s
                     for s in samples[-2:]
@@ -1219,6 +1267,14 @@ class Calibrator:
         finally:
             self._zero()
         return self.clock() - start
+
+
+class _RescanError(Exception):
+    """The round trip is longer than the axis scan waited: it must start again."""
+
+    def __init__(self, margin_s: float) -> None:
+        super().__init__(f"round trip needs {margin_s:.2f} s")
+        self.margin_s = margin_s
 
 
 def _unknown_motor(device_id: int) -> Motor:
