@@ -79,7 +79,7 @@ class CalibrationConfig:
     min_margin_s: float = 0.12
     min_leg_s: float = 0.4
     # Noisy readings: runs long enough for this relative error each, never slower than this.
-    noisy_run_error: float = 0.02
+    noisy_run_error: float = 0.01
     min_sweep_speed_rad_s: float = 0.05
     max_sweep_cycles: int = 4
     # Sweeps repeat until ticks per radian is known to this fraction (1 sigma).
@@ -357,10 +357,11 @@ class Calibrator:
                 # Trapezoids: a speed that changed between two readings changed half-way.
                 mean_raw = (previous.motors[joint.device_id].speed + record.speed) / 2
                 joint.integrated_rad += mean_raw / self.speed_scale * dt_s
-            if joint.ticks_per_rad is not None and dt_s > 0:
+            known = joint.ticks_per_rad or joint.rough_ticks_per_rad
+            if known is not None and dt_s > 0:
                 jump = abs(
                     tick_delta(previous.motors[joint.device_id].position, record.position)
-                ) / abs(joint.ticks_per_rad)
+                ) / abs(known)
                 allowed = max(
                     abs(record.speed), abs(previous.motors[joint.device_id].speed)
                 ) / self.speed_scale * dt_s * self.config.implausible_speed_factor + math.radians(
