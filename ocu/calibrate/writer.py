@@ -91,14 +91,30 @@ def _swap_device_ids(data: dict[str, Any], items: Iterable[Measured]) -> None:
         motors[name]["device_id"] = new_id
 
 
+SCALE_KEYS = {
+    "linear": "si.linear_axis_per_m_s",
+    "rotation": "si.rotation_axis_per_rad_s",
+    "joint": "si.joint_axis_per_rad_s",
+}
+
+
 def _bounded_maxima(data: dict[str, Any], result: CalibrationResult) -> list[Measured]:
-    """Maxima a measured axis scale can no longer carry in the int16 axis, lowered."""
+    """Maxima a measured axis scale (the channel's own or its SI scale) can no longer carry
+    in the int16 axis, lowered."""
     lowered: list[Measured] = []
     for name, channel in data["channels"].items():
-        key = f"channels.{name}.axis_per_unit"
-        if key not in result.measured:
+        own = f"channels.{name}.axis_per_unit"
+        if "axis_per_unit" in channel:
+            measured, per_unit = own in result.measured, float(channel["axis_per_unit"])
+        else:
+            key = SCALE_KEYS.get(channel.get("scale", ""), "")
+            if not key:
+                continue
+            measured = key in result.measured
+            per_unit = float(data["si"][key.split(".")[1]])
+        if not measured:
             continue
-        limit = AXIS_MAX / float(channel["axis_per_unit"])
+        limit = AXIS_MAX / per_unit
         if channel["hard_max"] <= limit:
             continue
         channel["hard_max"] = int(limit * 1000) / 1000
@@ -108,7 +124,8 @@ def _bounded_maxima(data: dict[str, Any], result: CalibrationResult) -> list[Mea
             Measured(
                 f"channels.{name}.hard_max",
                 channel["hard_max"],
-                f"lowered so the measured axis_per_unit fits the int16 axis ({AXIS_MAX})",
+                f"lowered so the measured axis scale ({per_unit:g} per unit) fits the int16 "
+                f"axis ({AXIS_MAX})",
             )
         )
     return lowered

@@ -198,21 +198,26 @@ class SimOperator(AnswersOperator):
         self.deadman = deadman
         self.released = False
         self.zeros_while_released = 0
+        self.waist_sweeps = threading.Event()
         self._before: dict[str, float] = {}
 
     def say(self, text: str) -> None:
         if text.startswith("Known angle"):
             self._before = self.sim.state().joints_rad
-        if "waist: sweeps" in text and not self.released:
-            # Let go of the deadman while the waist sweeps: it stops, then goes on when held.
-            self.released = True
-            first_motion(self.sim, 10.0)
-            let_go = time.monotonic()
-            self.deadman.set(False)
-            assert self.sim.wait_until(lambda s: s.all_stopped, DEADLINE_S)
-            moving, self.zeros_while_released = zeros_after(self.sim.received_commands(), let_go)
-            assert moving == 0
-            self.deadman.set(True)
+        if "waist: sweeps" in text:
+            self.waist_sweeps.set()
+
+    def let_go_while_the_waist_sweeps(self) -> None:
+        """Let go of the deadman while the waist sweeps: it stops; held again, it goes on."""
+        assert self.waist_sweeps.wait(120.0)
+        first_motion(self.sim, 10.0)
+        let_go = time.monotonic()
+        self.deadman.set(False)
+        assert self.sim.wait_until(lambda s: s.all_stopped, DEADLINE_S)
+        moving, self.zeros_while_released = zeros_after(self.sim.received_commands(), let_go + 0.1)
+        assert moving == 0
+        self.released = True
+        self.deadman.set(True)
 
     def measured_angle(self, joint: str, moved_deg: float) -> float | None:
         moved = self.sim.state().joints_rad[joint] - self._before[joint]
@@ -230,6 +235,9 @@ def test_guided_calibration_finds_swapped_device_ids_limits_and_drive_constants(
         operators.append(SimOperator(sim, truth, deadman))
         return operators[0]
 
+    def during(sim: RobotSimulator, stop: StopSignal, finished: threading.Event) -> None:
+        operators[0].let_go_while_the_waist_sweeps()
+
     outcome = calibrate_scrambled(
         5,
         tmp_path,
@@ -237,6 +245,7 @@ def test_guided_calibration_finds_swapped_device_ids_limits_and_drive_constants(
         operator=operator,
         deadman=deadman,
         config=CalibrationConfig(limit_speed_rad_s=0.35),
+        during=during,
     )
     result = outcome.result
     assert result.aborted is None, result.aborted
