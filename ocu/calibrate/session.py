@@ -57,6 +57,8 @@ NEGATIVE = -1
 ROUGH_FIT_ERROR = 0.15
 # Ticks per radian of a 16-bit encoder per turn, for a joint the profile gives none.
 DEFAULT_TICKS_PER_RAD = 65536 / (2 * math.pi)
+# Scans of the axes, each with a longer wait, before a round trip is called unbounded.
+MAX_SCANS = 3
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,11 @@ class CalibrationConfig:
     latency_margin_s: float = 0.5
     min_margin_s: float = 0.12
     min_leg_s: float = 0.4
+    # The link repeats the command this often during a calibration (at most the profile's
+    # maximum). At the profile's 5 Hz a pulse shorter than 0.2 s rests on one datagram: lost,
+    # or overtaken on the way by the zeros of the tick sent just before it (jitter reorders
+    # datagrams; the robot obeys the last to arrive), the axis looks as if it drove nothing.
+    command_rate_hz: float = 50.0
     # Noisy readings: runs long enough for this relative error each, never slower than this.
     noisy_run_error: float = 0.01
     min_sweep_speed_rad_s: float = 0.05
@@ -225,6 +232,8 @@ class Calibrator:
         started = self.clock()
         self.link.subscribe(self.log)
         self.link.start()
+        rate_hz = self.link.rate_hz
+        self.link.set_rate_hz(min(self.config.command_rate_hz, self.profile.link.send_rate_max_hz))
         try:
             self._listen()
             self._step("zero", self._zero_offsets)
@@ -243,6 +252,7 @@ class Calibrator:
             raise
         finally:
             self._zero()
+            self.link.set_rate_hz(rate_hz)
             self.link.unsubscribe(self.log)
             self.result.duration_s = self.clock() - started
             self.result.excursion_deg = {
@@ -548,63 +558,82 @@ class Calibrator:
 
     def _scan(self) -> None:
         """Pulse each axis in turn; map the channels from the motors that answer."""
-        try:
-            self._scan_axes()
-        except _RescanError as err:
-            self.operator.say(
-                f"the robot answers slowly (round trip up to {err.margin_s:.2f} s): "
-                "scanning again with a longer wait"
-            )
-            self._axis_map.clear()
-            for key in [k for k in self.result.measured if k.startswith("channels.")]:
-                del self.result.measured[key]
-            self.result.findings = [
-                f for f in self.result.findings if not f.text.startswith("axis ")
-            ]
-            for joint in self._joints.values():
-                joint.channel = joint.axis = None
-                joint.free.clear()
-            self._round_trips.clear()
-            self._scan_axes()
+        for attempt in range(MAX_SCANS):
+            try:
+                self._scan_axes()
+                return
+            except _RescanError as err:
+                if attempt == MAX_SCANS - 1:
+                    raise CalibrationAbortedError(
+                        f"the round trip kept growing ({err.margin_s:.2f} s after "
+                        f"{MAX_SCANS} scans): check the link with `ocu probe`"
+                    ) from err
+                self.operator.say(
+                    f"the robot answers slowly (round trip up to {err.margin_s:.2f} s): "
+                    "scanning again with a longer wait"
+                )
+                self._forget_scan()
+
+    def _forget_scan(self) -> None:
+        """Drop what a scan judged with too short a wait."""
+        self._axis_map.clear()
+        for key in [k for k in self.result.measured if k.startswith("channels.")]:
+            del self.result.measured[key]
+        self.result.findings = [f for f in self.result.findings if not f.text.startswith("axis ")]
+        for joint in self._joints.values():
+            joint.channel = joint.axis = None
+            joint.free.clear()
+        self._round_trips.clear()
 
     def _scan_axes(self) -> None:
-        found_joint_axes: dict[int, _Joint] = {}
-        for axis in range(AXIS_COUNT):
-            responses = self._pulse(axis)
-            moved = {d: r for d, r in responses.items() if r.direction() != 0}
-            # Speeds and echoed commands are exact; a position alone may be noise when
-            # another device answers by its speed.
-            strong = {d for d, r in moved.items() if r.speed_raw or r.command_raw}
-            if strong:
-                moved = {d: moved[d] for d in strong}
-            joints = [d for d in moved if d in self._joints]
-            tracks = [d for d in moved if self._is_track(d)]
-            others = [d for d in moved if d not in joints and d not in tracks]
-            if not moved:
-                self.operator.say(f"axis {axis}: nothing answers")
-                continue
-            if len(joints) == 1 and not tracks and not others:
-                joint = self._identify(joints[0], moved[joints[0]])
-                if joint is not None:
-                    found_joint_axes[axis] = joint
-                    self._map_joint(axis, joint, responses[joints[0]])
-                continue
-            if len(tracks) == 2 and not joints and not others:
-                self._map_drive(axis, {d: moved[d] for d in tracks})
-                continue
-            log.info("axis %d: ambiguous responses %s", axis, moved)
-            names = [self._name(d) for d in moved]
-            self._finding(
-                MISMATCH,
-                f"axis {axis} moves several motors ({', '.join(names)}): not mapped",
+        silent = [axis for axis in range(AXIS_COUNT) if not self._scan_axis(axis)]
+        missing = [name for name in self.profile.channels if name not in self._axis_map]
+        if missing and silent:
+            # A pulse can miss the robot (a burst of loss, a link that stalled): the axes
+            # that seemed to drive nothing get a second pulse before a channel is given up.
+            self.operator.say(
+                f"no axis answered for {', '.join(missing)}: pulsing the silent axes again"
             )
-        for name, _channel in self.profile.channels.items():
+            for axis in silent:
+                self._scan_axis(axis)
+        for name in self.profile.channels:
             if name not in self._axis_map:
                 self._finding(
                     MISMATCH,
                     f"no axis moves the {name}: channels.{name}.axis stays an assumption",
                     f"channels.{name}.axis",
                 )
+
+    def _scan_axis(self, axis: int) -> bool:
+        """Pulse one axis and map what answered; whether anything did."""
+        responses = self._pulse(axis)
+        moved = {d: r for d, r in responses.items() if r.direction() != 0}
+        # Speeds and echoed commands are exact; a position alone may be noise when
+        # another device answers by its speed.
+        strong = {d for d, r in moved.items() if r.speed_raw or r.command_raw}
+        if strong:
+            moved = {d: moved[d] for d in strong}
+        joints = [d for d in moved if d in self._joints]
+        tracks = [d for d in moved if self._is_track(d)]
+        others = [d for d in moved if d not in joints and d not in tracks]
+        if not moved:
+            self.operator.say(f"axis {axis}: nothing answers")
+            return False
+        if len(joints) == 1 and not tracks and not others:
+            joint = self._identify(joints[0], moved[joints[0]])
+            if joint is not None:
+                self._map_joint(axis, joint, responses[joints[0]])
+            return True
+        if len(tracks) == 2 and not joints and not others:
+            self._map_drive(axis, {d: moved[d] for d in tracks})
+            return True
+        log.info("axis %d: ambiguous responses %s", axis, moved)
+        names = [self._name(d) for d in moved]
+        self._finding(
+            MISMATCH,
+            f"axis {axis} moves several motors ({', '.join(names)}): not mapped",
+        )
+        return True
 
     def _pulse(self, axis: int) -> dict[int, _Response]:
         """Pulse an axis out and back (a third leg if the first direction was blocked);
