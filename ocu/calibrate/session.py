@@ -30,7 +30,7 @@ import math
 import statistics
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ocu.calibrate.fit import Fit, FitError, Run, fit_through_origin, fit_ticks_per_rad
@@ -160,6 +160,9 @@ class _Joint:
     # Ticks per radian from the axis scan's pulse: rough, for the excursion guard only.
     rough_ticks_per_rad: float | None = None
     last: Sample | None = None
+    # This device's reading in the zero pose; its key names the motor the device is (which
+    # the guided mode may learn only after the zero step).
+    zero: Measured | None = None
 
 
 @dataclass(frozen=True)
@@ -224,6 +227,8 @@ class Calibrator:
         self._settled: Sample | None = None
         # While searching hard stops the excursion budget does not apply (guided only).
         self._limit_search = False
+        # Motor name -> the device whose zero-pose reading is that motor's zero offset.
+        self._zero_owner: dict[str, int] = {}
 
     # ---- life ----------------------------------------------------------------------------
 
@@ -535,24 +540,28 @@ class Calibrator:
             else "--yes: the pose at the start is the zero pose"
         )
         for joint in self._joints.values():
-            if joint.motor.name.startswith("device"):
-                continue
             positions = [s.motors[joint.device_id].position for s in samples]
             base = positions[0]
             middle = round(statistics.median(tick_delta(base, p) for p in positions))
             offset = (base + middle) % 2**32
             joint.start_ticks = offset
-            self._measure(
-                Measured(
-                    f"motors.{joint.motor.name}.zero_offset_ticks",
-                    offset,
-                    f"raw position in the zero pose, the median of {len(positions)} readings "
-                    f"({how})",
-                    residual=joint.noise_ticks,
-                    residual_unit="ticks (spread of the readings)",
-                    samples=len(positions),
-                )
+            joint.zero = Measured(
+                "",
+                offset,
+                f"raw position in the zero pose, the median of {len(positions)} readings ({how})",
+                residual=joint.noise_ticks,
+                residual_unit="ticks (spread of the readings)",
+                samples=len(positions),
             )
+            self._record_zero(joint)
+
+    def _record_zero(self, joint: _Joint) -> None:
+        """The device's zero-pose reading as the zero offset of the motor it is."""
+        name = joint.motor.name
+        if joint.zero is None or name.startswith("device"):
+            return
+        self._measure(replace(joint.zero, key=f"motors.{name}.zero_offset_ticks"))
+        self._zero_owner[name] = joint.device_id
 
     # ---- axis map ------------------------------------------------------------------------
 
@@ -579,7 +588,10 @@ class Calibrator:
         self._axis_map.clear()
         for key in [k for k in self.result.measured if k.startswith("channels.")]:
             del self.result.measured[key]
-        self.result.findings = [f for f in self.result.findings if not f.text.startswith("axis ")]
+        # The findings of the axis scan (and of the devices the operator named in it).
+        self.result.findings = [
+            f for f in self.result.findings if not f.text.startswith(("axis ", "device "))
+        ]
         for joint in self._joints.values():
             joint.channel = joint.axis = None
             joint.free.clear()
@@ -762,7 +774,7 @@ class Calibrator:
                 f"{profile_motor.name if profile_motor else 'unknown device'} the profile says",
                 f"motors.{answer}.device_id",
             )
-            joint.motor = motor
+            self._rename(joint, motor)
             self._measure(
                 Measured(
                     f"motors.{answer}.device_id",
@@ -779,6 +791,19 @@ class Calibrator:
             )
             return None
         return joint
+
+    def _rename(self, joint: _Joint, motor: Motor) -> None:
+        """The device is another motor than the profile says: its zero offset goes with it."""
+        old = joint.motor.name
+        if self._zero_owner.get(old) == joint.device_id:
+            del self._zero_owner[old]
+            del self.result.measured[f"motors.{old}.zero_offset_ticks"]
+        # A device the profile gave this name to is not that motor (and is still unknown).
+        for other in self._joints.values():
+            if other is not joint and other.motor.name == motor.name:
+                other.motor = _unknown_motor(other.device_id)
+        joint.motor = motor
+        self._record_zero(joint)
 
     def _map_joint(self, axis: int, joint: _Joint, response: _Response) -> None:
         channel = joint.motor.channel
