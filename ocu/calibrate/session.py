@@ -712,7 +712,7 @@ class Calibrator:
             ):
                 self._round_trips.append(sample.received_at - start)
                 break
-        if len(self._round_trips) < 2:
+        if not self._round_trips:
             return
         margin = max(self.config.min_margin_s, 1.5 * min(self._round_trips) + 0.05)
         if margin > self._margin_s:
@@ -897,12 +897,16 @@ class Calibrator:
         # Noisy readings need longer runs: the slope of a run of n readings spread over a
         # travel of d is known to about noise·sqrt(12/n)/d; aim at `noisy_run_error` per run,
         # but never slower than `min_sweep_speed_rad_s` (the speed report's resolution).
+        # A one-sided cycle runs each way for two legs: it travels twice as far from the start.
+        reach = 1.0 if symmetric else 2.0
         noisy_s = 0.0
         if noise_rad > 0.0:
             ratio = noise_rad * math.sqrt(12.0) / (budget_rad * config.noisy_run_error)
-            noisy_s = ratio**2 * self._period_s
-        # A one-sided cycle runs each way for two legs: it travels twice as far from the start.
-        reach = 1.0 if symmetric else 2.0
+            # The noise is reckoned with a rough ticks per radian (the profile's may be 50 %
+            # off): whatever it says, noisy runs use the whole budget, the travel that divides
+            # the noise; at full speed that costs no more time than shorter cycles repeated.
+            full_s = budget_rad / (reach * config.joint_speed_rad_s)
+            noisy_s = max(ratio**2 * self._period_s, full_s)
         slowest_s = budget_rad / (reach * config.min_sweep_speed_rad_s)
         leg_s = max(config.min_leg_s, need_s, min(noisy_s, slowest_s))
         speed = min(config.joint_speed_rad_s, budget_rad / (reach * leg_s))

@@ -34,6 +34,8 @@ from tests.test_hotkeys import TABLE_4
 
 pytestmark = pytest.mark.slow
 
+# The stopping tests need no noise estimate: a short listening step.
+QUICK = CalibrationConfig(listen_s=0.5)
 LISTENING = re.compile(r"listening on (?P<host>[\d.]+):(?P<port>\d+)")
 DEADLINE_S = 5.0
 # Longer than a scan pulse waits for an answer (about 1.3 s), shorter than LINK LOST (3 s).
@@ -210,16 +212,18 @@ class SimOperator(AnswersOperator):
                 "joints": joints,
                 "angles": {"shoulder": 0.0},
                 "limits": ["gripper"],
+                # Short runs: the times the operator types, not the robot's travel, carry
+                # the truth the fit must find.
                 "drive": {
                     "linear": {
-                        "distance": 0.5,
+                        "distance": 0.25,
                         "speeds": [0.3, 0.4],
-                        "times_s": [0.5 * linear / v for v in (0.3, 0.4)],
+                        "times_s": [0.25 * linear / v for v in (0.3, 0.4)],
                     },
                     "rotation": {
-                        "distance": 1.0,
+                        "distance": 0.5,
                         "speeds": [0.4, 0.6],
-                        "times_s": [1.0 * turn / w for w in (0.4, 0.6)],
+                        "times_s": [0.5 * turn / w for w in (0.4, 0.6)],
                     },
                 },
             }
@@ -281,7 +285,7 @@ def test_guided_calibration_finds_swapped_device_ids_limits_and_drive_constants(
         ids=True,
         operator=operator,
         deadman=deadman,
-        config=CalibrationConfig(limit_speed_rad_s=0.35),
+        config=CalibrationConfig(limit_speed_rad_s=0.5),
         during=during,
     )
     result = outcome.result
@@ -317,7 +321,7 @@ def test_an_emergency_stop_ends_the_calibration_with_zeros(tmp_path: Path) -> No
         stop.stop("Space")
         assert sim.wait_until(lambda s: s.all_stopped, DEADLINE_S)
 
-    outcome = calibrate_scrambled(11, tmp_path, during=during)
+    outcome = calibrate_scrambled(11, tmp_path, config=QUICK, during=during)
     assert outcome.result.aborted == "Space"
     # The calibrator sees the stop within one control step (20 ms) and the e-stop burst
     # follows at once: after 50 ms nothing but zeros reach the robot.
@@ -340,7 +344,7 @@ def test_link_lost_ends_the_calibration_and_nothing_resumes(tmp_path: Path) -> N
         assert finished.wait(10.0)
         sim.restore_link()
 
-    outcome = calibrate_scrambled(12, tmp_path, during=during)
+    outcome = calibrate_scrambled(12, tmp_path, config=QUICK, during=during)
     assert outcome.result.aborted is not None
     assert "LINK LOST" in outcome.result.aborted
     moving, _ = zeros_after(outcome.received, cut[0] + 0.01)
@@ -348,30 +352,32 @@ def test_link_lost_ends_the_calibration_and_nothing_resumes(tmp_path: Path) -> N
 
 
 def test_an_encoder_that_jumps_stops_the_calibration(tmp_path: Path) -> None:
+    truth = scrambled_truth(13)
+    measured: list[str] = []
+    first = threading.Event()
+
+    def heard(text: str) -> None:
+        # "<joint>: <n> ticks/rad ...": the first joint whose ticks per radian is known.
+        if "ticks/rad" in text and not first.is_set():
+            measured.append(text.partition(":")[0])
+            first.set()
+
     def during(sim: RobotSimulator, stop: StopSignal, finished: threading.Event) -> None:
-        # Once the sweeps have begun (a joint's ticks per radian is known), break an encoder.
-        assert sim.wait_until(
-            lambda s: s.elapsed_s > 1.0 and any(v != 0.0 for v in s.velocities.values()), 60
-        )
-        truth = scrambled_truth(13)
-        while not stop.stopped and sim.state().elapsed_s < 120:
-            state = sim.state()
-            moving = [n for n, v in state.velocities.items() if v != 0.0]
-            if moving and state.elapsed_s > 15.0:
-                motor = truth.motor_for_channel(moving[0])
-                if motor is not None:
-                    sim.set_raw_position(motor.name, (motor.zero_offset_ticks + 2**31) % 2**32)
-                    return
-            then = state.elapsed_s
+        # While the next joint sweeps, the measured joint's encoder jumps half its range.
+        assert first.wait(120.0)
+        motor = truth.motors[measured[0]]
+        sim.set_raw_position(motor.name, (motor.zero_offset_ticks + 2**31) % 2**32)
 
-            def later(s: SimState, t: float = then) -> bool:
-                return s.elapsed_s > t + 0.05
-
-            sim.wait_until(later, 1.0)
-
-    outcome = calibrate_scrambled(13, tmp_path, during=during)
+    outcome = calibrate_scrambled(
+        13,
+        tmp_path,
+        operator=lambda sim: AutoOperator(heard),
+        config=QUICK,
+        during=during,
+    )
+    assert measured
     assert outcome.result.aborted is not None
-    assert "implausible" in outcome.result.aborted
+    assert f"implausible: the {measured[0]}'s position jumped" in outcome.result.aborted
     assert not any(outcome.received[-1].packet.axes)
 
 
