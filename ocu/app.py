@@ -1,7 +1,8 @@
 """The `ocu` command: start the console on the built-in simulator or a real robot.
 
-Also `ocu --record FILE`, `ocu --replay FILE`, `ocu inspect FILE` (docs/recordings.md) and
-`ocu screenshot [--window] OUT.png` (the model, or the whole console, without a display).
+Also `ocu --record FILE`, `ocu --replay FILE`, `ocu inspect FILE` (docs/recordings.md),
+`ocu screenshot [--window] OUT.png` (the model, or the whole console, without a display) and
+`ocu probe` / `ocu calibrate` (first contact with a robot: docs/calibration.md).
 """
 
 from __future__ import annotations
@@ -53,7 +54,10 @@ def build_parser() -> argparse.ArgumentParser:
         "starts the built-in simulator on 127.0.0.1 and connects to it.",
         epilog="Subcommands: `ocu screenshot OUT.png [--joints name=deg ...]` renders the model "
         "without a display; `ocu screenshot --window OUT.png [--seconds S]` the whole console "
-        "on the built-in simulator; `ocu inspect FILE.mcap` summarises a recording.",
+        "on the built-in simulator; `ocu inspect FILE.mcap` summarises a recording; "
+        "`ocu probe --robot HOST[:PORT]` checks what a robot sends against the profile; "
+        "`ocu calibrate --robot HOST[:PORT] --out PROFILE.toml [--yes]` measures the robot "
+        "and writes a profile (docs/calibration.md).",
     )
     parser.add_argument("--robot", metavar="HOST[:PORT]", help="connect to a robot")
     files = parser.add_mutually_exclusive_group()
@@ -123,6 +127,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         from ocu.record.inspect import main as inspect_main
 
         return inspect_main(args_list[1:])
+    if args_list and args_list[0] == "probe":
+        from ocu.calibrate.cli import probe_main
+
+        return probe_main(args_list[1:])
+    if args_list and args_list[0] == "calibrate":
+        from ocu.calibrate.cli import calibrate_main
+
+        return calibrate_main(args_list[1:])
     parser = build_parser()
     args = parser.parse_args(args_list)
     if args.replay is not None and (args.robot or args.sim_arg):

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
+import datetime as dt
 import difflib
 import itertools
+import json
 import math
+import os
+import re
+import tempfile
 import tomllib
-from collections.abc import Collection, Iterable
-from dataclasses import dataclass
+from collections.abc import Collection, Iterable, Mapping
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -40,6 +46,7 @@ TOP_KEYS = (
     "motors",
     "arm",
     "navigation",
+    "measured",
 )
 LINK_KEYS = (
     "address",
@@ -139,6 +146,8 @@ CHANNEL_KEYS = (
     "switch",
     "directions",
     "locked_while_driving",
+    "axis_sign",
+    "axis_per_unit",
 )
 # A motor's position keys only mean something with ticks_per_rad.
 MOTOR_POSITION_KEYS = ("zero_offset_ticks", "limits_deg")
@@ -163,6 +172,12 @@ ARM_KEYS = (
     "twist_timeout_s",
     "poses",
 )
+# What a `[measured."some.key"]` entry may say about how that key was measured on a robot.
+MEASUREMENT_KEYS = ("how", "when", "residual", "residual_unit", "samples")
+# Table names are TOML bare keys; the dotted names in `measured` and `assumptions` join them.
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+# Arrays longer than this are written one item per line.
+TOML_LINE_LENGTH = 96
 
 CAMERA_MODELS = ("fisheye", "standard")
 COLOUR_MODES = ("off", "gray_world", "fixed")
@@ -374,7 +389,10 @@ class Channel:
 
     `directions` are the words for + and − ("up", "down"); `switch` gives the channel a
     three-way switch in the console; `locked_while_driving` says the robot refuses to move it
-    while the chassis moves (the Engineer's waist).
+    while the chassis moves (the Engineer's waist). `axis_sign` is -1 when the robot moves the
+    channel the negative way for a positive axis value (the OCU then sends the axis negated).
+    `axis_per_unit` is the channel's own scale when the profile gives one, else the SI
+    constant its `scale` names.
     """
 
     name: str
@@ -388,6 +406,19 @@ class Channel:
     switch: bool = False
     directions: tuple[str, str] = ("+", "-")
     locked_while_driving: bool = False
+    axis_sign: int = 1
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """How one profile key was measured on a robot (`[measured."key"]`, by ocu calibrate)."""
+
+    key: str
+    how: str
+    when: dt.datetime
+    residual: float | None = None
+    residual_unit: str | None = None
+    samples: int | None = None
 
 
 @dataclass(frozen=True)
@@ -460,6 +491,16 @@ class RobotProfile:
     cameras: tuple[CameraSettings, ...] = ()
     arm: ArmSettings | None = None
     navigation: NavigationSettings = NavigationSettings()
+    # Keys measured on a robot, by dotted name ("channels.shoulder.axis").
+    measured: Mapping[str, Measurement] = field(default_factory=dict)
+
+    def provenance(self, key: str) -> str:
+        """Where a dotted key's value comes from: "measured", "assumption" or "documents"."""
+        if key in self.measured:
+            return "measured"
+        if any(assumption_covers(pattern, key) for pattern in self.assumptions):
+            return "assumption"
+        return "documents"
 
     def channel_with_role(self, role: str) -> str | None:
         """The channel that plays a role (e.g. "drive_linear"), or None."""
@@ -500,6 +541,18 @@ class RobotProfile:
         return [m for m in self.motors.values() if m.has_position and m.channel]
 
 
+def assumption_covers(pattern: str, key: str) -> bool:
+    """Whether an `assumptions` entry covers a dotted key.
+
+    `*` stands for one table name ("channels.*.axis" covers "channels.waist.axis") and an
+    entry naming a table covers every key in it ("buttons" covers "buttons.torch").
+    """
+    parts, wanted = pattern.split("."), key.split(".")
+    if len(parts) > len(wanted):
+        return False
+    return all(p in ("*", k) for p, k in zip(parts, wanted, strict=False))
+
+
 def default_profile_path() -> Path:
     """Path of the Engineer profile shipped with the package."""
     return Path(str(resources.files("ocu") / "profiles" / "engineer.toml"))
@@ -508,6 +561,15 @@ def default_profile_path() -> Path:
 def load_profile(path: str | Path | None = None) -> RobotProfile:
     """Read and validate a profile; the shipped Engineer profile when path is None."""
     profile_path = Path(path) if path is not None else default_profile_path()
+    return parse_profile(load_profile_data(profile_path), source=str(profile_path))
+
+
+def load_profile_data(path: str | Path | None = None) -> dict[str, Any]:
+    """A profile file's TOML document, not yet validated (the shipped one when path is None).
+
+    For tools that write a profile from another one (ocu calibrate, ocu-sim --scramble).
+    """
+    profile_path = Path(path) if path is not None else default_profile_path()
     try:
         text = profile_path.read_text(encoding="utf-8")
     except OSError as err:
@@ -515,10 +577,9 @@ def load_profile(path: str | Path | None = None) -> RobotProfile:
     except UnicodeDecodeError as err:
         raise ProfileError(f"{profile_path}: not UTF-8 text: {err}") from err
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ProfileError(f"{profile_path}: not valid TOML: {err}") from err
-    return parse_profile(data, source=str(profile_path))
 
 
 class _Reader:
@@ -623,6 +684,13 @@ def _parse_channel(name: str, reader: _Reader, scales: dict[str, float]) -> Chan
     if scale not in scales:
         raise ProfileError(f"{reader.where}.scale: must be one of {SCALE_NAMES}, got {scale!r}")
     per_unit = scales[scale]
+    if reader.optional("axis_per_unit"):
+        per_unit = reader.number("axis_per_unit", low=1e-9)
+    axis_sign = 1
+    if reader.optional("axis_sign"):
+        axis_sign = reader.integer("axis_sign", low=-1, high=1)
+        if axis_sign == 0:
+            raise ProfileError(f"{reader.where}.axis_sign: must be 1 or -1, got 0")
     min_speed = reader.number("min_speed", low=0.0)
     hard_max = reader.number("hard_max", low=0.0)
     default_max = reader.number("default_max", low=0.0, high=hard_max)
@@ -663,6 +731,7 @@ def _parse_channel(name: str, reader: _Reader, scales: dict[str, float]) -> Chan
             if reader.optional("locked_while_driving")
             else False
         ),
+        axis_sign=axis_sign,
     )
 
 
@@ -1044,6 +1113,7 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
     assumptions = data.get("assumptions", [])
     if not isinstance(assumptions, list) or not all(isinstance(a, str) for a in assumptions):
         raise ProfileError("profile.assumptions: must be a list of key names")
+    measured = _parse_measured(root, data, assumptions)
     return RobotProfile(
         name=root.string("name"),
         source=source,
@@ -1075,4 +1145,126 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
             if root.optional("navigation")
             else NavigationSettings()
         ),
+        measured=measured,
     )
+
+
+def _parse_measured(
+    root: _Reader, data: dict[str, Any], assumptions: list[str]
+) -> dict[str, Measurement]:
+    """The `[measured."key"]` entries; each must name a key the profile holds."""
+    if not root.optional("measured"):
+        return {}
+    table = root.sub("measured", None)
+    measured: dict[str, Measurement] = {}
+    for key, entry in table.table.items():
+        where = f'profile.measured."{key}"'
+        if not isinstance(entry, dict):
+            raise ProfileError(f"{where}: must be a table (how, when, residual, ...)")
+        reader = _Reader(entry, where, MEASUREMENT_KEYS)
+        value: Any = data
+        for part in key.split("."):
+            if not isinstance(value, dict) or part not in value:
+                raise ProfileError(f"{where}: names no key of this profile")
+            value = value[part]
+        if key in assumptions:
+            raise ProfileError(f"{where}: also listed in assumptions; a key is one or the other")
+        when = reader.table.get("when")
+        if not isinstance(when, dt.datetime) or when.tzinfo is None:
+            raise ProfileError(
+                f"{where}.when: must be a date and time with its offset, e.g. 2025-06-01T12:00:00Z"
+            )
+        measured[key] = Measurement(
+            key=key,
+            how=reader.string("how"),
+            when=when,
+            residual=(reader.number("residual", low=0.0) if reader.optional("residual") else None),
+            residual_unit=(
+                reader.string("residual_unit") if reader.optional("residual_unit") else None
+            ),
+            samples=(
+                reader.integer("samples", low=1, high=2**31 - 1)
+                if reader.optional("samples")
+                else None
+            ),
+        )
+    return measured
+
+
+# ---- writing -----------------------------------------------------------------------------
+
+
+def _toml_key(key: str) -> str:
+    return key if _BARE_KEY.match(key) else _toml_string(key)
+
+
+def _toml_string(text: str) -> str:
+    # A JSON string is a TOML basic string; TOML also wants DEL (U+007F) escaped.
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
+def _toml_value(value: Any, where: str) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ProfileError(f"{where}: cannot write {value!r}")
+        return repr(value)
+    if isinstance(value, str):
+        return _toml_string(value)
+    if isinstance(value, dt.datetime):
+        if value.tzinfo is None:
+            raise ProfileError(f"{where}: a date and time needs its offset")
+        return value.isoformat()
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v, where) for v in value) + "]"
+    raise ProfileError(f"{where}: cannot write a {type(value).__name__}")
+
+
+def _toml_table(lines: list[str], path: list[str], table: Mapping[str, Any]) -> None:
+    values = {k: v for k, v in table.items() if not isinstance(v, dict)}
+    tables = {k: v for k, v in table.items() if isinstance(v, dict)}
+    if path and (values or not tables):
+        lines.append("")
+        lines.append("[" + ".".join(_toml_key(part) for part in path) + "]")
+    for key, value in values.items():
+        where = ".".join([*path, key])
+        line = f"{_toml_key(key)} = {_toml_value(value, where)}"
+        if isinstance(value, (list, tuple)) and len(line) > TOML_LINE_LENGTH:
+            items = [f"    {_toml_value(item, where)}," for item in value]
+            line = "\n".join([f"{_toml_key(key)} = [", *items, "]"])
+        lines.append(line)
+    for key, sub in tables.items():
+        _toml_table(lines, [*path, key], sub)
+
+
+def profile_to_toml(data: Mapping[str, Any], header: str = "") -> str:
+    """A profile document as TOML text (comments: the header's lines), which tomllib reads
+    back to the same document."""
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    _toml_table(lines, [], data)
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def write_profile_data(path: str | Path, data: Mapping[str, Any], header: str = "") -> None:
+    """Validate a profile document and write it atomically (a temp file renamed over path).
+
+    A profile that does not load is refused before anything is written; a writer killed
+    half-way leaves the old file (or none), never half of the new one.
+    """
+    target = Path(path)
+    text = profile_to_toml(data, header)
+    parse_profile(tomllib.loads(text), source=str(target))
+    fd, temp_name = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or ".")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as out:
+            out.write(text)
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(temp_name, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temp_name)
+        raise

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import datetime as dt
 import math
 import re
 import tomllib
@@ -16,9 +17,13 @@ from ocu.profile import (
     AXIS_MAX,
     ProfileError,
     RobotProfile,
+    assumption_covers,
     default_profile_path,
     load_profile,
+    load_profile_data,
     parse_profile,
+    profile_to_toml,
+    write_profile_data,
 )
 
 SHIPPED_TEXT = default_profile_path().read_text(encoding="utf-8")
@@ -634,3 +639,120 @@ def test_not_utf8(tmp_path: Path) -> None:
     path.write_bytes(b"name = '\xff'\n")
     with pytest.raises(ProfileError, match=r"robot\.toml: not UTF-8 text: .*byte 0xff"):
         load_profile(path)
+
+
+# --- direction, per-channel scale, measured keys, writing ---------------------------------
+
+MEASURED = {
+    "channels.shoulder.axis": {
+        "how": "a pulse on axis 3 moved the shoulder",
+        "when": dt.datetime(2025, 6, 1, 12, 0, tzinfo=dt.UTC),
+    },
+    "motors.shoulder.ticks_per_rad": {
+        "how": "sweeps",
+        "when": dt.datetime(2025, 6, 1, 12, 0, tzinfo=dt.UTC),
+        "residual": 0.4,
+        "residual_unit": "ticks",
+        "samples": 24,
+    },
+}
+
+
+def _measured(entries: dict[str, Any]) -> dict[str, Any]:
+    data = copy.deepcopy(SHIPPED_DATA)
+    data["measured"] = copy.deepcopy(entries)
+    return data
+
+
+def test_axis_sign_and_own_scale(profile: RobotProfile) -> None:
+    assert all(c.axis_sign == 1 for c in profile.channels.values())
+    data = _edited(("channels", "shoulder", "axis_sign"), -1)
+    data["channels"]["shoulder"]["axis_per_unit"] = 25_000.0
+    shoulder = parse_profile(data).channels["shoulder"]
+    assert (shoulder.axis_sign, shoulder.axis_per_unit) == (-1, 25_000.0)
+    del data["channels"]["elbow"]["axis_sign"]  # optional: +1 when absent
+    assert parse_profile(data).channels["elbow"].axis_sign == 1
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("axis_sign", 0, r"axis_sign: must be 1 or -1, got 0$"),
+        ("axis_sign", 2, r"axis_sign: must be in \[-1, 1\], got 2$"),
+        ("axis_sign", 1.0, r"axis_sign: must be an integer"),
+        ("axis_per_unit", 0.0, r"axis_per_unit: must be >= 1e-09"),
+        ("axis_per_unit", 40_000.0, r"shoulder\.hard_max: 1.0 needs axis value 40000"),
+    ],
+)
+def test_bad_direction_or_scale(key: str, value: object, message: str) -> None:
+    with pytest.raises(ProfileError, match=message):
+        parse_profile(_edited(("channels", "shoulder", key), value))
+
+
+def test_measured_keys_and_provenance(profile: RobotProfile) -> None:
+    measured = parse_profile(_measured(MEASURED))
+    entry = measured.measured["motors.shoulder.ticks_per_rad"]
+    assert (entry.how, entry.residual, entry.residual_unit, entry.samples) == (
+        "sweeps",
+        0.4,
+        "ticks",
+        24,
+    )
+    # A measured key is no assumption, though a wildcard still covers it.
+    assert measured.provenance("channels.shoulder.axis") == "measured"
+    assert measured.provenance("channels.elbow.axis") == "assumption"
+    assert profile.provenance("channels.shoulder.axis") == "assumption"
+    assert profile.provenance("buttons.torch") == "assumption"
+    assert profile.provenance("si.linear_axis_per_m_s") == "documents"
+    assert assumption_covers("channels.*.axis", "channels.elbow.axis")
+    assert not assumption_covers("channels.*.axis", "channels.elbow.axis_sign")
+    assert not assumption_covers("link.port.x", "link.port")
+
+
+@pytest.mark.parametrize(
+    ("entries", "message"),
+    [
+        ({"link.nope": MEASURED["channels.shoulder.axis"]}, r'"link\.nope": names no key'),
+        ({"link.port": MEASURED["channels.shoulder.axis"]}, r'"link\.port": also listed in'),
+        (
+            {"link.send_rate_hz": {"how": "x", "when": dt.datetime(2025, 6, 1, 12, 0)}},
+            r'"link\.send_rate_hz"\.when: must be a date and time with its offset',
+        ),
+        (
+            {"link.send_rate_hz": {"when": dt.datetime(2025, 6, 1, tzinfo=dt.UTC)}},
+            r'"link\.send_rate_hz"\.how: missing$',
+        ),
+        (
+            {"link.send_rate_hz": {**MEASURED["channels.shoulder.axis"], "resid": 1.0}},
+            r"resid: unknown key; did you mean 'residual'\?",
+        ),
+        (
+            {"link.send_rate_hz": {**MEASURED["channels.shoulder.axis"], "residual": -1.0}},
+            r"residual: must be >= 0.0",
+        ),
+    ],
+)
+def test_bad_measured_entries(entries: dict[str, Any], message: str) -> None:
+    with pytest.raises(ProfileError, match=message):
+        parse_profile(_measured(entries))
+
+
+def test_toml_writer_round_trips_the_shipped_profile_and_measurements() -> None:
+    data = _measured(MEASURED)
+    data["name"] = 'A "quoted" name\twith a tab, é and \x7f'
+    text = profile_to_toml(data, header="first line\nsecond line")
+    assert text.startswith("# first line\n# second line\n")
+    assert tomllib.loads(text) == data
+    assert load_profile_data() == SHIPPED_DATA
+
+
+def test_written_profiles_are_validated_and_replace_the_old_file_whole(tmp_path: Path) -> None:
+    target = tmp_path / "robot.toml"
+    write_profile_data(target, _measured(MEASURED), header="ocu test")
+    assert load_profile(target).measured.keys() == MEASURED.keys()
+    before = target.read_bytes()
+    bad = _edited(("channels", "shoulder", "axis_sign"), 0)
+    with pytest.raises(ProfileError, match="axis_sign"):
+        write_profile_data(target, bad)
+    assert target.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["robot.toml"]  # no temp file left

@@ -72,7 +72,8 @@ class CommandMapper:
             if limits is not None:
                 value = limits.clamp(name, value)
             value = min(max(value, -channel.hard_max), channel.hard_max)
-            axes[channel.axis] = _to_axis(value, channel.axis_per_unit)
+            # A channel the robot moves backwards (axis_sign -1) gets its axis negated.
+            axes[channel.axis] = _to_axis(value * channel.axis_sign, channel.axis_per_unit)
         buttons = [0] * BUTTON_COUNT
         buttons[self.profile.torch_button] = 1 if command.torch else 0
         if command.camera is not None:
@@ -84,7 +85,7 @@ class CommandMapper:
     def to_command(self, packet: RemoteControlPacket) -> Command:
         """The SI command an RCP carries (inverse of to_packet up to axis rounding)."""
         velocities = {
-            name: packet.axes[ch.axis] / ch.axis_per_unit
+            name: packet.axes[ch.axis] * ch.axis_sign / ch.axis_per_unit
             for name, ch in self.profile.channels.items()
             if packet.axes[ch.axis] != 0
         }

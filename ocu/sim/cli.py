@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 from ocu.nav.world import DEFAULT_WORLD, WorldError, load_world
 from ocu.net.transport import TransportError
-from ocu.profile import ProfileError, load_profile
+from ocu.profile import ProfileError, default_profile_path, load_profile_data, parse_profile
 from ocu.sim.extended import DEFAULT_DRAIN_PERCENT_PER_S, DEFAULT_STATUS_HZ
 from ocu.sim.faults import FaultConfig
 from ocu.sim.rangefinder import (
@@ -27,6 +27,7 @@ from ocu.sim.rangefinder import (
     DEFAULT_SCAN_HZ,
     RangeSensorConfig,
 )
+from ocu.sim.scramble import scramble_profile_data, write_truth
 from ocu.sim.simulator import RobotSimulator
 from ocu.sim.video import MAX_FRAME_SIDE_PX, MIN_FRAME_SIDE_PX
 
@@ -160,6 +161,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--seed", type=int, default=None, help="seed of the fault decisions")
     parser.add_argument(
+        "--scramble",
+        type=int,
+        default=None,
+        metavar="SEED",
+        help="play an unknown robot: the profile's axes shuffled, directions flipped, new "
+        "joint scales, ticks per radian and zero offsets drawn from SEED (docs/calibration.md)",
+    )
+    parser.add_argument(
+        "--scramble-ids",
+        action="store_true",
+        help="with --scramble: also shuffle the device IDs of the motors with a position",
+    )
+    parser.add_argument(
+        "--scramble-out",
+        metavar="FILE",
+        default=None,
+        help="with --scramble: write the hidden truth (the scrambled profile) to FILE",
+    )
+    parser.add_argument(
         "--extended",
         action="store_true",
         help="also speak ocu's protocol extension: four cameras, status, battery "
@@ -240,10 +260,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the simulator until SIGINT or SIGTERM; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.scramble is None and (args.scramble_ids or args.scramble_out):
+        parser.error("--scramble-ids and --scramble-out need --scramble SEED")
     try:
-        profile = load_profile(args.profile)
+        data = load_profile_data(args.profile)
+        if args.scramble is not None:
+            data = scramble_profile_data(data, args.scramble, ids=args.scramble_ids)
+        profile = parse_profile(data, source=str(args.profile or default_profile_path()))
+        if args.scramble_out is not None:
+            write_truth(args.scramble_out, data, args.scramble, args.scramble_ids)
     except ProfileError as err:
         parser.error(str(err))
+    except OSError as err:
+        parser.error(f"--scramble-out: {err}")
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )

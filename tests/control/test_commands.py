@@ -16,7 +16,7 @@ from ocu.control.commands import (
     read_telemetry,
     ticks_to_rad,
 )
-from ocu.profile import Motor, load_profile
+from ocu.profile import Motor, load_profile, load_profile_data, parse_profile
 from ocu.protocol import Codec, MotorRecord, RemoteControlPacket, TelemetryPacket
 from ocu.protocol.wire import make_codec
 from ocu.records import Command, CommandError
@@ -359,3 +359,17 @@ def test_unknown_device_is_skipped() -> None:
     assert read_motor(PROFILE, MotorRecord(device_id=200)) is None
     assert read_telemetry(PROFILE, TelemetryPacket(motors=(MotorRecord(device_id=200),))) == {}
     assert read_telemetry(PROFILE, TelemetryPacket()) == {}
+
+
+def test_a_channel_the_robot_moves_backwards_gets_its_axis_negated() -> None:
+    data = load_profile_data()
+    data["channels"]["shoulder"]["axis_sign"] = -1
+    data["channels"]["shoulder"]["axis_per_unit"] = 25_000.0
+    mapper = CommandMapper(parse_profile(data))
+    axis = PROFILE.channels["shoulder"].axis
+    packet = mapper.to_packet(Command({"shoulder": 0.4, "elbow": 0.4}))
+    assert packet.axes[axis] == -10_000
+    assert _axis(packet, "elbow") == 8_000  # the others keep the sign and the shared scale
+    back = mapper.to_command(packet)
+    assert back.velocities["shoulder"] == pytest.approx(0.4)
+    assert back.velocities["elbow"] == pytest.approx(0.4)
