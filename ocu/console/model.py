@@ -56,6 +56,7 @@ from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
 from ocu.control.drive import DriveBounds, scale_drive
 from ocu.control.position import PositionController
+from ocu.control.tracking import TrackingOptions
 from ocu.kinematics.arm import ArmError, ArmKinematics
 from ocu.model.urdf import UrdfError, load_urdf
 from ocu.nav.assist import AssistError
@@ -226,6 +227,8 @@ class ConsoleModel:
             self._bitrate,
         )
         self._tracking: TrackSession | None = None
+        # What of the tracking controller acts (the benchmark's baseline switches parts off).
+        self.tracking_options = TrackingOptions()
         # The arm in Cartesian space; None when the profile has no [arm] table, or its URDF
         # cannot carry it (`arm_error` says why).
         self.arm: ArmConsole | None = None
@@ -964,7 +967,11 @@ class ConsoleModel:
             self.controller.channel_of(axes.tilt_joint),
         )
         session = TrackSession(
-            camera, axes, channels, (self.limits.get(channels[0]), self.limits.get(channels[1]))
+            camera,
+            axes,
+            channels,
+            (self.limits.get(channels[0]), self.limits.get(channels[1])),
+            self.tracking_options,
         )
         height, width = pixels.shape[:2]
         session.start(pixels, click_box(point, (width, height)), now)

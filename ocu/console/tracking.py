@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ocu.control.tracking import CameraAxes, TrackingController
+from ocu.control.tracking import CameraAxes, TrackingController, TrackingOptions
 from ocu.kinematics.arm import ArmKinematics
 from ocu.kinematics.chain import Chain, ChainError
 from ocu.profile import CameraSettings
@@ -150,13 +150,14 @@ class TrackSession:
         axes: CameraAxes,
         channels: tuple[str, str],
         limits_rad_s: tuple[float, float],
+        options: TrackingOptions | None = None,
     ) -> None:
         self.camera = camera
         self.axes = axes
         # The pan and the tilt joint's velocity channels.
         self.channels = channels
         self.tracker = Tracker()
-        self.controller = TrackingController(axes, limits_rad_s)
+        self.controller = TrackingController(axes, limits_rad_s, options)
         self.result = TrackResult(TrackState.IDLE, None, 0.0)
         self.lost_since: float | None = None
         self.last_frame_at: float | None = None

@@ -11,6 +11,7 @@ from ocu.control.tracking import (
     KP_MAX,
     CameraAxes,
     TrackingController,
+    TrackingOptions,
     gains_for_delay,
 )
 
@@ -96,3 +97,16 @@ def test_no_target_no_motion_and_stop_forgets() -> None:
     assert controller.update(0.04, still, 0.1) == {}
     # Without the joints' angles at the frame's moment nothing can be placed.
     assert not controller.on_measurement((0.5, 0.5), 0.1, {"waist": 0.0})
+
+
+def test_the_baseline_acts_on_the_last_frame_with_the_no_delay_gains() -> None:
+    """The benchmark's baseline (the paper's PID): the image error of the last frame, whatever
+    is on its way to the joint, at the gains for no delay."""
+    baseline = TrackingController(AXES, (0.8, 0.8), TrackingOptions.baseline())
+    ours = TrackingController(AXES, (0.8, 0.8))
+    for controller in (baseline, ours):
+        controller.on_measurement((0.55, 0.5), 0.0, {"waist": 0.0, "neck": 0.0})
+    offset = -math.atan2(0.05 * 640, FOCAL)  # right of the centre: the waist turns right
+    eventual = {"waist": offset, "neck": 0.0}  # commands already sent will get there
+    assert baseline.update(0.1, eventual, 0.4)["waist"] == pytest.approx(KP_MAX * offset)
+    assert abs(ours.update(0.1, eventual, 0.4)["waist"]) < 1e-9  # nothing more to send
