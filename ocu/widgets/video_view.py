@@ -431,8 +431,9 @@ class VideoView(QWidget):
             font.setPointSizeF(max(10.0, min(24.0, area.height() / 14)))
             painter.setFont(font)
             painter.setPen(TRACK_LOST_COLOUR)
+            # Below the centre: the text box over the picture's top is not covered.
             band = QRectF(
-                area.x(), area.y() + area.height() * 0.2, area.width(), area.height() * 0.2
+                area.x(), area.y() + area.height() * 0.6, area.width(), area.height() * 0.2
             )
             painter.drawText(band, Qt.AlignmentFlag.AlignCenter, "LOST")
         painter.restore()
