@@ -63,8 +63,10 @@ PAN_START_RAD = 2.4
 BOX_AHEAD_M = 1.7
 PLACE_HZ = 50.0
 SETTLE_S = 3.0
-BOX_SIZE_M = 0.3
-BOX_HEIGHT_M = 0.4
+# A small cube: the middle of its outline (what the tracker centres) is its middle in 3D from
+# any side, so the ground truth measures the tracking, not where a big box's faces lie.
+BOX_SIZE_M = 0.12
+BOX_HEIGHT_M = 0.12
 IMAGE_PX = (640, 480)
 STREAM_PX = (320, 240)
 STREAM_FPS = 30

@@ -264,6 +264,10 @@ def _outline(work: Image, seed: tuple[int, int]) -> tuple[int, int, int, int]:
     centre_x, centre_y = x + w / 2.0, y + h / 2.0
     w = min(round(w * (1 + 2 * FILL_PAD)) + 4, round(width * MAX_BOX_FRACTION))
     h = min(round(h * (1 + 2 * FILL_PAD)) + 4, round(height * MAX_BOX_FRACTION))
+    # At the frame's edge the box shrinks about the surface's middle rather than shifting:
+    # the template's middle is what the controller centres.
+    w = max(MIN_BOX_PX, min(w, 2 * math.floor(min(centre_x, width - centre_x))))
+    h = max(MIN_BOX_PX, min(h, 2 * math.floor(min(centre_y, height - centre_y))))
     return _clip_box((round(centre_x - w / 2.0), round(centre_y - h / 2.0), w, h), width, height)
 
 
