@@ -269,6 +269,10 @@ class VideoControls(QWidget):
         self.colour_box.setEnabled(link is not None)
         self.undistort_box.setEnabled(link is not None)
         self.bitrate_box.setEnabled(commands)
+        # Tracking commands the waist and the neck: not in a replay, not without a link.
+        self.track_button.setEnabled(commands)
+        if not commands and self.track_button.isChecked():
+            self.track_button.setChecked(False)
         widgets = (self.colour_box, self.undistort_box, self.size_box, self.fps_box)
         for widget in widgets:
             widget.blockSignals(True)
