@@ -436,6 +436,9 @@ def press(model: ConsoleModel, key_map: KeyMap, key: str) -> bool:
     if key == CLOSE_HELP_KEY and model.help_visible:
         model.set_help_visible(False)
         return True
+    if key == CLOSE_HELP_KEY and model.tracking is not None:
+        model.stop_tracking("Esc")
+        return True
     return False
 
 

@@ -97,7 +97,7 @@ CAMERA_KEYS = (
     "undistort",
     "colour",
     "fixed_gains_rgb",
-    *("mount_xyz_m", "mount_yaw_deg", "mount_pitch_deg"),
+    *("mount_xyz_m", "mount_yaw_deg", "mount_pitch_deg", "mount_link"),
 )
 SI_KEYS = (
     "linear_axis_per_m_s",
@@ -289,12 +289,14 @@ class CameraMount:
     """Where a camera sits on the chassis (base_link: x forward, y left, z up) and looks.
 
     Yaw turns the view left of straight ahead; pitch tilts it down. The simulator draws its
-    world from here (ocu.sim.scene).
+    world from here (ocu.sim.scene). With `link` (a URDF link, e.g. the arm's camera link)
+    the offset is in that link's frame and the camera moves with the joints above it.
     """
 
     xyz_m: tuple[float, float, float]
     yaw_rad: float = 0.0
     pitch_rad: float = 0.0
+    link: str | None = None
 
 
 @dataclass(frozen=True)
@@ -874,7 +876,7 @@ def _parse_camera(name: str, index: int, reader: _Reader) -> CameraSettings:
 
 def _parse_mount(reader: _Reader) -> CameraMount | None:
     if not reader.optional("mount_xyz_m"):
-        for key in ("mount_yaw_deg", "mount_pitch_deg"):
+        for key in ("mount_yaw_deg", "mount_pitch_deg", "mount_link"):
             if reader.optional(key):
                 raise ProfileError(f"{reader.where}.{key}: needs mount_xyz_m")
         return None
@@ -885,7 +887,8 @@ def _parse_mount(reader: _Reader) -> CameraMount | None:
         if reader.optional("mount_pitch_deg")
         else 0.0
     )
-    return CameraMount((xyz[0], xyz[1], xyz[2]), math.radians(yaw), math.radians(pitch))
+    link = reader.string("mount_link") if reader.optional("mount_link") else None
+    return CameraMount((xyz[0], xyz[1], xyz[2]), math.radians(yaw), math.radians(pitch), link)
 
 
 def _ascending(reader: _Reader, key: str, count: int | None, low: float) -> tuple[float, ...]:

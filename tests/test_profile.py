@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from ocu.nav.world import parse_world
 from ocu.profile import (
     AXIS_MAX,
     ProfileError,
@@ -25,6 +26,7 @@ from ocu.profile import (
     profile_to_toml,
     write_profile_data,
 )
+from ocu.sim.simulator import RobotSimulator
 
 SHIPPED_TEXT = default_profile_path().read_text(encoding="utf-8")
 SHIPPED_DATA: dict[str, Any] = tomllib.loads(SHIPPED_TEXT)
@@ -756,3 +758,23 @@ def test_written_profiles_are_validated_and_replace_the_old_file_whole(tmp_path:
         write_profile_data(target, bad)
     assert target.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["robot.toml"]  # no temp file left
+
+
+def test_a_camera_on_a_link_needs_its_offset_and_the_simulator_checks_the_link(
+    profile: RobotProfile,
+) -> None:
+    head = next(c for c in profile.cameras if c.mount is not None and c.mount.link is not None)
+    assert head.mount is not None
+    assert head.mount.link == "head_cameras"
+    assert profile.arm is not None
+    assert head.mount.link == profile.arm.camera_link
+    data = _edited(("cameras", head.name, "mount_xyz_m"), DELETE)
+    del data["cameras"][head.name]["mount_yaw_deg"]
+    del data["cameras"][head.name]["mount_pitch_deg"]
+    with pytest.raises(ProfileError, match=rf"cameras\.{head.name}\.mount_link: needs mount_xyz_m"):
+        parse_profile(data)
+    wrong = parse_profile(_edited(("cameras", head.name, "mount_link"), "no_such_link"))
+    with pytest.raises(ValueError, match="the robot model has no link no_such_link"):
+        RobotSimulator(
+            wrong, world=parse_world({"box": [{"centre_m": [2.0, 0.0], "size_m": [0.3, 0.3]}]})
+        )

@@ -38,13 +38,25 @@ from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
+import numpy as np
+import numpy.typing as npt
+
 from ocu.console.arm import ArmConsole
 from ocu.console.events import Event
 from ocu.console.robot import RobotState
+from ocu.console.tracking import (
+    FRAME_TIMEOUT_S,
+    LOST_TIMEOUT_S,
+    TrackSession,
+    TrackView,
+    camera_axes,
+    click_box,
+)
 from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
 from ocu.control.drive import DriveBounds, scale_drive
 from ocu.control.position import PositionController
+from ocu.control.tracking import TrackingOptions
 from ocu.kinematics.arm import ArmError, ArmKinematics
 from ocu.model.urdf import UrdfError, load_urdf
 from ocu.nav.assist import AssistError
@@ -61,6 +73,7 @@ from ocu.records import (
     StatusFrame,
     TelemetryFrame,
 )
+from ocu.video.tracker import TrackState
 
 log = logging.getLogger("ocu.console")
 
@@ -84,6 +97,9 @@ class Source(Enum):
     GAMEPAD = "gamepad"
     # An assisted mode (linear shuttle, path following): any operator input ends it.
     ASSIST = "assist"
+    # Click-to-track (ocu.console.tracking): the pan and tilt joints keep an object centred;
+    # any operator input ends it.
+    TRACK = "track"
 
 
 MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH, Source.GAMEPAD)
@@ -131,6 +147,8 @@ class ConsoleEvents:
         self.waypoints_changed: Event[[tuple[tuple[float, float], ...]]] = Event()
         self.shuttle_points_changed: Event[[tuple[tuple[float, float], ...]]] = Event()
         self.odometry_reset: Event[[]] = Event()
+        # Click-to-track: what to draw (None: not tracking) after every frame, start and stop.
+        self.tracking_changed: Event[[TrackView | None]] = Event()
 
 
 def _check_finite(channel: str, value: float) -> float:
@@ -208,6 +226,9 @@ class ConsoleModel:
             None,
             self._bitrate,
         )
+        self._tracking: TrackSession | None = None
+        # What of the tracking controller acts (the benchmark's baseline switches parts off).
+        self.tracking_options = TrackingOptions()
         # The arm in Cartesian space; None when the profile has no [arm] table, or its URDF
         # cannot carry it (`arm_error` says why).
         self.arm: ArmConsole | None = None
@@ -552,7 +573,12 @@ class ConsoleModel:
         `keep_gamepad`, so do the channels the game controller drives (its deadman is held,
         and it reads the pad whatever window has the focus: docs/gamepad.md).
         """
-        active = bool(self.held_keys) or self.is_moving or bool(self._targets)
+        active = (
+            bool(self.held_keys)
+            or self.is_moving
+            or bool(self._targets)
+            or self._tracking is not None
+        )
         self._zero_all(keep_external=keep_external, keep_gamepad=keep_gamepad, reason=reason)
         self._publish()
         if active:
@@ -898,6 +924,7 @@ class ConsoleModel:
         """One position-control step: merge the controller's velocities into the channels."""
         now = self.clock() if now is None else now
         self._assist_tick(now)
+        self._tracking_tick(now)
         # The robot moves, scans come: the zones judge the drive command again.
         self._apply_drive_now()
         output = self.controller.update(now)
@@ -914,6 +941,120 @@ class ConsoleModel:
         if self.arm is not None:
             self.arm.step(now)
         self._publish(now)
+
+    # ---- click-to-track (ocu.console.tracking; the video view calls these) -----------------
+
+    @property
+    def tracking(self) -> TrackView | None:
+        """What is tracked and where it was last seen (None: not tracking)."""
+        return None if self._tracking is None else self._tracking.view()
+
+    @property
+    def tracking_session(self) -> TrackSession | None:
+        """The tracking session (for its numbers: frames, update time); None when idle."""
+        return self._tracking
+
+    def start_tracking(
+        self, camera: int, pixels: npt.NDArray[np.uint8], point: tuple[float, float]
+    ) -> None:
+        """Follow the object at a normalised point (0..1) of a camera's frame (BGR or BGRA)
+        by turning the joints that carry the camera; CommandError, nothing changed, if it
+        cannot be done (a camera on the chassis, no arm, no readings yet, a bad point)."""
+        if self.arm is None:
+            raise CommandError(self.arm_error or "this robot has no arm to turn a camera")
+        if not 0 <= camera < len(self.profile.cameras):
+            raise CommandError(f"no camera {camera}")
+        if not all(0.0 <= v <= 1.0 and math.isfinite(v) for v in point):
+            raise CommandError(f"point {point!r} outside the frame")
+        now = self.clock()
+        angles = self.controller.predicted_angles(now)
+        axes = camera_axes(self.profile.cameras[camera], self.arm.controller.kinematics, angles)
+        missing = [j for j in (axes.pan_joint, axes.tilt_joint) if j not in angles]
+        if missing:
+            raise CommandError(f"no reading of {', '.join(missing)} yet")
+        channels = (
+            self.controller.channel_of(axes.pan_joint),
+            self.controller.channel_of(axes.tilt_joint),
+        )
+        session = TrackSession(
+            camera,
+            axes,
+            channels,
+            (self.limits.get(channels[0]), self.limits.get(channels[1])),
+            self.tracking_options,
+        )
+        height, width = pixels.shape[:2]
+        session.start(pixels, click_box(point, (width, height)), now)
+        self._end_tracking("a new object was clicked", quiet=True)
+        # Starting is the operator's act: it ends an e-stop latch, a planner, an assisted mode.
+        self._operator_acted()
+        for channel in channels:
+            self._take_manual(channel)
+            self._set_channel(channel, 0.0, Source.TRACK)
+        self._tracking = session
+        name = self.profile.cameras[camera].name
+        self.events.tracking_changed.emit(session.view())
+        self.events.message.emit(
+            f"tracking in the {name} camera with the {axes.pan_joint} and {axes.tilt_joint}: "
+            "any motion input, Space or Esc takes over"
+        )
+        self._publish()
+
+    def on_tracking_frame(
+        self, camera: int, pixels: npt.NDArray[np.uint8], received_at: float
+    ) -> None:
+        """A decoded frame of a camera: the tracker follows the object in it."""
+        session = self._tracking
+        if session is None or camera != session.camera:
+            return
+        now = self.clock()
+        # The picture was taken about half a round trip before it arrived.
+        taken_at = received_at - (self.controller.delay_s or 0.0) / 2.0
+        was = session.result.state
+        result = session.on_frame(pixels, taken_at, self.controller.predicted_angles(taken_at), now)
+        if result.state is not was:
+            if result.state is TrackState.LOST:
+                self.events.message.emit("tracking: object LOST, searching the whole frame")
+            elif result.refound:
+                self.events.message.emit("tracking: object found again")
+        self.events.tracking_changed.emit(session.view())
+
+    def stop_tracking(self, reason: str = "operator") -> bool:
+        """End the tracking; its channels stop. True if it was running."""
+        ended = self._end_tracking(reason)
+        self._publish()
+        return ended
+
+    def _end_tracking(self, reason: str, *, quiet: bool = False) -> bool:
+        session = self._tracking
+        if session is None:
+            return False
+        self._tracking = None
+        for channel in session.channels:
+            if self._requested(channel).source is Source.TRACK:
+                self._set_channel(channel, 0.0, Source.NONE)
+        self.events.tracking_changed.emit(None)
+        if not quiet:
+            self.events.message.emit(f"tracking stopped: {reason}")
+        return True
+
+    def _tracking_tick(self, now: float) -> None:
+        session = self._tracking
+        if session is None:
+            return
+        if self.robot.link_state is LinkState.LOST:
+            self._end_tracking("LINK LOST")
+            return
+        if session.frame_age(now) > FRAME_TIMEOUT_S:
+            session.mark_lost(now)  # no pictures: nothing to steer by
+        lost_s = session.lost_for(now)
+        if lost_s >= LOST_TIMEOUT_S:
+            self._end_tracking(f"object lost for {lost_s:.1f} s")
+            return
+        eventual = self.controller.eventual_angles(now)
+        for channel, velocity in session.velocities(now, eventual, self.controller.delay_s).items():
+            if self._requested(channel).source is Source.TRACK:
+                self._set_channel(channel, self.limits.clamp(channel, velocity), Source.TRACK)
 
     # ---- the arm (ocu.console.arm calls these) ---------------------------------------------
 
@@ -964,6 +1105,7 @@ class ConsoleModel:
             # A move is automatic: any operator motion input stops it.
             self._stop_arm("operator input")
         self.events.operator_acted.emit()
+        self._end_tracking("operator took over")
         # The operator's input wins over a planner's and an assisted mode, at once.
         for channel in self._channels:
             if self._requested(channel).source is Source.ROS:
@@ -1098,6 +1240,7 @@ class ConsoleModel:
     ) -> None:
         had_keys = bool(self.held_keys)
         self._held.clear()
+        self._end_tracking(reason)
         self._stop_arm(reason)
         self.nav.cancel_override()
         if not (keep_external and self.nav.assist_external):

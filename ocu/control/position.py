@@ -375,6 +375,15 @@ class PositionController:
             if predictor.known and name not in self.faults
         }
 
+    def eventual_angles(self, now: float) -> dict[str, float]:
+        """Where every joint ends once every command sent until `now` has landed (the Smith
+        predictor's offset plus the integral of what was sent)."""
+        return {
+            name: predictor.eventual(now)
+            for name, predictor in self.predictors.items()
+            if predictor.known and name not in self.faults
+        }
+
     def pop_messages(self) -> list[str]:
         """Why joints stopped since the last call (reached, stale, stalled, at limit, ...)."""
         messages, self._messages = self._messages, []

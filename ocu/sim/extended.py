@@ -27,7 +27,7 @@ import math
 import random
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -180,7 +180,7 @@ class SyntheticCameras:
         self.world = world
         self._maps: dict[tuple[int, tuple[int, int]], Maps | None] = {}
         # The last world view per camera and size, reused while the robot stands still.
-        self._world_views: dict[tuple[int, tuple[int, int], bool], tuple[Pose, Pixels]] = {}
+        self._world_views: dict[tuple[int, tuple[int, int], bool], tuple[object, Pixels]] = {}
         self._views: dict[tuple[int, tuple[int, int], bool], Pixels] = {}
         self._casts = [(cast_table(c, torch=False), cast_table(c, torch=True)) for c in cameras]
 
@@ -219,14 +219,25 @@ class SyntheticCameras:
             self._views[key] = view
         return view
 
-    def world_view(self, camera: int, size_px: tuple[int, int], torch: bool, pose: Pose) -> Pixels:
-        """The world from the camera's mount on the robot at `pose`: lens and cast applied."""
+    def world_view(
+        self,
+        camera: int,
+        size_px: tuple[int, int],
+        torch: bool,
+        pose: Pose,
+        joints_rad: Mapping[str, float] | None = None,
+    ) -> Pixels:
+        """The world from the camera's mount on the robot at `pose` (and the joints' angles,
+        for a camera on the arm): lens and cast applied."""
         assert self.world is not None
         key = (camera, size_px, torch)
-        cached = self._world_views.get(key)
-        if cached is not None and cached[0] == pose:
-            return cached[1]
         settings = self.cameras[camera]
+        link = self.world.link_transform(settings.mount, joints_rad)
+        # A camera on a link sees a new picture when the joints move, not only the chassis.
+        where = (pose, None if link is None else tuple(np.round(link, 6).ravel()))
+        cached = self._world_views.get(key)
+        if cached is not None and cached[0] == where:
+            return cached[1]
         width, height = size_px
         calibration = settings.calibration
         if calibration is not None:
@@ -238,7 +249,9 @@ class SyntheticCameras:
             centre = (calibration.centre_px[0] * sx, calibration.centre_px[1] * sy)
         else:
             focal, centre = (width / 2.0, width / 2.0), (width / 2.0, height / 2.0)
-        view = self.world.render(pose, settings.mount, size_px, focal, centre)
+        view = self.world.render(
+            pose, settings.mount, size_px, focal, centre, joints_rad=joints_rad
+        )
         if (camera, size_px) not in self._maps:
             self._maps[(camera, size_px)] = distortion_maps(settings, size_px)
         maps = self._maps[(camera, size_px)]
@@ -249,7 +262,7 @@ class SyntheticCameras:
         cv2.LUT(view, self._casts[camera][int(torch)], dst=view)
         if len(self._world_views) >= VIEW_CACHE_SIZE:
             self._world_views.pop(next(iter(self._world_views)))
-        self._world_views[key] = (pose, view)
+        self._world_views[key] = (where, view)
         return view
 
     def _colour(self, camera: int, torch: bool, bgr: tuple[int, int, int]) -> tuple[int, ...]:
@@ -274,12 +287,13 @@ class SyntheticCameras:
         *,
         torch: bool = False,
         pose: Pose | None = None,
+        joints_rad: Mapping[str, float] | None = None,
     ) -> bytes:
         """One JPEG of a camera: the lens view (the world at `pose`, or the test pattern and
         its ball), on-screen text, comment."""
         width, height = size_px
         if self.world is not None and pose is not None:
-            image = self.world_view(camera, size_px, torch, pose).copy()
+            image = self.world_view(camera, size_px, torch, pose, joints_rad).copy()
         else:
             image = self.view(camera, size_px, torch).copy()
             self._ball(camera, image, size_px, frame_number, torch)
@@ -522,6 +536,7 @@ class ExtendedServer:
         pose: tuple[float, float, float],
         moving: bool,
         rcp_quality: int,
+        joints_rad: Mapping[str, float] | None = None,
     ) -> None:
         """Drain the battery; send whatever is due: status packets and camera frames."""
         if self._last_step_s is not None:
@@ -559,11 +574,20 @@ class ExtendedServer:
                 stream.next_due_s = now_s + period_s  # skip a backlog rather than burst
             if camera in stopped:
                 continue
-            jpeg, capture_s = self._render(camera, stream, torch, rcp_quality, Pose(*pose))
+            jpeg, capture_s = self._render(
+                camera, stream, torch, rcp_quality, Pose(*pose), joints_rad=joints_rad
+            )
             self._send_frame(stream, jpeg, capture_s, corrupt, lambda d: send(d, client))
 
     def _render(
-        self, camera: int, stream: _Stream, torch: bool, rcp_quality: int, pose: Pose
+        self,
+        camera: int,
+        stream: _Stream,
+        torch: bool,
+        rcp_quality: int,
+        pose: Pose,
+        *,
+        joints_rad: Mapping[str, float] | None = None,
     ) -> tuple[bytes, float]:
         request = stream.request
         capture_s = time.monotonic()
@@ -575,6 +599,7 @@ class ExtendedServer:
             request.quality or rcp_quality,
             torch=torch,
             pose=pose,
+            joints_rad=joints_rad,
         )
         return jpeg, capture_s
 

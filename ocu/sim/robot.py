@@ -250,6 +250,7 @@ class RobotServer:
             torch=self.torch,
             time_s=now_s,
             pose=Pose(*self.physics.pose),
+            joints_rad=self.physics.joints_rad,
         )
         self._frame_number += 1
         self.counters.video_sent += 1
@@ -266,6 +267,7 @@ class RobotServer:
             pose=self.physics.pose,
             moving=not self.physics.all_stopped,
             rcp_quality=self.video_quality,
+            joints_rad=self.physics.joints_rad,
         )
 
     def next_due_s(self) -> float:

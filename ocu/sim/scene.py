@@ -13,11 +13,13 @@ Camera frame: x right, y down, z along the view; world frame: x, y on the floor,
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
+from ocu.model.tree import KinematicTree
 from ocu.nav.geometry import Pose
 from ocu.nav.world import World
 from ocu.profile import CameraMount
@@ -39,11 +41,9 @@ DEFAULT_MOUNT = CameraMount((0.35, 0.0, 0.25))
 SUBPIXEL_BITS = 4
 
 
-def camera_rotation(pose: Pose, mount: CameraMount) -> Matrix:
-    """World -> camera rotation for a camera on the chassis at `pose`."""
-    yaw = pose.heading_rad + mount.yaw_rad
-    pitch = mount.pitch_rad
-    # The camera's axes in the world: forward (z), right (x), down (y).
+def _mount_axes(mount: CameraMount) -> Matrix:
+    """The camera's right, down and forward axes (rows) in the frame it is mounted in."""
+    yaw, pitch = mount.yaw_rad, mount.pitch_rad
     forward = np.array(
         [math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), -math.sin(pitch)]
     )
@@ -52,11 +52,51 @@ def camera_rotation(pose: Pose, mount: CameraMount) -> Matrix:
     return np.stack([right, down, forward])
 
 
-def camera_position(pose: Pose, mount: CameraMount) -> Matrix:
-    """Where the camera is in the world."""
+def _chassis(pose: Pose) -> Matrix:
+    """base_link -> world (4x4) of a chassis at `pose` on the floor."""
     c, s = math.cos(pose.heading_rad), math.sin(pose.heading_rad)
-    x, y, z = mount.xyz_m
-    return np.array([pose.x_m + c * x - s * y, pose.y_m + s * x + c * y, z])
+    matrix = np.eye(4)
+    matrix[:2, :2] = [[c, -s], [s, c]]
+    matrix[0, 3], matrix[1, 3] = pose.x_m, pose.y_m
+    return matrix
+
+
+def camera_rotation(pose: Pose, mount: CameraMount, link: Matrix | None = None) -> Matrix:
+    """World -> camera rotation for a camera on the chassis at `pose`; `link` is the 4x4
+    base_link -> mount link transform of a camera on a moving link (None: on the chassis)."""
+    frame = _chassis(pose) if link is None else _chassis(pose) @ link
+    return _mount_axes(mount) @ frame[:3, :3].T
+
+
+def camera_position(pose: Pose, mount: CameraMount, link: Matrix | None = None) -> Matrix:
+    """Where the camera is in the world."""
+    frame = _chassis(pose) if link is None else _chassis(pose) @ link
+    position: Matrix = frame[:3, :3] @ np.array(mount.xyz_m) + frame[:3, 3]
+    return position
+
+
+class CameraLinks:
+    """Where the links cameras are mounted on stand for given joint angles (URDF forward
+    kinematics from base_link)."""
+
+    def __init__(self, tree: KinematicTree, base_link: str = "base_link") -> None:
+        self._tree = tree.copy()
+        self.base_link = base_link
+        if base_link not in self._tree.links:
+            raise ValueError(f"the robot model has no link {base_link!r}")
+
+    def has(self, link: str) -> bool:
+        """Whether the model has this link."""
+        return link in self._tree.links
+
+    def transform(self, link: str, joints_rad: Mapping[str, float]) -> Matrix:
+        """base_link -> `link` (4x4) with the model's joints at these angles (others at 0)."""
+        actuated = self._tree.positions()
+        self._tree.set_positions({name: float(joints_rad.get(name, 0.0)) for name in actuated})
+        base = self._tree.world_transform(self.base_link)
+        target = self._tree.world_transform(link)
+        result: Matrix = np.linalg.inv(base) @ target
+        return result
 
 
 def _clip_polygon(points: Matrix) -> Matrix:
@@ -77,8 +117,10 @@ def _clip_polygon(points: Matrix) -> Matrix:
 class WorldView:
     """Renders one world from cameras on the robot (see the module docstring)."""
 
-    def __init__(self, world: World) -> None:
+    def __init__(self, world: World, links: CameraLinks | None = None) -> None:
         self.world = world
+        # Forward kinematics for cameras mounted on a moving link (CameraMount.link).
+        self.links = links
         self._faces = self._build_faces()
         self._grid = self._build_grid()
 
@@ -132,20 +174,32 @@ class WorldView:
         size_px: tuple[int, int],
         focal_px: tuple[float, float],
         centre_px: tuple[float, float] | None = None,
+        *,
+        joints_rad: Mapping[str, float] | None = None,
     ) -> Image:
-        """The ideal pinhole image (BGR) of the world from a camera on the robot."""
+        """The ideal pinhole image (BGR) of the world from a camera on the robot; a camera
+        on a link (CameraMount.link) is placed by the joints' angles `joints_rad`."""
         width, height = size_px
         mount = mount or DEFAULT_MOUNT
         fx, fy = focal_px
         cx, cy = centre_px if centre_px is not None else (width / 2.0, height / 2.0)
-        rotation = camera_rotation(pose, mount)
-        origin = camera_position(pose, mount)
+        link = self.link_transform(mount, joints_rad)
+        rotation = camera_rotation(pose, mount, link)
+        origin = camera_position(pose, mount, link)
         image = np.empty((height, width, 3), np.uint8)
         image[:] = SKY_BGR
         self._floor(image, rotation, origin, (fx, fy, cx, cy))
         self._grid_lines(image, rotation, origin, (fx, fy, cx, cy))
         self._obstacles(image, rotation, origin, (fx, fy, cx, cy))
         return image
+
+    def link_transform(
+        self, mount: CameraMount | None, joints_rad: Mapping[str, float] | None
+    ) -> Matrix | None:
+        """base_link -> the mount's link, or None for a camera on the chassis."""
+        if mount is None or mount.link is None or self.links is None:
+            return None
+        return self.links.transform(mount.link, joints_rad or {})
 
     def _project(
         self, camera_points: Matrix, intrinsics: tuple[float, float, float, float]

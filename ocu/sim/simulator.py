@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from types import TracebackType
 from typing import NamedTuple
 
+from ocu.model.urdf import UrdfError, load_urdf
 from ocu.nav.geometry import Pose
 from ocu.nav.world import World
 from ocu.net.loop import SelectLoop
@@ -37,7 +38,7 @@ from ocu.sim.faults import Direction, FaultConfig, FaultLayer
 from ocu.sim.physics import RobotPhysics
 from ocu.sim.rangefinder import DEFAULT_RANGE_SENSOR, RangeSensor, RangeSensorConfig
 from ocu.sim.robot import RobotServer
-from ocu.sim.scene import WorldView
+from ocu.sim.scene import CameraLinks, WorldView
 from ocu.sim.video import FrameRenderer
 
 log = logging.getLogger("ocu.sim")
@@ -139,6 +140,24 @@ class _PlaceRequest:
     error: ValueError | None = None
 
 
+def _camera_links(profile: RobotProfile) -> CameraLinks | None:
+    """Forward kinematics for the cameras the profile mounts on a link (the head), from the
+    robot's URDF; None when every camera sits on the chassis."""
+    wanted = {c.mount.link for c in profile.cameras if c.mount is not None and c.mount.link}
+    if not wanted:
+        return None
+    try:
+        model = load_urdf(meshes=False)
+    except UrdfError as err:
+        raise ValueError(f"cameras mounted on {', '.join(sorted(wanted))}: {err}") from err
+    base_link = profile.arm.base_link if profile.arm is not None else "base_link"
+    links = CameraLinks(model.tree, base_link)
+    missing = sorted(link for link in wanted if not links.has(link))
+    if missing:
+        raise ValueError(f"cameras.*.mount_link: the robot model has no link {', '.join(missing)}")
+    return links
+
+
 class RobotSimulator:
     """A simulated Engineer robot server on a UDP socket (or a given transport)."""
 
@@ -191,7 +210,8 @@ class RobotSimulator:
         self._physics = RobotPhysics(
             profile, initial_joints, now_s=self._start_s, world=world, turn_slip=turn_slip
         )
-        view = WorldView(world) if world is not None and world.obstacles else None
+        links = _camera_links(profile) if world is not None and world.obstacles else None
+        view = WorldView(world, links) if world is not None and world.obstacles else None
         extension: ExtendedServer | None = None
         if extended:
             codec = make_extension_codec(profile)

@@ -14,6 +14,7 @@ import colorsys
 import io
 import math
 import time
+from collections.abc import Mapping
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
@@ -109,11 +110,13 @@ class FrameRenderer:
         torch: bool = False,
         time_s: float | None = None,
         pose: Pose | None = None,
+        joints_rad: Mapping[str, float] | None = None,
     ) -> bytes:
-        """One JPEG of a camera that fits a single datagram (quality or size lowered if needed)."""
+        """One JPEG of a camera that fits a single datagram (quality or size lowered if needed);
+        `joints_rad` places the cameras mounted on the arm."""
         mono_s = time.monotonic() if time_s is None else time_s
         name = self.camera_names[camera]
-        image = self._draw(camera, name, frame_number, torch, pose)
+        image = self._draw(camera, name, frame_number, torch, pose, joints_rad=joints_rad)
         quality = min(max(quality, 1), 100)
         while True:
             comment = (
@@ -136,21 +139,32 @@ class FrameRenderer:
                     )
                 )
 
-    def _world(self, camera: int, pose: Pose) -> Image.Image:
+    def _world(
+        self, camera: int, pose: Pose, joints_rad: Mapping[str, float] | None
+    ) -> Image.Image:
         assert self.world is not None
         width_px = self.size_px[0]
         mount = self.mounts[camera] if camera < len(self.mounts) else None
         # A 90-degree wide, undistorted view (the vendor stream's lens is not modelled).
-        bgr = self.world.render(pose, mount, self.size_px, (width_px / 2.0, width_px / 2.0))
+        bgr = self.world.render(
+            pose, mount, self.size_px, (width_px / 2.0, width_px / 2.0), joints_rad=joints_rad
+        )
         return Image.fromarray(np.ascontiguousarray(bgr[..., ::-1]), "RGB")
 
     def _draw(
-        self, camera: int, name: str, frame_number: int, torch: bool, pose: Pose | None = None
+        self,
+        camera: int,
+        name: str,
+        frame_number: int,
+        torch: bool,
+        pose: Pose | None = None,
+        *,
+        joints_rad: Mapping[str, float] | None = None,
     ) -> Image.Image:
         width_px, height_px = self.size_px
         if self.world is not None and pose is not None:
             # The world is drawn fully lit; without the headlight it is darker.
-            image = self._world(camera, pose)
+            image = self._world(camera, pose, joints_rad)
             if not torch:
                 image = image.point(self._dark_table)
             self._text(image, camera, name, frame_number, torch)

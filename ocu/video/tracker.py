@@ -4,6 +4,9 @@ The tracker works on a copy of each frame scaled to a fixed working width, so th
 cell size (frames are decoded at the size they are shown) does not change what it sees; boxes
 are given and returned in normalised coordinates (0..1 of the frame's width and height).
 
+A click inside a plain surface (a painted box: no texture for the correlation) grows the box to
+the surface's outline by a flood fill from the click, padded so its edges are in the template.
+
 Two models of the object, both from the clicked box:
 - a template, found again in each frame by normalised cross-correlation in a window around
   where it was (`cv2.matchTemplate`), and blended slowly towards what it finds, so lighting and
@@ -41,6 +44,15 @@ MIN_BOX_PX = 8
 HIST_BINS = (30, 32)
 # Mean colour-model response (0..1) a re-found box must have.
 MIN_COLOUR_SUPPORT = 0.15
+# A template flatter than this (grey-level standard deviation) cannot be matched by correlation:
+# the click fell inside a plain surface, and the box grows to the surface's outline instead.
+MIN_TEMPLATE_STD = 6.0
+# Flood fill of the plain surface: neighbours within this much of the clicked colour (BGR).
+FILL_TOLERANCE = 14
+# The grown box: the outline plus this fraction of its size on each side (its edges are what
+# the correlation sees), at most this fraction of the frame each way.
+FILL_PAD = 0.2
+MAX_BOX_FRACTION = 0.6
 # Pixels too dark or too grey carry no hue: left out of the colour model.
 MIN_SATURATION = 40
 MIN_VALUE = 30
@@ -122,6 +134,11 @@ class Tracker:
                 f"box too small to track: {w}x{h} px at {width} px wide (at least {MIN_BOX_PX})"
             )
         patch = work[y : y + h, x : x + w]
+        if _flat(patch):
+            x, y, w, h = _outline(work, (x + w // 2, y + h // 2))
+            patch = work[y : y + h, x : x + w]
+            if _flat(patch):
+                raise TrackerError("nothing to follow there: a plain surface with no outline")
         self._template = cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY).astype(np.float32)
         self._hist = _colour_model(patch)
         self._box_px = (x, y, w, h)
@@ -229,6 +246,29 @@ def _best_match(
     if not math.isfinite(best):
         return None
     return (origin[0] + at[0], origin[1] + at[1], w, h), float(best)
+
+
+def _flat(patch: Image) -> bool:
+    gray = cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)
+    return float(gray.std()) < MIN_TEMPLATE_STD
+
+
+def _outline(work: Image, seed: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The box around the plain surface at `seed`, padded so that its edges are inside."""
+    height, width = work.shape[:2]
+    mask = np.zeros((height + 2, width + 2), np.uint8)
+    tolerance = (FILL_TOLERANCE,) * 3
+    flags = 4 | cv2.FLOODFILL_FIXED_RANGE | cv2.FLOODFILL_MASK_ONLY | (255 << 8)
+    cv2.floodFill(work.copy(), mask, seed, (0, 0, 0), tolerance, tolerance, flags)
+    x, y, w, h = cv2.boundingRect(mask[1:-1, 1:-1])
+    centre_x, centre_y = x + w / 2.0, y + h / 2.0
+    w = min(round(w * (1 + 2 * FILL_PAD)) + 4, round(width * MAX_BOX_FRACTION))
+    h = min(round(h * (1 + 2 * FILL_PAD)) + 4, round(height * MAX_BOX_FRACTION))
+    # At the frame's edge the box shrinks about the surface's middle rather than shifting:
+    # the template's middle is what the controller centres.
+    w = max(MIN_BOX_PX, min(w, 2 * math.floor(min(centre_x, width - centre_x))))
+    h = max(MIN_BOX_PX, min(h, 2 * math.floor(min(centre_y, height - centre_y))))
+    return _clip_box((round(centre_x - w / 2.0), round(centre_y - h / 2.0), w, h), width, height)
 
 
 def _colour_model(patch: Image) -> npt.NDArray[Any]:

@@ -17,7 +17,7 @@ from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
-from PySide6.QtCore import QStandardPaths, QTimer, Signal
+from PySide6.QtCore import QStandardPaths, Qt, QTimer, Signal
 from PySide6.QtGui import QFont, QFontMetrics
 from PySide6.QtWidgets import (
     QButtonGroup,
@@ -36,7 +36,7 @@ from PySide6.QtWidgets import (
 from ocu.console.model import ConsoleModel
 from ocu.protocol.extended import CameraRequest
 from ocu.qt.link import QtLink
-from ocu.records import LinkState, StatusFrame
+from ocu.records import CommandError, LinkState, StatusFrame
 from ocu.video.correction import CorrectionSettings
 from ocu.widgets.video_status import AttitudeIndicator, BatteryGauge, HeadlightIndicator
 from ocu.widgets.video_view import (
@@ -112,6 +112,13 @@ class VideoControls(QWidget):
         self.bitrate_box.setValue(round(model.video_bitrate / 1000.0))
         self.bitrate_box.valueChanged.connect(self._on_bitrate)
 
+        self.track_button = _named(QPushButton("Track"), "track_button")
+        self.track_button.setCheckable(True)
+        self.track_button.setToolTip(
+            "Click-to-track: click an object in a camera on the arm's head and the waist and "
+            "neck keep it centred; Esc, any motion input, Space or a click outside the "
+            "picture stops it"
+        )
         self.snapshot_button = _named(QPushButton("Snapshot"), "snapshot_button")
         self.snapshot_button.setToolTip("Save the selected camera's picture as PNG")
 
@@ -123,6 +130,7 @@ class VideoControls(QWidget):
         top.addWidget(QLabel("Bit-rate"))
         top.addWidget(self.bitrate_box)
         top.addStretch(1)
+        top.addWidget(self.track_button)
         top.addWidget(self.snapshot_button)
 
         self.correction_label = _named(QLabel(), "correction_label")
@@ -261,6 +269,10 @@ class VideoControls(QWidget):
         self.colour_box.setEnabled(link is not None)
         self.undistort_box.setEnabled(link is not None)
         self.bitrate_box.setEnabled(commands)
+        # Tracking commands the waist and the neck: not in a replay, not without a link.
+        self.track_button.setEnabled(commands)
+        if not commands and self.track_button.isChecked():
+            self.track_button.setChecked(False)
         widgets = (self.colour_box, self.undistort_box, self.size_box, self.fps_box)
         for widget in widgets:
             widget.blockSignals(True)
@@ -354,6 +366,13 @@ class VideoPanel(QWidget):
         robot.link_state_changed.connect(self._on_link_state)
         model.events.camera_changed.connect(lambda _camera: self._update_live())
         model.events.stream_request_changed.connect(lambda _streams: self._update_live())
+        # Click-to-track: the Track button arms clicks on the pictures; the tracker follows
+        # each new frame of the tracked camera (on the GUI thread: about a millisecond).
+        self.controls.track_button.toggled.connect(self._on_track_button)
+        self.view.track_clicked.connect(self.start_tracking_at)
+        self.view.track_cancelled.connect(self._on_track_cancelled)
+        self.view.frame_taken.connect(self._on_frame_taken)
+        model.events.tracking_changed.connect(self.view.set_tracking)
         self._stats_timer = QTimer(self)
         self._stats_timer.setInterval(STATS_PERIOD_MS)
         self._stats_timer.timeout.connect(self.refresh_counters)
@@ -396,6 +415,48 @@ class VideoPanel(QWidget):
         return self.model.robot.status
 
     # ---- link -----------------------------------------------------------------------------
+
+    # ---- click-to-track ---------------------------------------------------------------------
+
+    def set_track_mode(self, on: bool) -> None:
+        """Arm (or disarm) click-to-track: a click on a picture then tracks what it hits."""
+        self.controls.track_button.setChecked(on)
+
+    def start_tracking_at(self, camera: int, x: float, y: float) -> bool:
+        """Track the object at a normalised point of a camera's picture; False (with a
+        message) when it cannot be tracked."""
+        frame = self.view.current_frame(camera)
+        if frame is None or frame.decoded is None:
+            self._track_refused("no picture of that camera yet")
+            return False
+        try:
+            self.model.start_tracking(camera, frame.decoded.pixels, (x, y))
+        except CommandError as err:
+            self._track_refused(str(err))
+            return False
+        return True
+
+    def _track_refused(self, reason: str) -> None:
+        text = f"track: {reason}"
+        self.message_label.setText(text)
+        self.model.events.message.emit(text)
+
+    def _on_track_button(self, on: bool) -> None:
+        self.view.track_mode = on
+        self.view.setCursor(Qt.CursorShape.CrossCursor if on else Qt.CursorShape.ArrowCursor)
+        if not on:
+            self.model.stop_tracking("Track switched off")
+
+    def _on_track_cancelled(self) -> None:
+        self.model.stop_tracking("click outside the picture")
+
+    def _on_frame_taken(self, camera: int) -> None:
+        tracking = self.model.tracking
+        if tracking is None or tracking.camera != camera:
+            return
+        frame = self.view.current_frame(camera)
+        if frame is not None and frame.decoded is not None:
+            self.model.on_tracking_frame(camera, frame.decoded.pixels, frame.frame.received_at)
 
     def set_link(self, link: QtLink | None) -> None:
         """Show the video of a (new) link; None shows nothing."""

@@ -33,8 +33,10 @@ from PySide6.QtGui import (
 )
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
+from ocu.console.tracking import TrackView
 from ocu.link.stats import RateMeter
 from ocu.qt.link import DecodedVideoFrame
+from ocu.video.tracker import TrackState
 
 REFRESH_PERIOD_MS = 250
 OVERLAY_PERIOD_S = 0.25
@@ -45,6 +47,9 @@ OVERLAY_MARGIN_PX = 6
 SELECTED_COLOUR = QColor(255, 200, 0)
 NO_SIGNAL_COLOUR = QColor(230, 60, 60)
 OVERLAY_BACKGROUND = QColor(0, 0, 0, 150)
+TRACK_COLOUR = QColor(60, 230, 90)
+TRACK_ERROR_COLOUR = QColor(255, 220, 0)
+TRACK_LOST_COLOUR = QColor(240, 60, 60)
 
 LIVE = "live"
 NO_SIGNAL = "no signal"
@@ -125,6 +130,12 @@ class VideoView(QWidget):
     camera_double_clicked = Signal(int)
     # Emitted once per frame, when it is first painted: camera and arrival-to-paint age (s).
     frame_painted = Signal(int, float)
+    # A new frame was taken from a camera's mailbox (click-to-track follows it).
+    frame_taken = Signal(int)
+    # Click-to-track mode: a click in a camera's picture (camera, x, y normalised to the
+    # picture), and a click outside every picture.
+    track_clicked = Signal(int, float, float)
+    track_cancelled = Signal()
 
     def __init__(
         self,
@@ -143,6 +154,8 @@ class VideoView(QWidget):
         self.live: frozenset[int] = frozenset(range(len(camera_names)))
         self.not_live_text = "not streamed"
         self.extra_lines: dict[int, str] = {}
+        self.track_mode = False
+        self.tracking: TrackView | None = None
         self._source: FrameSource | None = None
         self._display_sink: DisplaySink | None = None
         self._cameras = [_CameraState() for _ in camera_names]
@@ -235,6 +248,32 @@ class VideoView(QWidget):
         cell = self.cell_rects().get(camera)
         if cell is not None:
             self.update(cell)  # only this camera's cell: Qt merges and clips the repaints
+        self.frame_taken.emit(camera)
+
+    def set_tracking(self, view: TrackView | None) -> None:
+        """What click-to-track draws (None: nothing)."""
+        previous, self.tracking = self.tracking, view
+        for tracked in (previous, view):
+            cell = None if tracked is None else self.cell_rects().get(tracked.camera)
+            if cell is not None:
+                self.update(cell)
+
+    def image_rect(self, camera: int) -> QRect | None:
+        """Where a camera's picture is drawn (None: not on screen or no frame yet)."""
+        cell = self.cell_rects().get(camera)
+        frame = self._cameras[camera].frame
+        if cell is None or frame is None or frame.image.isNull():
+            return None
+        image = frame.image
+        target = fit_rect(cell, image.width(), image.height())
+        if abs(target.width() - image.width()) <= 2 and abs(target.height() - image.height()) <= 2:
+            return QRect(
+                cell.x() + (cell.width() - image.width()) // 2,
+                cell.y() + (cell.height() - image.height()) // 2,
+                image.width(),
+                image.height(),
+            )
+        return target
 
     def signal_state(self, camera: int) -> str:
         """LIVE, NO_SIGNAL (no frame for no_signal_after_s) or NOT_STREAMED."""
@@ -313,6 +352,8 @@ class VideoView(QWidget):
                 if not state.painted:
                     first_paints.append((camera, frame))
             self._paint_overlay(painter, camera, cell)
+            if self.tracking is not None and self.tracking.camera == camera:
+                self._paint_tracking(painter, camera, self.tracking)
             if self.grid and camera == self.selected:
                 painter.setPen(QPen(SELECTED_COLOUR, 2))
                 painter.setBrush(Qt.BrushStyle.NoBrush)
@@ -354,6 +395,48 @@ class VideoView(QWidget):
                 else f"last frame {now - frame.frame.received_at:.1f} s ago"
             )
             self._draw_centre(painter, cell, "NO SIGNAL", detail, NO_SIGNAL_COLOUR)
+
+    def _paint_tracking(self, painter: QPainter, camera: int, view: TrackView) -> None:
+        """The tracked box, the error (image centre to the box's centre), LOST when lost."""
+        area = self.image_rect(camera)
+        if area is None:
+            return
+        painter.save()
+        painter.setBrush(Qt.BrushStyle.NoBrush)
+        middle = area.center()
+        painter.setPen(QPen(TRACK_ERROR_COLOUR, 1))
+        painter.drawLine(middle - QPoint(6, 0), middle + QPoint(6, 0))
+        painter.drawLine(middle - QPoint(0, 6), middle + QPoint(0, 6))
+        box = view.box
+        if box is not None:
+            rect = QRectF(
+                area.x() + box.x * area.width(),
+                area.y() + box.y * area.height(),
+                box.width * area.width(),
+                box.height * area.height(),
+            )
+            painter.setPen(QPen(TRACK_ERROR_COLOUR, 2))
+            painter.drawLine(middle, rect.center().toPoint())
+            painter.setPen(QPen(TRACK_COLOUR, 2))
+            painter.drawRect(rect)
+            error_x = (box.centre[0] - 0.5) * area.width()
+            error_y = (box.centre[1] - 0.5) * area.height()
+            painter.drawText(
+                rect.bottomLeft() + QPoint(0, painter.fontMetrics().ascent() + 2),
+                f"track {error_x:+.0f}, {error_y:+.0f} px",
+            )
+        if view.state is TrackState.LOST:
+            font = QFont(painter.font())
+            font.setBold(True)
+            font.setPointSizeF(max(10.0, min(24.0, area.height() / 14)))
+            painter.setFont(font)
+            painter.setPen(TRACK_LOST_COLOUR)
+            # Below the centre: the text box over the picture's top is not covered.
+            band = QRectF(
+                area.x(), area.y() + area.height() * 0.6, area.width(), area.height() * 0.2
+            )
+            painter.drawText(band, Qt.AlignmentFlag.AlignCenter, "LOST")
+        painter.restore()
 
     def _overlay_lines(self, camera: int, now: float) -> list[str]:
         """Name, size and rate; age and the time each stage took; the counters."""
@@ -432,9 +515,20 @@ class VideoView(QWidget):
     # ---- input ----------------------------------------------------------------------------
 
     def mousePressEvent(self, event: QMouseEvent) -> None:
-        camera = self.camera_at(int(event.position().x()), int(event.position().y()))
+        x, y = int(event.position().x()), int(event.position().y())
+        camera = self.camera_at(x, y)
         if camera is not None:
             self.camera_clicked.emit(camera)
+        if self.track_mode and event.button() == Qt.MouseButton.LeftButton:
+            area = None if camera is None else self.image_rect(camera)
+            if camera is not None and area is not None and area.contains(x, y):
+                self.track_clicked.emit(
+                    camera,
+                    (event.position().x() - area.x()) / max(area.width(), 1),
+                    (event.position().y() - area.y()) / max(area.height(), 1),
+                )
+            else:
+                self.track_cancelled.emit()
         super().mousePressEvent(event)
 
     def mouseDoubleClickEvent(self, event: QMouseEvent) -> None:

@@ -39,6 +39,7 @@ SOURCE_TEXT = {
     Source.ARM: "arm",
     Source.GAMEPAD: "pad",
     Source.ASSIST: "assist",
+    Source.TRACK: "track",
 }
 STOP_ALL_STYLE = (
     "QPushButton { background: #c62828; color: white; font-size: 16pt; font-weight: bold;"

@@ -12,13 +12,14 @@ import numpy as np
 import pytest
 
 from ocu.link.live import UdpLink
+from ocu.model.urdf import load_urdf
 from ocu.nav.geometry import Pose
 from ocu.nav.world import load_world, parse_world
 from ocu.profile import RobotProfile
 from ocu.records import Command, LinkEvent, ScanFrame, StatusFrame
 from ocu.sim.cli import main
 from ocu.sim.physics import RobotPhysics
-from ocu.sim.scene import WorldView
+from ocu.sim.scene import CameraLinks, WorldView
 from ocu.sim.simulator import RobotSimulator
 
 WALL_AHEAD = {
@@ -117,3 +118,36 @@ def test_a_bad_world_file_is_an_argparse_error(
         main(["--port", "0", "--world", str(bad)])
     assert exit_info.value.code == 2
     assert "box[0].size: unknown key; did you mean 'size_m'?" in capsys.readouterr().err
+
+
+def test_a_camera_on_the_head_turns_with_the_waist_and_tilts_with_the_neck(
+    profile: RobotProfile,
+) -> None:
+    world = parse_world(
+        {"box": [{"centre_m": [2.5, 0.0], "size_m": [0.4, 0.4], "colour": [250, 20, 20]}]}
+    )
+    zoom = next(c for c in profile.cameras if c.mount is not None and c.mount.link is not None)
+    assert zoom.mount is not None
+    assert profile.arm is not None
+    view = WorldView(world, CameraLinks(load_urdf(meshes=False).tree, profile.arm.base_link))
+
+    def centroid(joints: dict[str, float]) -> tuple[float, float]:
+        image = view.render(
+            Pose(0.0, 0.0, 0.0), zoom.mount, (160, 120), (80.0, 80.0), joints_rad=joints
+        )
+        b, g, r = (image[..., k].astype(int) for k in range(3))
+        ys, xs = np.nonzero((r > 100) & (r > 2 * g) & (r > 2 * b))
+        assert xs.size > 20, "the box is out of view"
+        return float(xs.mean()), float(ys.mean())
+
+    waist, neck = profile.arm.joints[0], profile.arm.joints[-1]
+    straight = centroid({})
+    assert abs(straight[0] - 80.0) < 3.0  # the head looks straight ahead at the box
+    left = centroid({waist: 0.2})
+    # The head turned left (+ waist about z): the box moves right in the image, by more than
+    # the focal length times the angle (the head, ~1 m forward of the waist, also swings left).
+    assert 80.0 * math.tan(0.2) < left[0] - straight[0] < 80.0 * math.tan(0.4)
+    assert abs(left[1] - straight[1]) < 2.0
+    tilted = centroid({neck: 0.1})
+    assert abs(tilted[1] - straight[1]) > 4.0
+    assert abs(tilted[0] - straight[0]) < 2.0

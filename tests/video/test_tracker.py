@@ -91,6 +91,35 @@ def test_a_box_too_small_is_refused_and_stop_forgets() -> None:
     tracker = Tracker()
     with pytest.raises(TrackerError, match="too small"):
         tracker.start(background(), Box(0.5, 0.5, 0.005, 0.005))
-    tracker.start(background(), box_at(10, 10))
+    with pytest.raises(TrackerError, match="plain surface"):
+        tracker.start(background(), box_at(10, 10))  # nothing there to correlate
+    tracker.start(scene((10, 10), background(), textured_object()), box_at(10, 10))
     tracker.stop()
     assert tracker.update(background()).state is TrackState.IDLE
+
+
+def test_a_click_inside_a_plain_object_takes_its_outline() -> None:
+    base = background()
+    side = 120
+    plain = np.zeros((side, side, 3), np.uint8)
+    plain[:] = (30, 30, 200)
+
+    def with_plain(x: int, y: int) -> np.ndarray:
+        image = base.copy()
+        image[y : y + side, x : x + side] = plain
+        return image
+
+    tracker = Tracker()
+    click = Box(
+        (200 + side / 2 - 15) / WIDTH, (150 + side / 2 - 15) / HEIGHT, 30 / WIDTH, 30 / HEIGHT
+    )
+    tracker.start(with_plain(200, 150), click)
+    assert tracker.box is not None
+    assert tracker.box.width * WIDTH > side  # the outline is inside the template
+    for step in range(1, 8):
+        x, y = 200 + 6 * step, 150 + 3 * step
+        result = tracker.update(with_plain(x, y))
+        assert result.state is TrackState.TRACKING
+        assert result.box is not None
+        cx, cy = result.box.centre
+        assert np.hypot(cx * WIDTH - (x + side / 2), cy * HEIGHT - (y + side / 2)) < 4.0

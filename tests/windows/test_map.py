@@ -113,6 +113,8 @@ def test_the_map_works_in_a_replay_read_only(
         assert not panel.path_button.isEnabled()
         assert not panel.override_button.isEnabled()
         assert panel.reset_button.isEnabled()
+        # Click-to-track would command the joints: not in a replay.
+        assert not window.video_panel.controls.track_button.isEnabled()
         panel.view.click(QPointF(10.0, 10.0))
         # A click in a replay marks nothing (the view does not forward it).
     finally:
