@@ -42,6 +42,10 @@ from ocu.records import SCAN_FROM_ROBOT, Command, ScanFrame, StatusFrame, Teleme
 COMMAND_LAG_S = 0.1
 OVERRIDE_ARM_S = 5.0
 TRAIL_STEP_M = 0.05
+# The occupancy grid takes at most one scan per this period (a 10 Hz sensor: every other):
+# a map the operator looks at needs no more, and each scan costs ~4 ms of the GUI thread.
+# The safety zones always use the newest scan itself.
+GRID_PERIOD_S = 0.2
 TRAIL_LENGTH = 5000
 
 ZONES_OFF_NO_DATA = "zones off: no range data"
@@ -99,6 +103,7 @@ class Navigator:
             motor.track: motor.name for motor in profile.motors.values() if motor.track is not None
         }
         self.grid = OccupancyGrid() if grid else None
+        self._grid_at: float | None = None
         self.trail: deque[tuple[float, float]] = deque(maxlen=TRAIL_LENGTH)
         self._scan: ScanFrame | None = None
         self._scan_points: Points = np.zeros((0, 2))
@@ -162,9 +167,13 @@ class Navigator:
                 return False
             self._scan = scan
             self._scan_points = scan_points(scan, self.settings.scan_mount_xy_m)
-            if self.grid is not None:
+            last = self._grid_at
+            # (a tenth of slack: a 10 Hz sensor's scans arrive a little early or late)
+            due = last is None or not 0.0 <= scan.received_at - last < 0.9 * GRID_PERIOD_S
+            if self.grid is not None and due:
                 taken = self.odometry.estimate(scan.received_at - self._one_way_s).pose
                 self.grid.integrate(scan, taken, self.settings.scan_mount_xy_m)
+                self._grid_at = scan.received_at
             self.revision += 1
             return True
 
@@ -188,6 +197,7 @@ class Navigator:
             self.odometry.reset(self.clock(), pose)
             if self.grid is not None:
                 self.grid.clear()
+                self._grid_at = None
             self.trail.clear()
             self.stop_assist("odometry reset")
             self.revision += 1

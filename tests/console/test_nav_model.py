@@ -212,3 +212,20 @@ def test_odometry_integrates_what_was_sent(model: ConsoleModel, clock: Clock) ->
     assert model.nav.estimate().pose.x_m == pytest.approx(0.6)
     model.reset_odometry()
     assert model.nav.estimate().pose == Pose(0.0, 0.0, 0.0)
+
+
+def test_the_grid_takes_five_scans_a_second_and_the_zones_every_scan(
+    model: ConsoleModel, clock: Clock
+) -> None:
+    assert model.nav.grid is not None
+    texts: list[str] = []
+    model.events.zones_changed.connect(lambda zones: texts.append(zones.text))
+    for k in range(10):  # one second of a 10 Hz sensor, the wall coming closer
+        model.on_scan(wall_scan(clock, 2.0 - 0.19 * k))
+        clock.now += 0.1
+    assert model.nav.grid.scans == 5
+    model.hotkey_down("W", LINEAR, 1)
+    assert texts[-1].startswith("slowed: obstacle 0.2")  # the newest scan, not the grid's
+    model.reset_odometry()
+    model.on_scan(wall_scan(clock, 0.5))  # a reset map takes the next scan at once
+    assert model.nav.grid.scans == 1
