@@ -56,7 +56,26 @@ class TelemetryTable(QTableWidget):
         return item.text() if item is not None else ""
 
     def show_frame(self, frame: TelemetryFrame) -> None:
-        """Fill the rows from one telemetry packet."""
+        """Fill the rows from one telemetry packet.
+
+        The model's signals are held while the cells change and one dataChanged follows: each
+        cell's own signal made the contents-sized header measure every section again (110
+        times a frame, most of the GUI thread's telemetry cost).
+        """
+        model = self.model()
+        was_blocked = model.blockSignals(True)
+        changed = False
+        try:
+            changed = self._fill(frame)
+        finally:
+            model.blockSignals(was_blocked)
+        if changed:
+            model.dataChanged.emit(
+                model.index(0, 0), model.index(model.rowCount() - 1, model.columnCount() - 1)
+            )
+
+    def _fill(self, frame: TelemetryFrame) -> bool:
+        changed = False
         for row in range(MOTOR_SLOTS):
             values = ["—"] * len(COLUMNS)
             fault: str | None = None
@@ -81,8 +100,11 @@ class TelemetryTable(QTableWidget):
                 item = self.item(row, column)
                 if item is not None and item.text() != text:
                     item.setText(text)
+                    changed = True
             angle = self.item(row, COLUMNS.index("angle °"))
             if angle is not None and angle.toolTip() != (fault or ""):
                 # Implausible: the reading is shown, marked, and says why it is not believed.
                 angle.setToolTip(f"implausible: {fault}" if fault else "")
                 angle.setBackground(QBrush(FAULT_BACKGROUND) if fault else QBrush())
+                changed = True
+        return changed
