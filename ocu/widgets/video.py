@@ -337,14 +337,15 @@ class VideoPanel(QWidget):
         self.attitude = AttitudeIndicator()
         self.counters_label = _named(QLabel(), "video_counters")
         self.counters_label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
-        self.counters_label.setWordWrap(True)  # two lines beside the attitude, not cut off
+        # A line of its own under the status row: beside the attitude it was squeezed into a
+        # column a word wide.
         self.message_label = _named(QLabel(), "video_message")
         status = QHBoxLayout()
         status.addWidget(self.protocol_label)
         status.addWidget(self.battery)
         status.addWidget(self.headlight)
         status.addWidget(self.attitude)
-        status.addWidget(self.counters_label, 1)
+        status.addStretch(1)
         # Labels whose text changes get room for their longest text up front, so the
         # panel's minimum size (and with it a top-level window's) never changes.
         bold = QFont(self.font())
@@ -358,6 +359,7 @@ class VideoPanel(QWidget):
         layout.addWidget(self.controls)
         layout.addWidget(self.view, 1)
         layout.addLayout(status)
+        layout.addWidget(self.counters_label)
         layout.addWidget(self.message_label)
 
         robot = model.robot.events
