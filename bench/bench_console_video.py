@@ -241,7 +241,7 @@ def main() -> int:
         "--switch-interval-ms",
         type=float,
         default=None,
-        help="sys.setswitchinterval for this run (default: what the console sets)",
+        help="sys.setswitchinterval for this run (default: what the console sets, 1 ms)",
     )
     parser.add_argument(
         "--configs",
