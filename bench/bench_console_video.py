@@ -40,7 +40,7 @@ from ocu.protocol import RemoteControlPacket
 from ocu.protocol.wire import make_codec
 from ocu.records import RCP, DatagramSent, LinkEvent, LinkState
 from ocu.sim.launcher import SimulatorProcess
-from ocu.windows.main_window import MainWindow
+from ocu.windows.main_window import GIL_SWITCH_INTERVAL_S, MainWindow
 
 WINDOW_SIZE = (1600, 1000)
 KEY_PERIOD_MS = 150
@@ -259,6 +259,8 @@ def main() -> int:
     assert isinstance(app, QApplication)
     if args.switch_interval_ms is not None:
         sys.setswitchinterval(args.switch_interval_ms / 1000.0)
+    else:
+        sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)  # what each console window sets
     base = load_profile()
     sim_args = ["--extended", "--video-fps", "0", "--telemetry-hz", "10", "--log-level", "WARNING"]
     results = []
