@@ -41,6 +41,14 @@ class Collector:
         self.states: list[LinkState] = []
         self.stats: list[LinkStats] = []
         self.safety: list[str] = []
+        self.finished = False
+
+    def mark_finished(self) -> None:
+        """A replay's on_finished: under the condition, so a wait on it wakes at once (a
+        wait re-checks only when notified; the end may come after the last event)."""
+        with self.cond:
+            self.finished = True
+            self.cond.notify_all()
 
     def __call__(self, event: LinkEvent) -> None:
         with self.cond:

@@ -53,16 +53,15 @@ def test_replay_reproduces_the_telemetry_the_live_link_delivered(
     profile: RobotProfile, live_session: tuple[Path, list[TelemetryFrame]]
 ) -> None:
     path, seen = live_session
-    finished: list[bool] = []
-    source = ReplayLink(path, profile, on_finished=lambda: finished.append(True))
     collector = Collector()
+    source = ReplayLink(path, profile, on_finished=collector.mark_finished)
     source.subscribe(collector)
     source.start()
     try:
         source.set_speed(4.0)
         started = time.monotonic()
         source.play()
-        assert collector.wait(lambda: bool(finished))
+        assert collector.wait(lambda: collector.finished)
         took_s = time.monotonic() - started
         assert collector.wait(lambda: len(collector.telemetry) == len(seen))
         assert collector.video
@@ -97,8 +96,7 @@ def test_the_replay_seeks_restores_the_link_state_and_honours_speed(
 ) -> None:
     path, seen = live_session
     collector = Collector()
-    finished: list[bool] = []
-    player = ReplayLink(path, on_finished=lambda: finished.append(True))
+    player = ReplayLink(path, on_finished=collector.mark_finished)
     player.subscribe(collector)
     player.start()
     try:
@@ -110,7 +108,7 @@ def test_the_replay_seeks_restores_the_link_state_and_honours_speed(
         assert not player.playing
         player.set_speed(2.0)
         player.play()
-        assert collector.wait(lambda: bool(finished))
+        assert collector.wait(lambda: collector.finished)
         middle_wall = player.start_ns / 1e9 + middle_s
         assert collector.telemetry
         assert all(f.wall_time >= middle_wall for f in collector.telemetry)
