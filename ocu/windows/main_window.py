@@ -61,6 +61,7 @@ from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.map_view import MapPanel, NavStatus
 from ocu.widgets.model3d import Model3DWidget
 from ocu.widgets.replay import ReplayBanner, ReplayControls
+from ocu.widgets.robot_check import RobotCheckPanel
 from ocu.widgets.video import VideoPanel
 from ocu.windows.arm import ArmModeIndicator, ArmPanel
 from ocu.windows.help_overlay import HelpOverlay
@@ -75,7 +76,8 @@ log = logging.getLogger("ocu.console")
 CONTROL_PERIOD_MS = 50
 # The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
-LAYOUT_VERSION = 4  # 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks
+# 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks; 5: the Robot check dock
+LAYOUT_VERSION = 5
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
@@ -183,6 +185,8 @@ class MainWindow(QMainWindow):
         self.video_dock = self._dock("video_dock", "Video", self.video_panel)
         self.gamepad_dock = self._dock("gamepad_dock", "Gamepad", self.gamepad_panel)
         self.map_dock = self._dock("map_dock", "Map", self.map_panel)
+        self.robot_check = RobotCheckPanel(profile)
+        self.robot_check_dock = self._dock("robot_check_dock", "Robot check", self.robot_check)
         # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
         # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
@@ -192,6 +196,7 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.model_dock, self.max_dock)
         self.tabifyDockWidget(self.max_dock, self.log_dock)
         self.tabifyDockWidget(self.log_dock, self.gamepad_dock)
+        self.tabifyDockWidget(self.gamepad_dock, self.robot_check_dock)
         # The map beside the 3D model: the robot's pose in the room, its arm in the other.
         self.tabifyDockWidget(self.model_dock, self.map_dock)
         self.model_dock.raise_()
@@ -444,6 +449,7 @@ class MainWindow(QMainWindow):
         qt.safety_event.connect(self._on_safety_event)
         self.link = qt
         self.video_panel.set_link(qt)
+        self.robot_check.attach(link)  # subscribed before any datagram flows
         qt.start()
         self.log_event("replay started" if link.read_only else "link started")
 
@@ -452,6 +458,7 @@ class MainWindow(QMainWindow):
         if qt is None:
             return
         self.video_panel.set_link(None)
+        self.robot_check.attach(None)
         if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
         qt.shutdown()  # zeros last

@@ -22,6 +22,7 @@ DOCKS = {
     "video_dock",
     "arm_dock",
     "gamepad_dock",
+    "robot_check_dock",
     "map_dock",
 }
 
