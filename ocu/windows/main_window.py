@@ -64,6 +64,7 @@ from ocu.widgets.replay import ReplayBanner, ReplayControls
 from ocu.widgets.robot_check import RobotCheckPanel
 from ocu.widgets.video import VideoPanel
 from ocu.windows.arm import ArmModeIndicator, ArmPanel
+from ocu.windows.calibration import CalibrationLinkFactory, CalibrationPanel
 from ocu.windows.help_overlay import HelpOverlay
 from ocu.windows.joint_position import JointPositionPanel
 from ocu.windows.key_filter import KeyFilter
@@ -76,8 +77,10 @@ log = logging.getLogger("ocu.console")
 CONTROL_PERIOD_MS = 50
 # The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
-# 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks; 5: the Robot check dock
+# 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks; 5: Robot check, Calibration
 LAYOUT_VERSION = 5
+# The Calibration dock's default output, beside the settings.
+CALIBRATED_PROFILE_NAME = "calibrated_profile.toml"
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
@@ -130,6 +133,7 @@ class MainWindow(QMainWindow):
         replay: ReplayLink | None = None,
         pad_mapping: PadMapping | None = None,
         pad_calibrations: CalibrationStore | None = None,
+        calibration_link: CalibrationLinkFactory | None = None,
         parent: QWidget | None = None,
     ) -> None:
         super().__init__(parent)
@@ -187,6 +191,14 @@ class MainWindow(QMainWindow):
         self.map_dock = self._dock("map_dock", "Map", self.map_panel)
         self.robot_check = RobotCheckPanel(profile)
         self.robot_check_dock = self._dock("robot_check_dock", "Robot check", self.robot_check)
+        self.calibration_panel = CalibrationPanel(
+            self.model,
+            calibration_link if replay is None else None,
+            Path(settings.fileName()).parent / CALIBRATED_PROFILE_NAME,
+        )
+        self.calibration_dock = self._dock(
+            "calibration_dock", "Calibration", self.calibration_panel
+        )
         # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
         # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
@@ -197,6 +209,7 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.max_dock, self.log_dock)
         self.tabifyDockWidget(self.log_dock, self.gamepad_dock)
         self.tabifyDockWidget(self.gamepad_dock, self.robot_check_dock)
+        self.tabifyDockWidget(self.robot_check_dock, self.calibration_dock)
         # The map beside the 3D model: the robot's pose in the room, its arm in the other.
         self.tabifyDockWidget(self.model_dock, self.map_dock)
         self.model_dock.raise_()
@@ -432,6 +445,10 @@ class MainWindow(QMainWindow):
     def _start_link(self) -> None:
         if self.link is not None or self._shut:
             return
+        if self.calibration_panel.running:
+            # One client commands the robot at a time: the calibration has its own link.
+            self.log_event("a calibration runs: the console connects when it ends")
+            return
         if self.replay is not None:
             link: Link = self.replay
         else:
@@ -634,6 +651,7 @@ class MainWindow(QMainWindow):
             return
         if self.gamepad is not None:
             self.gamepad.shutdown()  # no pad state arrives after the halt
+        self.calibration_panel.shutdown()  # its link's zeros before the window goes
         self.model.halt("console closed")
         self.save_layout()
         self._control_timer.stop()

@@ -23,6 +23,7 @@ DOCKS = {
     "arm_dock",
     "gamepad_dock",
     "robot_check_dock",
+    "calibration_dock",
     "map_dock",
 }
 

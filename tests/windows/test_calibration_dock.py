@@ -1,0 +1,153 @@
+"""The Calibration dock: `ocu calibrate` from the console, against scrambled simulators."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from PySide6.QtCore import QSettings, Qt
+from PySide6.QtTest import QTest
+from PySide6.QtWidgets import QApplication
+from pytestqt.qtbot import QtBot
+
+from ocu.link.base import Link
+from ocu.link.live import UdpLink
+from ocu.profile import RobotProfile, load_profile
+from ocu.records import LinkState
+from ocu.sim.simulator import RobotSimulator
+from ocu.windows.calibration import CalibrationPanel, Question
+from ocu.windows.main_window import MainWindow
+from tests.calibrate.scrambled import scrambled_truth
+from tests.windows.console_fixtures import DEADLINE_MS, is_zero
+
+RUN_MS = 150_000
+
+
+@pytest.fixture
+def scrambled() -> Iterator[tuple[RobotProfile, RobotSimulator]]:
+    """A scrambled robot at 20 Hz telemetry, no video."""
+    truth = scrambled_truth(2)
+    with RobotSimulator(truth, telemetry_hz=20.0, video_fps=0.0) as sim:
+        yield truth, sim
+
+
+def _console(
+    qtbot: QtBot, profile: RobotProfile, settings: QSettings, sim: RobotSimulator
+) -> MainWindow:
+    def link() -> Link:
+        return UdpLink(profile, sim.address)
+
+    window = MainWindow(
+        profile,
+        link,
+        "simulator",
+        settings,
+        calibration_link=lambda raw: UdpLink(raw, sim.address, extension=False),
+    )
+    qtbot.addWidget(window)
+    window.show()
+    window.activateWindow()
+    qtbot.waitUntil(window.isActiveWindow, timeout=DEADLINE_MS)
+    qtbot.waitUntil(lambda: window.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS)
+    window.calibration_dock.show()
+    window.calibration_dock.raise_()
+    return window
+
+
+def test_on_a_stand_the_dock_recovers_the_robot_and_writes_the_profile(
+    qtbot: QtBot,
+    profile: RobotProfile,
+    settings: QSettings,
+    tmp_path: Path,
+    scrambled: tuple[RobotProfile, RobotSimulator],
+) -> None:
+    truth, sim = scrambled
+    window = _console(qtbot, profile, settings, sim)
+    panel = window.calibration_panel
+    out = tmp_path / "calibrated.toml"
+    panel.out_edit.setText(str(out))
+    panel.on_stand.setChecked(True)
+    try:
+        with qtbot.waitSignal(panel.finished, timeout=RUN_MS):
+            assert panel.start()
+            assert window.link is None  # the console let go of the robot
+        assert panel.result is not None
+        assert panel.result.aborted is None
+        assert panel.written == out
+        found = load_profile(out)
+        for name, channel in truth.channels.items():
+            assert found.channels[name].axis == channel.axis, name
+            assert found.channels[name].axis_sign == channel.axis_sign, name
+        for name, motor in truth.motors.items():
+            if motor.channel is not None and motor.ticks_per_rad is not None:
+                assert found.motors[name].ticks_per_rad == pytest.approx(
+                    motor.ticks_per_rad, rel=0.02
+                ), name
+        steps = [panel.steps.item(i).text() for i in range(panel.steps.count())]
+        assert any(s.startswith("Axis map") for s in steps), steps
+        assert f"Wrote {out}" in panel.status.text()
+        # The console connects again when the calibration ends.
+        qtbot.waitUntil(
+            lambda: window.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS
+        )
+    finally:
+        window.shutdown()
+        QApplication.processEvents()
+
+
+def _wait_question(qtbot: QtBot, panel: CalibrationPanel) -> Question:
+    qtbot.waitUntil(lambda: panel._question is not None, timeout=DEADLINE_MS * 3)
+    assert panel._question is not None
+    return panel._question
+
+
+def test_guided_the_robot_moves_only_with_the_deadman_and_space_stops_it(
+    qtbot: QtBot,
+    profile: RobotProfile,
+    settings: QSettings,
+    tmp_path: Path,
+    scrambled: tuple[RobotProfile, RobotSimulator],
+) -> None:
+    _truth, sim = scrambled
+    window = _console(qtbot, profile, settings, sim)
+    panel = window.calibration_panel
+    out = tmp_path / "calibrated.toml"
+    panel.out_edit.setText(str(out))
+    try:
+        assert panel.start()
+        # Each step is shown and confirmed: the zero pose, then the axis map.
+        question = _wait_question(qtbot, panel)
+        assert question.text.startswith("Zero offsets")
+        assert panel.answer(True)
+        question = _wait_question(qtbot, panel)
+        assert question.text.startswith("Axis map")
+        before = len(sim.received_commands())
+        assert panel.answer(True)
+        # Nothing moves while the deadman is not held.
+        qtbot.waitUntil(
+            lambda: any("deadman released" in panel.steps.item(i).text()
+                        for i in range(panel.steps.count())),
+            timeout=DEADLINE_MS,
+        )  # fmt: skip
+        assert all(is_zero(rcp) for rcp in sim.received_commands()[before:])
+        # Held with the mouse, the scan pulses the axes.
+        QTest.mousePress(panel.deadman_button, Qt.MouseButton.LeftButton)
+        qtbot.waitUntil(
+            lambda: any(not is_zero(r) for r in sim.received_commands()[before:]),
+            timeout=DEADLINE_MS,
+        )
+        with qtbot.waitSignal(panel.finished, timeout=DEADLINE_MS):
+            QTest.keyClick(window.velocity_panel, Qt.Key.Key_Space)
+        QTest.mouseRelease(panel.deadman_button, Qt.MouseButton.LeftButton)
+        assert panel.result is not None
+        assert panel.result.aborted == "Space"
+        assert not out.exists()
+        assert "STOPPED: Space" in panel.status.text()
+        # Zeros are the last thing the robot got, and it stands still.
+        received = sim.received_commands()
+        assert is_zero(received[-1])
+        qtbot.waitUntil(lambda: sim.state().all_stopped, timeout=DEADLINE_MS)
+    finally:
+        window.shutdown()
+        QApplication.processEvents()
