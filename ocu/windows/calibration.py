@@ -3,13 +3,14 @@
 Start disconnects the console's link and runs the `Calibrator` on a thread of its own over a
 fresh raw link to the same robot; the dock is its `Operator`: it shows every step and asks
 its questions with buttons, a list of joints or a text box, and the calibrator's thread
-waits for the answer. The robot moves only while the operator holds the deadman: the
-"Hold to move" button with the mouse, or Ctrl held anywhere in the console; letting go, or
-the console losing the keyboard, releases it. Space, STOP ALL and the dock's Stop set the
-calibrator's stop signal. "Robot on a stand" runs the automatic steps only with no deadman,
-as `--yes` does. At the end the profile is written to the file the operator chose and the
-console connects again (with the profile it started with: `ocu --profile FILE` uses the new
-one).
+waits for the answer. Asked which joint a device is, the 3D model's ghost turns the joint
+the profile says (and the one picked in the list). The robot moves only while the operator
+holds the deadman: the "Hold to move" button with the mouse, or Ctrl held anywhere in the
+console; letting go, or the console losing the keyboard, releases it. Space, STOP ALL and
+the dock's Stop set the calibrator's stop signal. "Robot on a stand" runs the automatic
+steps only with no deadman, as `--yes` does. At the end the profile is written to the file
+the operator chose and the console connects again (with the profile it started with:
+`ocu --profile FILE` uses the new one).
 """
 
 from __future__ import annotations
@@ -64,6 +65,8 @@ class Question:
     entry: str | None = None  # "number" or "choice"
     choices: Sequence[str] = ()
     default: str = ""
+    # The joint the 3D model shows while the question is asked (and the one chosen after).
+    joint: str | None = None
     answer: queue.Queue[object] = field(default_factory=queue.Queue)
 
 
@@ -117,6 +120,7 @@ class DockOperator(QObject):
                 entry="choice",
                 choices=choices,
                 default=profile_name or "",
+                joint=profile_name,
             )
         )
         return None if answer == profile_name else str(answer)
@@ -210,12 +214,15 @@ class CalibrationPanel(QWidget):
         link_factory: CalibrationLinkFactory | None,
         default_out: Path,
         parent: QWidget | None = None,
+        *,
+        show_joint: Callable[[str | None], None] | None = None,
     ) -> None:
         super().__init__(parent)
         self.setObjectName("calibration")
         self.model = model
         self.profile = model.profile
         self.link_factory = link_factory
+        self.show_joint = show_joint
         self.deadman = HeldFlag()
         self.stop: StopSignal | None = None
         self.result: CalibrationResult | None = None
@@ -258,6 +265,7 @@ class CalibrationPanel(QWidget):
         self.entry.setObjectName("calibration_entry")
         self.choice = QComboBox()
         self.choice.setObjectName("calibration_choice")
+        self.choice.currentTextChanged.connect(self._choice_changed)
         self.answer_row = QHBoxLayout()
         self.answer_buttons: list[QPushButton] = []
         self.steps = QListWidget()
@@ -429,6 +437,8 @@ class CalibrationPanel(QWidget):
             if question.default:
                 self.choice.setCurrentText(question.default)
             self.choice.show()
+        if question.joint is not None and self.show_joint is not None:
+            self.show_joint(question.joint)
         for label, value in question.buttons:
             button = QPushButton(label)
             button.setFocusPolicy(Qt.FocusPolicy.NoFocus)
@@ -459,7 +469,14 @@ class CalibrationPanel(QWidget):
         question.answer.put(value)
         return True
 
+    def _choice_changed(self, name: str) -> None:
+        question = self._question
+        if question is not None and question.entry == "choice" and self.show_joint is not None:
+            self.show_joint(name or None)
+
     def _clear_question(self) -> None:
+        if self._question is not None and self._question.joint and self.show_joint is not None:
+            self.show_joint(None)
         self._question = None
         self.question_label.hide()
         self.entry.hide()

@@ -18,6 +18,7 @@ widgets disabled, no hotkeys, no pad, nothing sent.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -81,6 +82,8 @@ VIEW_PERIOD_MS = 33
 LAYOUT_VERSION = 5
 # The Calibration dock's default output, beside the settings.
 CALIBRATED_PROFILE_NAME = "calibrated_profile.toml"
+# How far the 3D model's ghost turns the joint the calibration asks about.
+CALIBRATION_GHOST_DEG = 30.0
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
@@ -195,6 +198,7 @@ class MainWindow(QMainWindow):
             self.model,
             calibration_link if replay is None else None,
             Path(settings.fileName()).parent / CALIBRATED_PROFILE_NAME,
+            show_joint=self._show_calibration_joint,
         )
         self.calibration_dock = self._dock(
             "calibration_dock", "Calibration", self.calibration_panel
@@ -209,7 +213,6 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.max_dock, self.log_dock)
         self.tabifyDockWidget(self.log_dock, self.gamepad_dock)
         self.tabifyDockWidget(self.gamepad_dock, self.robot_check_dock)
-        self.tabifyDockWidget(self.robot_check_dock, self.calibration_dock)
         # The map beside the 3D model: the robot's pose in the room, its arm in the other.
         self.tabifyDockWidget(self.model_dock, self.map_dock)
         self.model_dock.raise_()
@@ -229,6 +232,10 @@ class MainWindow(QMainWindow):
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.arm_dock)
             self.tabifyDockWidget(self.joint_dock, self.arm_dock)
             self.joint_dock.raise_()
+        # On the right, so the 3D model stays in view: it shows the joint a device should be.
+        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.calibration_dock)
+        self.tabifyDockWidget(self.joint_dock, self.calibration_dock)
+        self.joint_dock.raise_()
 
         self.link_status = LinkStatus(self.model, address_text)
         self.statusBar().addPermanentWidget(self.link_status, 1)
@@ -543,6 +550,13 @@ class MainWindow(QMainWindow):
             pose = arm.kinematics.tool_matrix(arm.kinematics.vector(goal.joints))
         self.model_view.set_goal_pose(pose)
         self._update_ghost()
+
+    def _show_calibration_joint(self, name: str | None) -> None:
+        """The 3D model's ghost with one joint turned (the calibration asks if it moved)."""
+        if name is None:
+            self._update_ghost()
+        else:
+            self.model_view.set_ghost({name: math.radians(CALIBRATION_GHOST_DEG)})
 
     def _update_ghost(self) -> None:
         """The ghost: position targets and the arm's goal together."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,7 +17,7 @@ from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile, load_profile
 from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
-from ocu.windows.calibration import CalibrationPanel, Question
+from ocu.windows.calibration import FROM_ENTRY, CalibrationPanel, Question
 from ocu.windows.main_window import MainWindow
 from tests.calibrate.scrambled import scrambled_truth
 from tests.windows.console_fixtures import DEADLINE_MS, is_zero
@@ -135,6 +136,22 @@ def test_guided_the_robot_moves_only_with_the_deadman_and_space_stops_it(
         QTest.mousePress(panel.deadman_button, Qt.MouseButton.LeftButton)
         qtbot.waitUntil(
             lambda: any(not is_zero(r) for r in sim.received_commands()[before:]),
+            timeout=DEADLINE_MS,
+        )
+        # Which joint a device is: the 3D model's ghost turns the joint the profile says.
+        qtbot.waitUntil(
+            lambda: panel._question is not None and "Which joint" in panel._question.text,
+            timeout=RUN_MS // 4,
+        )
+        asked = panel._question
+        assert asked is not None
+        assert asked.joint is not None
+        assert window.model_view.ghost_targets == {asked.joint: pytest.approx(math.radians(30))}
+        assert panel.answer(FROM_ENTRY)  # the profile's joint, as the list proposes
+        assert window.model_view.ghost_targets == {}
+        moving_from = len(sim.received_commands())
+        qtbot.waitUntil(
+            lambda: any(not is_zero(r) for r in sim.received_commands()[moving_from:]),
             timeout=DEADLINE_MS,
         )
         with qtbot.waitSignal(panel.finished, timeout=DEADLINE_MS):
