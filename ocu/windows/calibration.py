@@ -432,10 +432,13 @@ class CalibrationPanel(QWidget):
             self.entry.setText(question.default)
             self.entry.show()
         elif question.entry == "choice":
+            # Filled quietly: the joint shown is the question's until the operator picks.
+            blocked = self.choice.blockSignals(True)
             self.choice.clear()
             self.choice.addItems(list(question.choices))
             if question.default:
                 self.choice.setCurrentText(question.default)
+            self.choice.blockSignals(blocked)
             self.choice.show()
         if question.joint is not None and self.show_joint is not None:
             self.show_joint(question.joint)

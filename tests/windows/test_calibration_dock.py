@@ -7,17 +7,19 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from PySide6.QtCore import QSettings, Qt
+from PySide6.QtCore import QEvent, QSettings, Qt
+from PySide6.QtGui import QKeyEvent
 from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
 
+from ocu.console.model import ConsoleModel
 from ocu.link.base import Link
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile, load_profile
 from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
-from ocu.windows.calibration import FROM_ENTRY, CalibrationPanel, Question
+from ocu.windows.calibration import FROM_ENTRY, CalibrationPanel, DeadmanKey, Question
 from ocu.windows.main_window import MainWindow
 from tests.calibrate.scrambled import scrambled_truth
 from tests.windows.console_fixtures import DEADLINE_MS, is_zero
@@ -168,3 +170,48 @@ def test_guided_the_robot_moves_only_with_the_deadman_and_space_stops_it(
     finally:
         window.shutdown()
         QApplication.processEvents()
+
+
+def test_answers_are_checked_and_ctrl_holds_the_deadman_until_the_keyboard_goes(
+    qtbot: QtBot, profile: RobotProfile
+) -> None:
+    model = ConsoleModel(profile)
+    shown: list[str | None] = []
+    panel = CalibrationPanel(model, None, Path("unused.toml"), show_joint=shown.append)
+    qtbot.addWidget(panel)
+    assert not panel.start_button.isEnabled()  # no robot to calibrate (a replay)
+    # A typed number must be a positive number; the calibrator gets it as one.
+    question = Question("How many degrees?", [("Use my angle", FROM_ENTRY)], entry="number")
+    panel._on_asked(question)
+    panel.entry.setText("eight")
+    assert not panel.answer(FROM_ENTRY)
+    assert "Not a positive number: 'eight'" in panel.question_label.text()
+    assert question.answer.empty()
+    panel.entry.setText("8.1")
+    assert panel.answer(FROM_ENTRY)
+    assert question.answer.get_nowait() == pytest.approx(8.1)
+    # The joint asked about is shown, then the one picked, then nothing.
+    question = Question(
+        "Which joint moved?",
+        [("That one", FROM_ENTRY)],
+        entry="choice",
+        choices=["shoulder", "elbow"],
+        default="shoulder",
+        joint="shoulder",
+    )
+    panel._on_asked(question)
+    panel.choice.setCurrentText("elbow")
+    assert panel.answer(FROM_ENTRY)
+    assert question.answer.get_nowait() == "elbow"
+    assert shown == ["shoulder", "elbow", None]
+    # Ctrl held anywhere holds the deadman; its release, or the keyboard going, lets go.
+    key = DeadmanKey(panel.deadman)
+    press = QKeyEvent(QEvent.Type.KeyPress, Qt.Key.Key_Control, Qt.KeyboardModifier.NoModifier)
+    release = QKeyEvent(QEvent.Type.KeyRelease, Qt.Key.Key_Control, Qt.KeyboardModifier.NoModifier)
+    assert not key.eventFilter(panel, press)  # never consumed
+    assert panel.deadman.held()
+    key.eventFilter(panel, release)
+    assert not panel.deadman.held()
+    key.eventFilter(panel, press)
+    key.eventFilter(panel, QEvent(QEvent.Type.ApplicationDeactivate))
+    assert not panel.deadman.held()
