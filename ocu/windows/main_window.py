@@ -203,6 +203,7 @@ class MainWindow(QMainWindow):
         self.calibration_dock = self._dock(
             "calibration_dock", "Calibration", self.calibration_panel
         )
+        self.calibration_panel.finished.connect(lambda _result: self._after_calibration())
         # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
         # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
@@ -476,6 +477,11 @@ class MainWindow(QMainWindow):
         self.robot_check.attach(link)  # subscribed before any datagram flows
         qt.start()
         self.log_event("replay started" if link.read_only else "link started")
+
+    def _after_calibration(self) -> None:
+        """Connect now if the operator asked for it while the calibration ran."""
+        if self.model.connected and self.link is None:
+            self._start_link()
 
     def _stop_link(self) -> None:
         qt, self.link = self.link, None

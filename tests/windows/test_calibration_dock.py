@@ -75,6 +75,8 @@ def test_on_a_stand_the_dock_recovers_the_robot_and_writes_the_profile(
         with qtbot.waitSignal(panel.finished, timeout=RUN_MS):
             assert panel.start()
             assert window.link is None  # the console let go of the robot
+            window.model.set_connected(True)  # Connect pressed meanwhile: not while it runs
+            assert window.link is None
         assert panel.result is not None
         assert panel.result.aborted is None
         assert panel.written == out
