@@ -256,6 +256,9 @@ def run_console(
             recorder=recorder,
             pad_mapping=pad_mapping,
             pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
+            calibration_link=lambda raw: UdpLink(
+                raw, robot_address, extension=False, description=address_text
+            ),
         )
         return run_window(app, window, quit_after_s)
     finally:

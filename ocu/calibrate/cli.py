@@ -21,6 +21,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TextIO
 
@@ -148,9 +149,19 @@ def calibrate_main(
     out = stdout or sys.stdout
     if args.yes and args.answers:
         parser.error("--yes asks nothing: --answers does not apply")
+    if args.telemetry_hz is not None and not (
+        math.isfinite(args.telemetry_hz) and args.telemetry_hz > 0
+    ):
+        parser.error("--telemetry-hz must be > 0")
     try:
         base = load_profile_data(args.profile)
         profile = parse_profile(base, _source(args.profile))
+        if args.telemetry_hz is not None:
+            # Only what the calibration expects at first (its waits); the profile written
+            # keeps the base's rate.
+            profile = replace(
+                profile, link=replace(profile.link, telemetry_rate_hz=args.telemetry_hz)
+            )
         operator: Operator = (
             AutoOperator(lambda text: print(text, file=out, flush=True))
             if args.yes

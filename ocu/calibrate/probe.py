@@ -32,7 +32,7 @@ from ocu.protocol.packets import (
     TELEMETRY_HEADER_STRUCT,
     TELEMETRY_SIZE,
 )
-from ocu.records import TELEMETRY, VIDEO
+from ocu.records import SCAN, STATUS, TELEMETRY, VIDEO, VIDEO_FRAGMENT
 
 OK = "ok"
 NOTE = "note"
@@ -47,6 +47,8 @@ SLOW_TELEMETRY_FACTOR = 0.5
 HUGE_TICK = 2**48
 # Pad bytes in a motor record under the assumed layout (docs/protocol.md).
 MOTOR_PAD_OFFSETS = (3, 14, 15)
+# Datagrams of ocu's protocol extension (docs/protocol.md), which the console's link may get.
+EXTENSION_KINDS = frozenset({VIDEO_FRAGMENT, STATUS, SCAN})
 
 
 @dataclass(frozen=True)
@@ -132,9 +134,17 @@ def run_probe(
 
 
 def judge(
-    profile: RobotProfile, log: TelemetryLog, listened_s: float, *, foreign: int
+    profile: RobotProfile,
+    log: TelemetryLog,
+    listened_s: float,
+    *,
+    foreign: int,
+    commanded_motion: bool = False,
 ) -> list[Finding]:
-    """Every finding about what a telemetry log holds (pure: the tests feed it datagrams)."""
+    """Every finding about what a telemetry log holds (pure: the tests feed it datagrams).
+
+    `commanded_motion`: the OCU commanded motion while the log filled (the console's Robot
+    check), so the motors' speeds are not expected to be zero and are not judged."""
     findings: list[Finding] = []
     datagrams = list(log.datagrams)
     samples = log.samples()
@@ -161,7 +171,11 @@ def judge(
     findings += _datagram_findings(profile, datagrams)
     if samples:
         findings += _rate_findings(profile, samples, listened_s)
-        findings += _motor_findings(profile, samples)
+        findings += _motor_findings(profile, samples, judge_speeds=not commanded_motion)
+        if commanded_motion:
+            findings.append(
+                Finding(NOTE, "The console commanded motion meanwhile: speeds are not judged.")
+            )
         pads = judge_pads(datagrams, profile.link.frame_types.telemetry)
         if pads is not None:
             findings.append(pads)
@@ -188,9 +202,11 @@ def _datagram_findings(profile: RobotProfile, datagrams: Sequence[Datagram]) -> 
     kinds: dict[tuple[int, int], Counter[str]] = {}
     for datagram in datagrams:
         key = (datagram.data[0] if datagram.data else -1, datagram.size)
-        # Video frames vary in size: one group per first byte.
+        # Video frames vary in size: one group per first byte; so do the extension's.
         if datagram.kind == VIDEO or (datagram.data[:1] and datagram.data[0] == types.video):
             key = (key[0], -1)
+        elif datagram.kind in EXTENSION_KINDS:
+            key = (key[0], -2)
         groups[key] += 1
         example.setdefault(key, datagram)
         kinds.setdefault(key, Counter())[datagram.kind] += 1
@@ -217,6 +233,16 @@ def _datagram_findings(profile: RobotProfile, datagrams: Sequence[Datagram]) -> 
                         "link.frame_types.video",
                     )
                 )
+            continue
+        if size == -2:
+            what = ", ".join(sorted(parsed))
+            findings.append(
+                Finding(
+                    OK,
+                    f"{count} datagram(s) of ocu's protocol extension ({what}), type {shown}, "
+                    "parse.",
+                )
+            )
             continue
         if parsed[TELEMETRY]:
             findings.append(
@@ -343,7 +369,9 @@ def _rate_findings(
     return findings
 
 
-def _motor_findings(profile: RobotProfile, samples: Sequence[Sample]) -> list[Finding]:
+def _motor_findings(
+    profile: RobotProfile, samples: Sequence[Sample], *, judge_speeds: bool = True
+) -> list[Finding]:
     findings: list[Finding] = []
     latest = samples[-1]
     counts = {len(s.motors) for s in samples}
@@ -390,7 +418,7 @@ def _motor_findings(profile: RobotProfile, samples: Sequence[Sample]) -> list[Fi
             continue
         moving = [s.motors[device_id].speed for s in samples if device_id in s.motors]
         fastest = max(moving, key=abs)
-        if fastest != 0:
+        if fastest != 0 and judge_speeds:
             findings.append(
                 Finding(
                     MISMATCH,

@@ -18,6 +18,7 @@ widgets disabled, no hotkeys, no pad, nothing sent.
 from __future__ import annotations
 
 import logging
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -62,8 +63,10 @@ from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.map_view import MapPanel, NavStatus
 from ocu.widgets.model3d import Model3DWidget
 from ocu.widgets.replay import ReplayBanner, ReplayControls
+from ocu.widgets.robot_check import RobotCheckPanel
 from ocu.widgets.video import VideoPanel
 from ocu.windows.arm import ArmModeIndicator, ArmPanel
+from ocu.windows.calibration import CalibrationLinkFactory, CalibrationPanel
 from ocu.windows.help_overlay import HelpOverlay
 from ocu.windows.joint_position import JointPositionPanel
 from ocu.windows.key_filter import KeyFilter
@@ -76,7 +79,12 @@ log = logging.getLogger("ocu.console")
 CONTROL_PERIOD_MS = 50
 # The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
-LAYOUT_VERSION = 4  # 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks
+# 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks; 5: Robot check, Calibration
+LAYOUT_VERSION = 5
+# The Calibration dock's default output, beside the settings.
+CALIBRATED_PROFILE_NAME = "calibrated_profile.toml"
+# How far the 3D model's ghost turns the joint the calibration asks about.
+CALIBRATION_GHOST_DEG = 30.0
 EVENT_LOG_LENGTH = 500
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
@@ -133,6 +141,7 @@ class MainWindow(QMainWindow):
         replay: ReplayLink | None = None,
         pad_mapping: PadMapping | None = None,
         pad_calibrations: CalibrationStore | None = None,
+        calibration_link: CalibrationLinkFactory | None = None,
         parent: QWidget | None = None,
     ) -> None:
         sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_INTERVAL_S))
@@ -189,6 +198,18 @@ class MainWindow(QMainWindow):
         self.video_dock = self._dock("video_dock", "Video", self.video_panel)
         self.gamepad_dock = self._dock("gamepad_dock", "Gamepad", self.gamepad_panel)
         self.map_dock = self._dock("map_dock", "Map", self.map_panel)
+        self.robot_check = RobotCheckPanel(profile)
+        self.robot_check_dock = self._dock("robot_check_dock", "Robot check", self.robot_check)
+        self.calibration_panel = CalibrationPanel(
+            self.model,
+            calibration_link if replay is None else None,
+            Path(settings.fileName()).parent / CALIBRATED_PROFILE_NAME,
+            show_joint=self._show_calibration_joint,
+        )
+        self.calibration_dock = self._dock(
+            "calibration_dock", "Calibration", self.calibration_panel
+        )
+        self.calibration_panel.finished.connect(lambda _result: self._after_calibration())
         # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
         # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
@@ -198,6 +219,7 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.model_dock, self.max_dock)
         self.tabifyDockWidget(self.max_dock, self.log_dock)
         self.tabifyDockWidget(self.log_dock, self.gamepad_dock)
+        self.tabifyDockWidget(self.gamepad_dock, self.robot_check_dock)
         # The map beside the 3D model: the robot's pose in the room, its arm in the other.
         self.tabifyDockWidget(self.model_dock, self.map_dock)
         self.model_dock.raise_()
@@ -217,6 +239,10 @@ class MainWindow(QMainWindow):
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.arm_dock)
             self.tabifyDockWidget(self.joint_dock, self.arm_dock)
             self.joint_dock.raise_()
+        # On the right, so the 3D model stays in view: it shows the joint a device should be.
+        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.calibration_dock)
+        self.tabifyDockWidget(self.joint_dock, self.calibration_dock)
+        self.joint_dock.raise_()
 
         self.link_status = LinkStatus(self.model, address_text)
         self.statusBar().addPermanentWidget(self.link_status, 1)
@@ -433,6 +459,10 @@ class MainWindow(QMainWindow):
     def _start_link(self) -> None:
         if self.link is not None or self._shut:
             return
+        if self.calibration_panel.running:
+            # One client commands the robot at a time: the calibration has its own link.
+            self.log_event("a calibration runs: the console connects when it ends")
+            return
         if self.replay is not None:
             link: Link = self.replay
         else:
@@ -450,14 +480,21 @@ class MainWindow(QMainWindow):
         qt.safety_event.connect(self._on_safety_event)
         self.link = qt
         self.video_panel.set_link(qt)
+        self.robot_check.attach(link)  # subscribed before any datagram flows
         qt.start()
         self.log_event("replay started" if link.read_only else "link started")
+
+    def _after_calibration(self) -> None:
+        """Connect now if the operator asked for it while the calibration ran."""
+        if self.model.connected and self.link is None:
+            self._start_link()
 
     def _stop_link(self) -> None:
         qt, self.link = self.link, None
         if qt is None:
             return
         self.video_panel.set_link(None)
+        self.robot_check.attach(None)
         if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
         qt.shutdown()  # zeros last
@@ -525,6 +562,13 @@ class MainWindow(QMainWindow):
             pose = arm.kinematics.tool_matrix(arm.kinematics.vector(goal.joints))
         self.model_view.set_goal_pose(pose)
         self._update_ghost()
+
+    def _show_calibration_joint(self, name: str | None) -> None:
+        """The 3D model's ghost with one joint turned (the calibration asks if it moved)."""
+        if name is None:
+            self._update_ghost()
+        else:
+            self.model_view.set_ghost({name: math.radians(CALIBRATION_GHOST_DEG)})
 
     def _update_ghost(self) -> None:
         """The ghost: position targets and the arm's goal together."""
@@ -633,6 +677,7 @@ class MainWindow(QMainWindow):
             return
         if self.gamepad is not None:
             self.gamepad.shutdown()  # no pad state arrives after the halt
+        self.calibration_panel.shutdown()  # its link's zeros before the window goes
         self.model.halt("console closed")
         self.save_layout()
         self._control_timer.stop()

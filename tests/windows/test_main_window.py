@@ -22,6 +22,8 @@ DOCKS = {
     "video_dock",
     "arm_dock",
     "gamepad_dock",
+    "robot_check_dock",
+    "calibration_dock",
     "map_dock",
 }
 
