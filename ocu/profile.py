@@ -2,21 +2,20 @@
 
 from __future__ import annotations
 
-import contextlib
 import datetime as dt
 import difflib
 import itertools
 import json
 import math
-import os
 import re
-import tempfile
 import tomllib
 from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+from ocu.files import write_text_atomically
 
 AXIS_COUNT = 16
 BUTTON_COUNT = 16
@@ -1260,14 +1259,4 @@ def write_profile_data(path: str | Path, data: Mapping[str, Any], header: str = 
     target = Path(path)
     text = profile_to_toml(data, header)
     parse_profile(tomllib.loads(text), source=str(target))
-    fd, temp_name = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as out:
-            out.write(text)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(temp_name, target)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp_name)
-        raise
+    write_text_atomically(target, text)

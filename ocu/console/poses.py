@@ -20,10 +20,11 @@ import json
 import math
 import os
 import re
-import tempfile
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+
+from ocu.files import write_text_atomically
 
 ARM_POSES_NAME = "arm_poses.toml"
 CONFIG_DIR_ENV = "OCU_CONFIG_DIR"
@@ -181,18 +182,7 @@ class PoseStore:
             lines.append(f"\n[poses.{json.dumps(name)}]\n")
             lines.extend(f"{joint} = {math.degrees(angles[joint]):.4f}\n" for joint in self.joints)
         text = "".join(lines)
-        folder = self.path.parent
         try:
-            folder.mkdir(parents=True, exist_ok=True)
-            handle, temporary = tempfile.mkstemp(prefix=".arm_poses.", suffix=".tmp", dir=folder)
-            try:
-                with os.fdopen(handle, "w", encoding="utf-8") as stream:
-                    stream.write(text)
-                    stream.flush()
-                    os.fsync(stream.fileno())
-                os.replace(temporary, self.path)
-            except BaseException:
-                Path(temporary).unlink(missing_ok=True)
-                raise
+            write_text_atomically(self.path, text)
         except OSError as err:
             raise PoseError(f"cannot write {self.path}: {err.strerror or err}") from err

@@ -12,14 +12,13 @@ one, so a killed console leaves either the old file or the new one.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ocu.files import write_text_atomically
 from ocu.gamepad.pad import AXES, RAW_MAX, RAW_MIN, TRIGGERS
 
 CALIBRATION_FILE_NAME = "gamepad-calibration.toml"
@@ -212,19 +211,4 @@ class CalibrationStore:
                     lines.append(
                         f"{axis} = {{ min = {a.minimum}, centre = {a.centre}, max = {a.maximum} }}"
                     )
-        write_atomically(self.path, "\n".join(lines) + "\n")
-
-
-def write_atomically(path: Path, text: str) -> None:
-    """Write a file so that it is either the old one or the whole new one, never a part."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as file:
-            file.write(text)
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(temp, path)
-    except BaseException:
-        Path(temp).unlink(missing_ok=True)
-        raise
+        write_text_atomically(self.path, "\n".join(lines) + "\n")
