@@ -181,6 +181,20 @@ def ellipse_closed_loop(profile: RobotProfile, loss: float, seed: int) -> Ellips
         if starved:
             raise StarvedError(starved[0])
         samples = [s for s in recorder.samples if s.time_s >= sim.state().time_s - completion]
+    end_text = messages[-1] if messages else "no end"
+    return ellipse_run(loss, completion, samples, reference, start, end_text=end_text)
+
+
+def ellipse_run(
+    loss: float,
+    completion: float,
+    samples: list[SimState],
+    reference: Trajectory,
+    start: Pose,
+    *,
+    end_text: str,
+) -> EllipseRun:
+    """The errors of one run of the ellipse against its reference path."""
     errors = cross_track_m(samples, reference)
     end = samples[-1].pose
     return EllipseRun(
@@ -189,7 +203,7 @@ def ellipse_closed_loop(profile: RobotProfile, loss: float, seed: int) -> Ellips
         float(np.sqrt(np.mean(errors**2))),
         float(errors.max()),
         math.hypot(end[0] - start.x_m, end[1] - start.y_m),
-        messages[-1] if messages else "no end",
+        end_text,
     )
 
 
@@ -220,16 +234,7 @@ def ellipse_feed_forward(profile: RobotProfile, loss: float, seed: int) -> Ellip
         if starved:
             raise StarvedError(starved[0])
         samples = [s for s in recorder.samples if s.time_s >= sim.state().time_s - completion]
-    errors = cross_track_m(samples, reference)
-    end = samples[-1].pose
-    return EllipseRun(
-        loss,
-        completion,
-        float(np.sqrt(np.mean(errors**2))),
-        float(errors.max()),
-        math.hypot(end[0] - start.x_m, end[1] - start.y_m),
-        "open loop",
-    )
+    return ellipse_run(loss, completion, samples, reference, start, end_text="open loop")
 
 
 def bench_ellipse(profile: RobotProfile) -> None:
