@@ -97,9 +97,7 @@ class GamepadTeleop:
         self._buttons_armed: set[str] = set()
         self._settled: dict[str, float] = dict.fromkeys(AXES, 0.0)
         self._hooks: dict[str, Hook] = {}
-        # Joints whose position targets a stored pose started during this engagement.
-        self._pose_joints: set[str] = set()
-        # How to stop what hooks started during this engagement (an arm move).
+        # How to stop what hooks started during this engagement (a stored pose's move).
         self._hook_stops: list[Stopper] = []
         model.events.estop_changed.connect(self._on_estop)
 
@@ -291,9 +289,7 @@ class GamepadTeleop:
         if not self._engaged:
             self.events.message.emit(f"gamepad: hold the deadman for '{name} {argument}'")
             return
-        before = set(self.model.targets)
         stop = hook(argument)
-        self._pose_joints |= set(self.model.targets) - before
         if stop is not None:
             self._hook_stops.append(stop)
 
@@ -324,11 +320,6 @@ class GamepadTeleop:
         self._armed.clear()
         self._buttons_armed.clear()
         stopped = self.model.stop_gamepad(reason)
-        for joint in sorted(self._pose_joints & set(self.model.targets)):
-            self.model.cancel_targets(joint)
-            self.events.message.emit(f"{joint}: stored pose stopped ({reason})")
-            stopped = True
-        self._pose_joints.clear()
         hook_stops, self._hook_stops = self._hook_stops, []
         for stop in hook_stops:
             stopped = bool(stop(reason)) or stopped

@@ -14,7 +14,7 @@ from ocu.console.model import ConsoleModel, Source
 from ocu.gamepad.calibration import AxisCalibration, PadCalibration
 from ocu.gamepad.mapping import PadMapping, load_pad_mapping, parse_pad_mapping
 from ocu.gamepad.pad import AXES, BUTTONS, PadInfo, PadState
-from ocu.gamepad.teleop import GamepadTeleop, PadStatus
+from ocu.gamepad.teleop import GamepadTeleop, PadStatus, Stopper
 from ocu.profile import RobotProfile
 
 FULL = 32767  # a stick right or down, a trigger pressed
@@ -302,9 +302,16 @@ def test_pose_hook_needs_the_deadman_and_stops_with_it(
     assert "no pose hook" in messages[-1]
     poses: list[str] = []
 
-    def go_to_pose(name: str) -> None:
+    def go_to_pose(name: str) -> Stopper:
         poses.append(name)
-        model.set_targets({"shoulder": 0.4, "elbow": -0.3})
+        targets = {"shoulder": 0.4, "elbow": -0.3}
+        model.set_targets(targets)
+
+        def stop(_reason: str) -> None:  # the pose's own targets, not the operator's
+            for joint in targets:
+                model.cancel_targets(joint)
+
+        return stop
 
     teleop.register_hook("pose", go_to_pose)
     pad.set(a=False)
