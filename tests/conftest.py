@@ -23,6 +23,24 @@ def profile() -> RobotProfile:
     return load_profile()
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _gui_thread_collector(qapp: object) -> Iterator[object]:
+    """The console's own policy for the whole run: cyclic garbage (closed windows, panels,
+    their timers) is collected in the GUI thread only, never in a link or simulator thread."""
+    from ocu.qt.collector import pin_garbage_collection
+
+    collector = pin_garbage_collection()
+    yield collector
+    collector.stop()
+
+
+@pytest.fixture(autouse=True)
+def _collect_in_the_gui_thread(_gui_thread_collector: object) -> Iterator[None]:
+    """Tests that never spin the event loop still have their garbage collected, here."""
+    yield
+    _gui_thread_collector.check()  # type: ignore[attr-defined]
+
+
 @pytest.fixture(autouse=True)
 def _no_thread_left_running() -> Iterator[None]:
     """Fail a test that leaves a QThread or an ocu-* Python thread running (napari's habit)."""

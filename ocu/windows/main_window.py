@@ -50,6 +50,7 @@ from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError
 from ocu.protocol.extended import CameraRequest
+from ocu.qt.collector import pin_garbage_collection
 from ocu.qt.console import ConsoleBinding
 from ocu.qt.gamepad import QtGamepad
 from ocu.qt.link import QtLink
@@ -145,6 +146,8 @@ class MainWindow(QMainWindow):
         parent: QWidget | None = None,
     ) -> None:
         sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_INTERVAL_S))
+        # Closed panels and dialogs are cyclic garbage holding QObjects: collected here only.
+        pin_garbage_collection()
         super().__init__(parent)
         if (link_factory is None) == (replay is None):
             raise ValueError("a console needs either a link factory or a replay source")
