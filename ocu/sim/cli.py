@@ -37,6 +37,10 @@ LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _HANDLED_SIGNALS = (*_STOP_SIGNALS, signal.SIGUSR1, signal.SIGUSR2)
 STDIN_FD = 0
+# How long the main thread waits for a signal before looking at those Python's handler
+# noted: numpy's and OpenCV's threads start at import, before the signals are blocked, and a
+# signal the kernel hands to one of them reaches main through the handler, not sigtimedwait.
+SIGNAL_POLL_S = 0.2
 
 
 def _number(text: str) -> float:
@@ -246,14 +250,26 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _stop_at_end_of_stdin() -> None:
-    """Read stdin to its end, then SIGTERM ourselves so main's sigwait runs the shutdown."""
+    """Read stdin to its end, then SIGTERM the main thread so its wait runs the shutdown."""
     try:
         while os.read(STDIN_FD, 4096):
             pass
     except OSError:
         pass  # no usable stdin: as good as closed
     log.info("standard input closed (parent gone)")
-    os.kill(os.getpid(), signal.SIGTERM)
+    # To the main thread itself (blocked there, taken by its sigtimedwait): a signal to the
+    # process could go to a library thread that does not block it and end the process unclean.
+    signal.pthread_kill(threading.main_thread().ident or 0, signal.SIGTERM)
+
+
+def _wait_for_signal(noted: list[int]) -> int:
+    """The next handled signal: taken where it is pending, or noted by the handler."""
+    while True:
+        info = signal.sigtimedwait(_HANDLED_SIGNALS, SIGNAL_POLL_S)
+        if info is not None:
+            return info.si_signo
+        if noted:
+            return noted.pop(0)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -301,11 +317,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ValueError as err:
             parser.error(f"range sensor: {err}")
     # Block the handled signals before the loop thread exists so it inherits the mask and the
-    # main thread alone takes them, synchronously, with sigwait.
+    # main thread alone takes them, synchronously, with sigtimedwait. Threads that libraries
+    # started at import do not block them: a signal given to one runs this handler (never
+    # the default action, which would kill the simulator without its shutdown).
+    noted: list[int] = []
+    previous_handlers = {
+        signum: signal.signal(signum, lambda signum, _frame: noted.append(signum))
+        for signum in _HANDLED_SIGNALS
+    }
     previous_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _HANDLED_SIGNALS)
     try:
         if args.exit_with_parent:
-            # Started under the mask too: its SIGTERM must reach sigwait, not the default action.
+            # Started under the mask too (its own reads need no signal).
             threading.Thread(
                 target=_stop_at_end_of_stdin, name="ocu-sim-stdin", daemon=True
             ).start()
@@ -343,7 +366,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             host, bound_port = simulator.address
             print(f"ocu-sim listening on {host}:{bound_port}", flush=True)
             while True:
-                signum = signal.sigwait(_HANDLED_SIGNALS)
+                signum = _wait_for_signal(noted)
                 if signum == signal.SIGUSR1:
                     simulator.cut_link()
                 elif signum == signal.SIGUSR2:
@@ -353,4 +376,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                     break
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous_mask)
+        for signum, handler in previous_handlers.items():
+            signal.signal(signum, handler)
     return 0

@@ -123,6 +123,45 @@ signal.pause()
 """
 
 
+_LIBRARY_THREAD = """
+import signal, sys, threading
+from ocu.sim import cli
+
+go = threading.Event()
+
+def library_thread():  # like numpy's and OpenCV's: started before the signals are blocked
+    go.wait()
+    signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
+
+threading.Thread(target=library_thread, daemon=True).start()
+threading.Thread(target=lambda: (sys.stdin.readline(), go.set()), daemon=True).start()
+sys.exit(cli.main(["--port", "0", "--video-fps", "0"]))
+"""
+
+
+def test_a_sigterm_given_to_a_library_thread_still_stops_cleanly() -> None:
+    # The kernel gives a process's signal to any thread that does not block it.
+    with (
+        subprocess.Popen(
+            [sys.executable, "-c", _LIBRARY_THREAD],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        ) as process,
+        _reaped(process, []),
+    ):
+        _wait_for_line(process.stdout, "ocu-sim listening on", STARTUP_S)
+        assert process.stdin is not None
+        process.stdin.write("go\n")
+        process.stdin.close()
+        assert process.wait(EXIT_S) == 0  # not -15: the default action would skip shutdown
+        assert process.stderr is not None
+        stderr = process.stderr.read()
+        assert "SIGTERM received, stopping" in stderr
+        assert "simulator stopped" in stderr
+
+
 def test_simulator_process_ends_when_its_parent_is_killed() -> None:
     simulators: list[int] = []
     with (
