@@ -216,6 +216,12 @@ class ConsoleModel:
         self._help_visible = False
         self._targets: dict[str, float] = {}
         self.nav = Navigator(profile, clock=clock)
+        # A new connection starts without range data: zones off until a scan, not blind.
+        self.robot.events.link_state_changed.connect(
+            lambda state, _reason: (
+                self.nav.forget_scans() if state is LinkState.CONNECTING else None
+            )
+        )
         self._waypoints: tuple[tuple[float, float], ...] = ()
         self._shuttle: tuple[tuple[float, float], ...] = ()
         self._zone_text = ""

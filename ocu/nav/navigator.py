@@ -33,7 +33,13 @@ from ocu.nav.grid import OccupancyGrid
 from ocu.nav.odometry import Odometry, OdometryEstimate
 from ocu.nav.scan import scan_points
 from ocu.nav.tracking import Trajectory, along_path
-from ocu.nav.zones import ZoneDecision, apply_zones, fastest_point_speed
+from ocu.nav.zones import (
+    ZoneDecision,
+    apply_zones,
+    cap_ratio,
+    direction_of,
+    fastest_point_speed,
+)
 from ocu.profile import RobotProfile
 from ocu.records import SCAN_FROM_ROBOT, Command, ScanFrame, StatusFrame, TelemetryFrame
 
@@ -49,6 +55,10 @@ GRID_PERIOD_S = 0.2
 TRAIL_LENGTH = 5000
 
 ZONES_OFF_NO_DATA = "zones off: no range data"
+# Scans came and stopped (a sensor, its node or the link failed): nothing is known of what is
+# ahead now, so the drive is held to the innermost zone's caps (Nav2's collision monitor stops
+# outright on a source timeout; a crawler the operator watches may creep, and Z overrides).
+ZONES_BLIND = "zones: range data lost"
 ZONES_OFF_NO_FOOTPRINT = "zones off: the profile has no footprint"
 ZONES_OVERRIDDEN = "ZONES OVERRIDDEN"
 ZONES_CLEAR = "zones: clear"
@@ -62,6 +72,8 @@ class ZoneState:
     active: bool
     overridden: bool
     text: str
+    # Range data came and stopped: the drive is held to the innermost zone's caps.
+    blind: bool = False
 
     @property
     def limiting(self) -> bool:
@@ -177,6 +189,14 @@ class Navigator:
             self.revision += 1
             return True
 
+    def forget_scans(self) -> None:
+        """A new connection: no scan yet (the zones are off until one comes, not blind)."""
+        with self._lock:
+            self._scan = None
+            self._scan_points = np.zeros((0, 2))
+            self._robot_scan_at = None
+            self.revision += 1
+
     def robot_scans(self, now: float | None = None) -> bool:
         """Whether the robot itself sends range scans (one arrived lately)."""
         with self._lock:
@@ -276,8 +296,10 @@ class Navigator:
                 state = ZoneState(passed, False, False, ZONES_OFF_NO_FOOTPRINT)
             else:
                 age = self.scan_age_s(now)
-                if age is None or age > self.settings.scan_stale_after_s:
+                if age is None:
                     state = ZoneState(passed, False, overridden, ZONES_OFF_NO_DATA)
+                elif age > self.settings.scan_stale_after_s:
+                    state = self._blind(linear_m_s, angular_rad_s, age, overridden)
                 else:
                     state = self._apply(linear_m_s, angular_rad_s, age, overridden)
             if overridden:
@@ -286,6 +308,15 @@ class Navigator:
                 state = ZoneState(passed, state.active, True, ZONES_OVERRIDDEN + detail)
             self._zones = state
             return state
+
+    def _blind(self, linear: float, angular: float, age_s: float, overridden: bool) -> ZoneState:
+        """The innermost zone's caps for a robot whose range data stopped coming."""
+        zones = self.settings.zones
+        v, w = cap_ratio(linear, angular, zones.max_linear_m_s[0], zones.max_angular_rad_s[0])
+        limited = (v, w) != (linear, angular)
+        decision = ZoneDecision(v, w, None, direction_of(linear), zone=0, limited=limited)
+        text = f"{ZONES_BLIND}: at most {zones.max_linear_m_s[0]:.2f} m/s"
+        return ZoneState(decision, True, overridden, text, blind=True)
 
     def _apply(self, linear: float, angular: float, age_s: float, overridden: bool) -> ZoneState:
         assert self.footprint is not None

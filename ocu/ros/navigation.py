@@ -190,7 +190,10 @@ class GuardedSink:
     def refresh(self) -> None:
         """Judge the drive again (new scans, the robot moved); send it if it changed."""
         with self._lock:
-            if self.drive is None or self._wanted == (0.0, 0.0):
+            if self.drive is None:
+                return
+            if self._wanted == (0.0, 0.0):
+                self.navigator.guard(0.0, 0.0)  # standing: the zones' state stays current
                 return
             before = self._sent
             guarded = self._guarded()

@@ -592,9 +592,13 @@ class RosBridge:
             return
         message = DiagnosticArray()
         message.header.stamp = rospy.Time.now()
+        bridge = _diagnostic_status(bridge_report(self.core.status(), self.hardware_id))
+        if self.navigator is not None:
+            # What the safety zones do now ("zones off: no range data", "slowed: ...").
+            bridge.values.append(KeyValue(key="safety zones", value=self.navigator.zones.text))
         message.status = [
             _diagnostic_status(link_report(link.state, link.stats(), self.hardware_id)),
-            _diagnostic_status(bridge_report(self.core.status(), self.hardware_id)),
+            bridge,
         ]
         self._publish(publishers.diagnostics, message)
 

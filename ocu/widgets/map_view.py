@@ -595,7 +595,7 @@ class NavStatus(QLabel):
             style = "override"
         elif zones is not None and zones.decision is not None and zones.decision.stopped:
             style = "stop"
-        elif zones is not None and zones.limiting:
+        elif zones is not None and (zones.limiting or zones.blind):
             style = "limit"
         elif zones is None or not zones.active:
             style = "off"

@@ -10,7 +10,7 @@ import pytest
 
 from ocu.console.model import ConsoleModel, Source
 from ocu.nav.geometry import Pose
-from ocu.nav.navigator import ZONES_CLEAR, ZONES_OFF_NO_DATA, ZoneState
+from ocu.nav.navigator import ZONES_BLIND, ZONES_CLEAR, ZONES_OFF_NO_DATA, ZoneState
 from ocu.nav.world import parse_world
 from ocu.profile import RobotProfile
 from ocu.protocol import TelemetryPacket
@@ -111,9 +111,37 @@ def test_without_range_data_the_zones_are_off_and_say_so(model: ConsoleModel, cl
     model.on_scan(wall_scan(clock, 3.0))
     model.update()
     assert model.nav.zones.text == ZONES_CLEAR
-    clock.now += 1.0  # the scans stopped coming
+    assert model.channel(LINEAR).velocity == pytest.approx(0.3)
+
+
+def test_range_data_that_stops_holds_the_drive_to_a_creep(
+    model: ConsoleModel, clock: Clock
+) -> None:
+    model.on_scan(wall_scan(clock, 3.0))
+    model.hotkey_down("W", LINEAR, 1)
+    assert model.channel(LINEAR).velocity == pytest.approx(0.3)
+    clock.now += 1.0  # the scans stopped coming: the wall may be anywhere now
     model.update()
+    assert model.nav.zones.text == f"{ZONES_BLIND}: at most 0.20 m/s"
+    assert model.nav.zones.blind
+    assert model.channel(LINEAR).velocity == pytest.approx(0.2)  # the innermost zone's cap
+    model.hotkey_up("W")
+    model.override_zones()  # the operator's deliberate act lets a push through
+    model.hotkey_down("W", LINEAR, 1)
+    assert model.channel(LINEAR).velocity == pytest.approx(0.3)
+    model.hotkey_up("W")
+    model.on_scan(wall_scan(clock, 3.0))  # the sensor is back
+    model.hotkey_down("W", LINEAR, 1)
+    assert model.nav.zones.text == ZONES_CLEAR
+    assert model.channel(LINEAR).velocity == pytest.approx(0.3)
+    model.hotkey_up("W")
+    # A new connection (another robot, maybe without a sensor) starts with the zones off.
+    clock.now += 1.0
+    model.robot.on_link_state(LinkState.CONNECTING, "connecting")
+    model.robot.on_link_state(LinkState.CONNECTED, "test")
+    model.hotkey_down("W", LINEAR, 1)
     assert model.nav.zones.text == ZONES_OFF_NO_DATA
+    assert model.channel(LINEAR).velocity == pytest.approx(0.3)
 
 
 def test_the_override_lets_one_push_through(model: ConsoleModel, clock: Clock) -> None:

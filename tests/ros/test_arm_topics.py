@@ -123,15 +123,16 @@ def test_pose_goal_reaches_and_tool_pose_and_tf_follow(
         reached = truth(kinematics, sim.state())
         assert np.linalg.norm(reached.position - np.array([0.45, -0.3, 0.5])) < 0.005
         assert reached.pitch == pytest.approx(math.radians(-30.0), abs=math.radians(0.5))
-        # tool0 as published agrees with the simulator's joints.
-        after = tool_poses.count()
-        message = tool_poses.wait(lambda m: True, after=after)
-        position = message.pose.position
+
+        # tool0 as published agrees with the simulator's joints (a reading or two after the
+        # arm came to rest: the node's last correction may still be on its way).
+        def agrees(message: Any) -> bool:
+            p = message.pose.position
+            now = truth(kinematics, sim.state()).position
+            return bool(np.linalg.norm(np.array([p.x, p.y, p.z]) - now) < 0.002)
+
+        message = tool_poses.wait(agrees, after=tool_poses.count())
         assert message.header.frame_id == "base_link"
-        assert (
-            np.linalg.norm(np.array([position.x, position.y, position.z]) - reached.position)
-            < 0.002
-        )
         tf = transforms.wait(
             lambda m: any(t.child_frame_id == "tool0" for t in m.transforms), after=0
         )

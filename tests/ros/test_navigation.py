@@ -15,7 +15,7 @@ import pytest
 
 from ocu.control.commands import CommandMapper
 from ocu.nav.geometry import Pose
-from ocu.nav.navigator import Navigator
+from ocu.nav.navigator import ZONES_OFF_NO_DATA, Navigator
 from ocu.nav.world import load_world, parse_world
 from ocu.profile import RobotProfile
 from ocu.records import ScanFrame
@@ -193,6 +193,7 @@ def test_a_vendor_robot_takes_scan_from_another_node_for_the_zones(
     profile: RobotProfile, ros_master: RosMaster, ros_client: None, tmp_path: Path
 ) -> None:
     import rospy
+    from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
     from sensor_msgs.msg import LaserScan
 
@@ -204,29 +205,48 @@ def test_a_vendor_robot_takes_scan_from_another_node_for_the_zones(
     sensor = RangeSensor(world, RangeSensorConfig(noise_m=0.0))
     scan_pub = rospy.Publisher("scan", LaserScan, queue_size=1)
     cmd_vel = rospy.Publisher("cmd_vel", Twist, queue_size=1)
+    diagnostics = Collector("/diagnostics", DiagnosticArray)
     process = NodeProcess(tmp_path, sim.address)
+
+    def zones_text(message: Any) -> str:
+        values = {kv.key: kv.value for kv in message.status[1].values}
+        return str(values.get("safety zones", ""))
+
+    def publish_scan() -> None:
+        # Another node's laser on the robot: what it sees from where the robot truly is.
+        packet = sensor.sweep(Pose(*sim.state().pose), 0)
+        frame = ScanFrame.from_packet(packet, 0.0, 0.0)
+        message = LaserScan()
+        message.header.frame_id = "base_link"
+        message.header.stamp = rospy.Time.now()
+        message.angle_min = frame.angle_min_rad
+        message.angle_increment = frame.angle_increment_rad
+        message.angle_max = frame.angle_min_rad + frame.angle_increment_rad * 359
+        message.range_min, message.range_max = frame.range_min_m, frame.range_max_m
+        message.ranges = list(frame.ranges_m)
+        scan_pub.publish(message)
+
     try:
         process.wait_connected(scan_pub)
         process.wait_connected(cmd_vel)
+        # Before any scan the zones are off (a vendor robot): say so, then see them take it.
+        assert zones_text(diagnostics.wait(lambda m: zones_text(m) != "")) == ZONES_OFF_NO_DATA
+        seen = diagnostics.count()
+        give_up = time.monotonic() + 20.0
+        while not wait_for(
+            lambda: any(zones_text(m) != ZONES_OFF_NO_DATA for m in diagnostics.messages[seen:]),
+            0.1,
+        ):
+            assert time.monotonic() < give_up, "the node never took the scans for its zones"
+            publish_scan()
         twist = Twist()
         twist.linear.x = 0.45
         started = time.monotonic()
         deadline = started + 6.0
         while time.monotonic() < deadline:
-            # Another node's laser on the robot: what it sees from where the robot truly is.
-            packet = sensor.sweep(Pose(*sim.state().pose), 0)
-            frame = ScanFrame.from_packet(packet, 0.0, 0.0)
-            message = LaserScan()
-            message.header.frame_id = "base_link"
-            message.header.stamp = rospy.Time.now()
-            message.angle_min = frame.angle_min_rad
-            message.angle_increment = frame.angle_increment_rad
-            message.angle_max = frame.angle_min_rad + frame.angle_increment_rad * 359
-            message.range_min, message.range_max = frame.range_min_m, frame.range_max_m
-            message.ranges = list(frame.ranges_m)
-            scan_pub.publish(message)
+            publish_scan()
             cmd_vel.publish(twist)
-            time.sleep(0.1)
+            time.sleep(0.1)  # the sensor's and the planner's rate, not a synchronisation
         mapper = CommandMapper(profile)
         speeds = [
             mapper.to_command(r.packet).velocity(LINEAR)
@@ -236,6 +256,7 @@ def test_a_vendor_robot_takes_scan_from_another_node_for_the_zones(
     finally:
         for publisher in (scan_pub, cmd_vel):
             publisher.unregister()
+        diagnostics.close()
         code = process.stop()
         sim.stop()
     assert code == 0, process.output()
