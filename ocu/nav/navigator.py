@@ -23,7 +23,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -52,6 +52,11 @@ TRAIL_STEP_M = 0.05
 # a map the operator looks at needs no more, and each scan costs ~4 ms of the GUI thread.
 # The safety zones always use the newest scan itself.
 GRID_PERIOD_S = 0.2
+# A motion the zones stopped stays stopped until the travel to contact clears the stop distance
+# by this much more: the margin moves with each scan's age and the link's jitter, and without
+# it the decision flips between "stopped" and "slowed" at the boundary, the robot inching on in
+# spurts of the innermost zone's speed.
+STOP_HYSTERESIS_M = 0.05
 TRAIL_LENGTH = 5000
 
 ZONES_OFF_NO_DATA = "zones off: no range data"
@@ -126,6 +131,8 @@ class Navigator:
         self._override = "off"
         self._override_at = 0.0
         self._zones = NO_ZONES
+        # The motion (signs of v and ω) the zones last stopped, held with the hysteresis.
+        self._stopped_motion: tuple[float, float] | None = None
         self.revision = 0
 
     # ---- what the link reports -------------------------------------------------------------
@@ -195,6 +202,7 @@ class Navigator:
             self._scan = None
             self._scan_points = np.zeros((0, 2))
             self._robot_scan_at = None
+            self._stopped_motion = None
             self.revision += 1
 
     def robot_scans(self, now: float | None = None) -> bool:
@@ -326,14 +334,22 @@ class Navigator:
             fastest_point_speed(self.footprint, current.linear_m_s, current.angular_rad_s),
         )
         margin = speed * (age_s + self._one_way_s + COMMAND_LAG_S)
+        motion = (_sign(linear), _sign(angular))
+        zones = self.settings.zones
+        if motion == self._stopped_motion:
+            zones = replace(zones, stop_m=zones.stop_m + STOP_HYSTERESIS_M)
         decision = apply_zones(
             linear,
             angular,
             self._scan_points,
             self.footprint,
-            self.settings.zones,
+            zones,
             margin_m=margin,
         )
+        if decision.stopped:
+            self._stopped_motion = motion
+        elif motion != (0.0, 0.0):
+            self._stopped_motion = None  # moving freely (this way or another): released
         text = decision.message() or ZONES_CLEAR
         return ZoneState(decision, True, overridden, text)
 
@@ -451,3 +467,8 @@ class Navigator:
             if command.done:
                 self.stop_assist()
             return command
+
+
+def _sign(value: float) -> float:
+    """-1, 0 or 1."""
+    return 0.0 if value == 0.0 else math.copysign(1.0, value)

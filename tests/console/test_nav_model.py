@@ -104,6 +104,30 @@ def test_the_zones_stop_motion_toward_a_wall_and_follow_new_scans(
     assert model.channel(LINEAR).velocity == pytest.approx(-0.3)
 
 
+def test_a_stop_for_an_obstacle_holds_until_it_clears_by_a_margin(
+    model: ConsoleModel, clock: Clock
+) -> None:
+    # Held W at 0.3 m/s: 3 cm of margin; the stop distance is 0.10 m of travel to contact.
+    model.on_scan(wall_scan(clock, 0.10))
+    model.hotkey_down("W", LINEAR, 1)
+    assert model.nav.zones.text.startswith("stopped")
+    # The next scan puts the wall 6 cm further (the margin moved with a scan's age): a motion
+    # the zones stopped stays stopped until it clears the stop distance by 5 cm more ...
+    clock.now += 0.1
+    model.on_scan(wall_scan(clock, 0.16))
+    assert model.nav.zones.text.startswith("stopped")
+    assert model.velocities() == {}
+    # ... which a fresh press of the same key does not get round either ...
+    model.hotkey_up("W")
+    model.hotkey_down("W", LINEAR, 1)
+    assert model.nav.zones.text.startswith("stopped")
+    # ... and beyond it the innermost zone lets the robot creep on.
+    clock.now += 0.1
+    model.on_scan(wall_scan(clock, 0.25))
+    assert model.nav.zones.text.startswith("slowed")
+    assert model.channel(LINEAR).velocity == pytest.approx(0.2)
+
+
 def test_without_range_data_the_zones_are_off_and_say_so(model: ConsoleModel, clock: Clock) -> None:
     model.hotkey_down("W", LINEAR, 1)
     assert model.channel(LINEAR).velocity == pytest.approx(0.3)
