@@ -92,11 +92,12 @@ def _reaped(process: subprocess.Popen[str], simulators: list[int]) -> Iterator[N
         process.wait()  # the pipes are closed by Popen's context exit
 
 
-def test_cli_stops_cleanly_at_the_end_of_stdin() -> None:
-    command = [sys.executable, "-m", "ocu.sim", "--port", "0", "--video-fps", "0"]
+@contextmanager
+def _listening(command: list[str]) -> Iterator[subprocess.Popen[str]]:
+    """A simulator command started with pipes, once it says where it listens; reaped after."""
     with (
         subprocess.Popen(
-            [*command, "--exit-with-parent"],
+            command,
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
@@ -105,6 +106,12 @@ def test_cli_stops_cleanly_at_the_end_of_stdin() -> None:
         _reaped(process, []),
     ):
         _wait_for_line(process.stdout, "ocu-sim listening on", STARTUP_S)
+        yield process
+
+
+def test_cli_stops_cleanly_at_the_end_of_stdin() -> None:
+    command = [sys.executable, "-m", "ocu.sim", "--port", "0", "--video-fps", "0"]
+    with _listening([*command, "--exit-with-parent"]) as process:
         assert process.stdin is not None
         process.stdin.close()
         assert process.wait(EXIT_S) == 0
@@ -141,17 +148,7 @@ sys.exit(cli.main(["--port", "0", "--video-fps", "0"]))
 
 def test_a_sigterm_given_to_a_library_thread_still_stops_cleanly() -> None:
     # The kernel gives a process's signal to any thread that does not block it.
-    with (
-        subprocess.Popen(
-            [sys.executable, "-c", _LIBRARY_THREAD],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        ) as process,
-        _reaped(process, []),
-    ):
-        _wait_for_line(process.stdout, "ocu-sim listening on", STARTUP_S)
+    with _listening([sys.executable, "-c", _LIBRARY_THREAD]) as process:
         assert process.stdin is not None
         process.stdin.write("go\n")
         process.stdin.close()
