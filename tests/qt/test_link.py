@@ -40,6 +40,8 @@ def test_the_qt_adapter_emits_signals_and_stops(qtbot: QtBot, profile: RobotProf
     finally:
         thread.shutdown()
         thread.shutdown()
+        # The closing zeros may still be in the simulator's socket: let it read them first.
+        sim.wait_until(lambda s: s.all_stopped, 3.0)
         sim.stop()
     assert not link.loop.running
     assert sim.received_commands()[-1].packet.axes == (0,) * 16
