@@ -145,6 +145,31 @@ def test_stalled_gui_thread_stops(
     QTest.keyRelease(console, Qt.Key.Key_W)
 
 
+def test_a_key_pressed_just_after_a_stall_with_nothing_moving_drives(
+    console: MainWindow, sim: RobotSimulator, profile: RobotProfile, qtbot: QtBot
+) -> None:
+    stall_s = profile.link.gui_alive_timeout_s * 2.0
+    pressed: list[float] = []
+
+    def stall_then_press() -> None:
+        # The GUI thread is busy with nothing moving; the operator's W is the first thing
+        # it handles afterwards, before its next control tick.
+        time.sleep(stall_s)
+        QTest.keyPress(console, Qt.Key.Key_W)
+        pressed.append(time.monotonic())
+
+    QTimer.singleShot(0, stall_then_press)
+    qtbot.waitUntil(lambda: bool(pressed), timeout=DEADLINE_MS)
+    # Nothing was zeroed during the stall, so nothing stale needs stopping: W drives on.
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving forward")
+    mark = len(sim.received_commands())
+    wait_sim(qtbot, sim, lambda s: s.rcp_count >= mark + 3, "three more RCPs")
+    assert not zeros_after(sim, pressed[0]), "W was dropped after the stall"
+    assert console.model.held_keys
+    QTest.keyRelease(console, Qt.Key.Key_W)
+    assert_stopped_promptly(sim, qtbot, time.monotonic(), "W released")
+
+
 def test_dropped_link_stops_and_nothing_resumes(
     make_console: ConsoleFactory, sim: RobotSimulator, profile: RobotProfile, qtbot: QtBot
 ) -> None:

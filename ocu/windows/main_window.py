@@ -40,6 +40,7 @@ from ocu import hotkeys
 from ocu.console.arm import ArmGoal
 from ocu.console.model import ConsoleModel
 from ocu.console.poses import ARM_POSES_NAME, PoseError
+from ocu.console.stall import StallWatch
 from ocu.gamepad.calibration import CalibrationError, CalibrationStore, PadCalibration
 from ocu.gamepad.mapping import PadMapping, load_pad_mapping
 from ocu.gamepad.pad import PadInfo
@@ -53,7 +54,7 @@ from ocu.protocol.extended import CameraRequest
 from ocu.qt.collector import pin_garbage_collection
 from ocu.qt.console import ConsoleBinding
 from ocu.qt.gamepad import QtGamepad
-from ocu.qt.link import QtLink
+from ocu.qt.link import HEARTBEAT_PERIOD_MS, QtLink
 from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
@@ -167,7 +168,11 @@ class MainWindow(QMainWindow):
         self.link: QtLink | None = None
         self.replay_controller = ReplayController(replay, self) if replay is not None else None
         self._shut = False
-        self._last_tick: float | None = None
+        # The link zeroes motion when the GUI thread is silent for gui_alive_timeout_s; the
+        # watch tells the control tick when that may have happened (its heartbeat can be one
+        # period older than the last tick, hence the margin).
+        stall_limit_s = profile.link.gui_alive_timeout_s - HEARTBEAT_PERIOD_MS / 1000.0
+        self._stall_watch = StallWatch(max(stall_limit_s, CONTROL_PERIOD_MS / 1000.0))
         if replay is None:
             self.setWindowTitle(f"ocu — {profile.name} — {address_text}")
         else:
@@ -316,6 +321,7 @@ class MainWindow(QMainWindow):
             self._build_replay_bar(self.replay_controller)
         self._wire_arm()
 
+        self.model.events.command_changed.connect(self._on_command_changed)
         self._control_timer = QTimer(self)
         self._control_timer.setInterval(CONTROL_PERIOD_MS)
         self._control_timer.timeout.connect(self._control_tick)
@@ -598,13 +604,19 @@ class MainWindow(QMainWindow):
 
     # ---- control loop ----------------------------------------------------------------------
 
+    def _on_command_changed(self) -> None:
+        # A command pushed is a sign of life for the link's watchdog too.
+        self._stall_watch.alive(time.monotonic(), self.model.command().is_motion)
+
     def _control_tick(self) -> None:
         now = time.monotonic()
-        last, self._last_tick = self._last_tick, now
-        if last is not None and now - last > self.profile.link.gui_alive_timeout_s:
-            # The GUI thread stalled long enough for the link to zero the command; this tick
-            # may run before the link's safety event arrives, so halt here too.
-            self.model.halt(f"GUI thread stalled for {now - last:.2f} s")
+        self._stall_watch.alive(now, self.model.command().is_motion)
+        stalled_s = self._stall_watch.take_stall()
+        if stalled_s is not None:
+            # The GUI thread stalled with motion commanded, long enough for the link to zero
+            # it; this tick may run before the link's safety event arrives, so halt here too.
+            # (A key pressed after a stall with nothing moving is fresh input: it stands.)
+            self.model.halt(f"GUI thread stalled for {stalled_s:.2f} s")
         self.model.update(now)
 
     # ---- focus, visibility, closing --------------------------------------------------------

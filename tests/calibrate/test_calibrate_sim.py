@@ -146,7 +146,17 @@ def test_calibrate_yes_finds_the_robot_and_the_console_then_drives_it(
                 def moves_that_way(c: str = name, d: int = direction) -> bool:
                     return sim.state().velocities[c] * d > 0
 
-                qtbot.waitUntil(moves_that_way, timeout=5000)
+                try:
+                    qtbot.waitUntil(moves_that_way, timeout=5000)
+                except qtbot.TimeoutError:
+                    events = [
+                        window.event_log.item(i).text() for i in range(window.event_log.count())
+                    ]
+                    raise AssertionError(
+                        f"{key} never moved {name} {direction:+d}: commanded "
+                        f"{sim.state().commanded_velocities}, held {window.model.held_keys}, "
+                        f"events {events[-5:]}"
+                    ) from None
                 QTest.keyRelease(window, Qt.Key(ord(key)))
                 qtbot.waitUntil(lambda: sim.state().all_stopped, timeout=5000)
         finally:

@@ -112,6 +112,29 @@ def wait_sim(
     return seen[-1]
 
 
+def wait_zeros(
+    qtbot: QtBot, sim: RobotSimulator, what: str, *, more: int = 3, timeout_ms: int = DEADLINE_MS
+) -> SimState:
+    """Wait until the simulator heard a zero RCP last and stands still, then for `more` RCPs
+    after it: every one of them is zero.
+
+    A standstill alone does not prove the zeros arrived: the servos' deadband stops a joint
+    under a small command (a centred tracking run) before the zeros reach the robot.
+    """
+
+    def zero_last() -> bool:
+        received = sim.received_commands()
+        return bool(received) and is_zero(received[-1])
+
+    state = wait_sim(qtbot, sim, lambda s: s.all_stopped and zero_last(), what, timeout_ms)
+    start = len(sim.received_commands())
+    if more:
+        qtbot.waitUntil(lambda: len(sim.received_commands()) >= start + more, timeout=timeout_ms)
+    moving = [r for r in sim.received_commands()[start - 1 :] if not is_zero(r)]
+    assert not moving, f"motion after the zeros: {moving[0]}"
+    return state
+
+
 def drive_axis(profile: RobotProfile, rcp: ReceivedRcp, channel: str) -> int:
     """The raw axis value of one channel in a received RCP."""
     return rcp.packet.axes[profile.channels[channel].axis]

@@ -26,6 +26,7 @@ from tests.windows.console_fixtures import (
     drive_axis,
     is_zero,
     wait_sim,
+    wait_zeros,
 )
 
 # A red box ahead and to the left of the head camera (the arm stands at zero: the head looks
@@ -153,8 +154,7 @@ def test_a_click_on_the_box_centres_it_and_space_stops_everything(
     QTest.keyPress(console, Qt.Key.Key_Space)
     assert console.model.tracking is None
     assert console.model.channel(pan).source is Source.NONE
-    wait_sim(qtbot, box_sim, lambda s: s.all_stopped, "the robot stopped")
-    assert is_zero(box_sim.received_commands()[-1])
+    wait_zeros(qtbot, box_sim, "the robot stopped by the zeros")
 
 
 def test_with_latency_a_motion_key_and_link_lost_end_the_tracking(

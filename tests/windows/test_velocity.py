@@ -14,7 +14,7 @@ from ocu.sim.simulator import RobotSimulator
 from ocu.widgets.number_box import NumberError, parse_number
 from ocu.widgets.value_slider import STEPS
 from ocu.windows.main_window import MainWindow
-from tests.windows.console_fixtures import DEADLINE_MS, drive_axis, is_zero, wait_sim
+from tests.windows.console_fixtures import DEADLINE_MS, drive_axis, is_zero, wait_sim, wait_zeros
 
 
 def type_into(qtbot: QtBot, box: object, text: str) -> None:
@@ -183,8 +183,7 @@ def test_disconnect_sends_zeros_last_and_connect_comes_back(
     assert console.link is None
     assert panel.connect_button.text() == "Connect"
     assert console.link_status.state_label.text() == "DISCONNECTED"
-    state = wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped on disconnect")
-    assert is_zero(sim.received_commands()[-1])
+    state = wait_zeros(qtbot, sim, "stopped on disconnect", more=0)
     assert state.rcp_count == len(sim.received_commands())
     QTest.mouseClick(panel.connect_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: console.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS)
