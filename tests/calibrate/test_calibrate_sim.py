@@ -31,6 +31,7 @@ from ocu.sim.simulator import ReceivedRcp, RobotSimulator, SimState
 from ocu.windows.main_window import MainWindow
 from tests.calibrate.scrambled import BASE, assert_recovered, calibrate_scrambled, scrambled_truth
 from tests.test_hotkeys import TABLE_4
+from tests.windows.console_fixtures import mid_range_joints
 
 pytestmark = pytest.mark.slow
 
@@ -126,8 +127,12 @@ def test_calibrate_yes_finds_the_robot_and_the_console_then_drives_it(
     assert found.provenance("channels.shoulder.axis") == "measured"
     assert "channels.*.axis" not in found.assumptions
 
-    # The console on the calibrated profile drives the scrambled robot as table 4 says.
-    with RobotSimulator(truth, telemetry_hz=10.0, video_fps=0.0) as sim:
+    # The console on the calibrated profile drives the scrambled robot as table 4 says (its
+    # joints mid-range: the gripper starts closed, and G's move back after T would be over
+    # before a poll of the simulator saw it).
+    with RobotSimulator(
+        truth, telemetry_hz=10.0, video_fps=0.0, initial_joints=mid_range_joints(truth)
+    ) as sim:
         settings = QSettings(str(tmp_path / "ocu.ini"), QSettings.Format.IniFormat)
 
         def link_factory() -> Link:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -133,6 +134,21 @@ def wait_zeros(
     moving = [r for r in sim.received_commands()[start - 1 :] if not is_zero(r)]
     assert not moving, f"motion after the zeros: {moving[0]}"
     return state
+
+
+def mid_range_joints(profile: RobotProfile) -> dict[str, float]:
+    """Every bounded joint mid-range: each hotkey has room both ways.
+
+    At a limit (the gripper starts closed) a key's move back is over within one telemetry
+    period, or one poll of the simulator, and may never be seen.
+    """
+    return {
+        motor.name: (motor.limits_rad[0] + motor.limits_rad[1]) / 2.0
+        for motor in profile.motors.values()
+        if motor.has_position
+        and motor.limits_rad is not None
+        and all(math.isfinite(v) for v in motor.limits_rad)
+    }
 
 
 def drive_axis(profile: RobotProfile, rcp: ReceivedRcp, channel: str) -> int:

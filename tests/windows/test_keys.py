@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Iterator
 
@@ -19,7 +18,13 @@ from ocu.sim.simulator import RobotSimulator
 from ocu.windows.key_filter import key_from_qt, key_name
 from ocu.windows.main_window import MainWindow
 from tests.test_hotkeys import TABLE_4
-from tests.windows.console_fixtures import DEADLINE_MS, drive_axis, is_zero, wait_sim
+from tests.windows.console_fixtures import (
+    DEADLINE_MS,
+    drive_axis,
+    is_zero,
+    mid_range_joints,
+    wait_sim,
+)
 
 NO_MOD = Qt.KeyboardModifier.NoModifier
 XCB_W = 17 + 8  # X11 key code of the W position: evdev code + 8
@@ -83,19 +88,10 @@ def still(readings: dict[str, JointReading]) -> bool:
 
 @pytest.fixture
 def sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
-    """The simulator with every bounded joint mid-range: each key has room both ways.
-
-    At a limit (the gripper starts closed) a key's move back is over within one
-    telemetry period and the telemetry may never show it.
-    """
-    middle = {
-        motor.name: (motor.limits_rad[0] + motor.limits_rad[1]) / 2.0
-        for motor in profile.motors.values()
-        if motor.has_position
-        and motor.limits_rad is not None
-        and all(math.isfinite(v) for v in motor.limits_rad)
-    }
-    simulator = RobotSimulator(profile, telemetry_hz=10.0, video_fps=0.0, initial_joints=middle)
+    """The simulator with every bounded joint mid-range: each key has room both ways."""
+    simulator = RobotSimulator(
+        profile, telemetry_hz=10.0, video_fps=0.0, initial_joints=mid_range_joints(profile)
+    )
     simulator.start()
     yield simulator
     simulator.stop()
