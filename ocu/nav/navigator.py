@@ -334,7 +334,7 @@ class Navigator:
             fastest_point_speed(self.footprint, current.linear_m_s, current.angular_rad_s),
         )
         margin = speed * (age_s + self._one_way_s + COMMAND_LAG_S)
-        motion = (_sign(linear), _sign(angular))
+        motion = (float(np.sign(linear)), float(np.sign(angular)))
         zones = self.settings.zones
         if motion == self._stopped_motion:
             zones = replace(zones, stop_m=zones.stop_m + STOP_HYSTERESIS_M)
@@ -467,8 +467,3 @@ class Navigator:
             if command.done:
                 self.stop_assist()
             return command
-
-
-def _sign(value: float) -> float:
-    """-1, 0 or 1."""
-    return 0.0 if value == 0.0 else math.copysign(1.0, value)

@@ -606,11 +606,11 @@ class MainWindow(QMainWindow):
 
     def _on_command_changed(self) -> None:
         # A command pushed is a sign of life for the link's watchdog too.
-        self._stall_watch.alive(time.monotonic(), self.model.command().is_motion)
+        self._stall_watch.alive(time.monotonic(), self.model.is_moving)
 
     def _control_tick(self) -> None:
         now = time.monotonic()
-        self._stall_watch.alive(now, self.model.command().is_motion)
+        self._stall_watch.alive(now, self.model.is_moving)
         stalled_s = self._stall_watch.take_stall()
         if stalled_s is not None:
             # The GUI thread stalled with motion commanded, long enough for the link to zero
