@@ -26,7 +26,9 @@ from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
-os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+from ocu.render.platform import offscreen_gl_mode
+
+os.environ.setdefault("PYOPENGL_PLATFORM", offscreen_gl_mode())
 
 import numpy as np
 import numpy.typing as npt
@@ -35,7 +37,7 @@ from ocu.model.mesh import MeshData
 from ocu.model.urdf import RobotModel, default_urdf_path, load_urdf
 from ocu.render.camera import OrbitCamera
 from ocu.render.gl import GL
-from ocu.render.osmesa import OffscreenRenderer
+from ocu.render.offscreen import OffscreenRenderer
 from ocu.render.renderer import ModelRenderer, interleave
 from ocu.render.scene import build_frame, model_bounds
 

@@ -8,7 +8,9 @@ from collections.abc import Iterator
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 # PyOpenGL picks its platform at first import; offscreen Qt has no GL, so render via OSMesa.
-os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+from ocu.render.platform import offscreen_gl_mode
+
+os.environ.setdefault("PYOPENGL_PLATFORM", offscreen_gl_mode())
 
 import pytest
 

@@ -1,8 +1,9 @@
 """Offscreen OpenGL 3.3 core context in main memory (Mesa's OSMesa, Debian libosmesa6).
 
 Works without any display: the headless fallback of the 3D widget, `ocu screenshot`, the
-tests and the benchmarks. PYOPENGL_PLATFORM must be "osmesa" before OpenGL is imported
-(ocu.render.platform does that).
+tests and the benchmarks, where Mesa still ships it (Debian 12 and 13: libosmesa6; Mesa 25.1
+removed it, and ocu.render.egl takes over). PYOPENGL_PLATFORM must be "osmesa" before OpenGL
+is imported (ocu.render.platform does that).
 """
 
 from __future__ import annotations
@@ -15,8 +16,6 @@ import numpy.typing as npt
 
 from ocu.render.gl import GL
 from ocu.render.platform import active_gl_platform
-from ocu.render.renderer import ModelRenderer
-from ocu.render.scene import RenderFrame
 
 
 class OsMesaError(RuntimeError):
@@ -42,6 +41,9 @@ def _destroy(osmesa: Any, context: Any) -> None:
 
 class OsMesaContext:
     """A GL 3.3 core context drawing into a numpy RGBA buffer."""
+
+    name = "osmesa"
+    framebuffer = 0  # the context's own buffer is the default framebuffer
 
     def __init__(self, width: int, height: int) -> None:
         osmesa = _osmesa()
@@ -69,6 +71,13 @@ class OsMesaContext:
         self.height = 0
         self._buffer: npt.NDArray[np.uint8] = np.zeros((0, 0, 4), dtype=np.uint8)
         self.resize(width, height)
+
+    @property
+    def renderer_name(self) -> str:
+        """The GL renderer's name (e.g. 'llvmpipe (LLVM 15.0.6, 256 bits)')."""
+        self.make_current()
+        name = GL.glGetString(GL.GL_RENDERER)
+        return name.decode(errors="replace") if isinstance(name, bytes) else str(name)
 
     def resize(self, width: int, height: int) -> None:
         """New buffer size; makes the context current."""
@@ -101,69 +110,3 @@ class OsMesaContext:
     def close(self) -> None:
         """Destroy the context (idempotent)."""
         self._finalizer()
-
-
-class OffscreenRenderer:
-    """A ModelRenderer in its own OSMesa context, with multisampling through an FBO."""
-
-    def __init__(self, renderer: ModelRenderer, width: int, height: int, samples: int = 4):
-        self.renderer = renderer
-        self.samples = samples
-        self.context = OsMesaContext(width, height)
-        self._fbo = 0
-        self._renderbuffers: list[int] = []
-        self._fbo_size = (0, 0)
-        renderer.initialize()
-
-    def _ensure_fbo(self) -> None:
-        size = (self.context.width, self.context.height)
-        if self.samples <= 1 or self._fbo_size == size:
-            return
-        self._delete_fbo()
-        fbo = int(GL.glGenFramebuffers(1))
-        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fbo)
-        color, depth = (int(v) for v in GL.glGenRenderbuffers(2))
-        for buffer, fmt, point in (
-            (color, GL.GL_RGBA8, GL.GL_COLOR_ATTACHMENT0),
-            (depth, GL.GL_DEPTH_COMPONENT24, GL.GL_DEPTH_ATTACHMENT),
-        ):
-            GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, buffer)
-            GL.glRenderbufferStorageMultisample(GL.GL_RENDERBUFFER, self.samples, fmt, *size)
-            GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, point, GL.GL_RENDERBUFFER, buffer)
-        status = GL.glCheckFramebufferStatus(GL.GL_FRAMEBUFFER)
-        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
-        self._fbo, self._renderbuffers, self._fbo_size = fbo, [color, depth], size
-        if status != GL.GL_FRAMEBUFFER_COMPLETE:
-            self._delete_fbo()
-            self.samples = 1  # render straight into the OSMesa buffer instead
-
-    def _delete_fbo(self) -> None:
-        if self._fbo:
-            GL.glDeleteFramebuffers(1, [self._fbo])
-            GL.glDeleteRenderbuffers(len(self._renderbuffers), self._renderbuffers)
-        self._fbo, self._renderbuffers, self._fbo_size = 0, [], (0, 0)
-
-    def render(
-        self, frame: RenderFrame, width: int | None = None, height: int | None = None
-    ) -> npt.NDArray[np.uint8]:
-        """Draw a frame and return it as RGBA rows, top first."""
-        self.context.resize(width or self.context.width, height or self.context.height)
-        self._ensure_fbo()
-        w, h = self.context.width, self.context.height
-        if self._fbo:
-            GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._fbo)
-        self.renderer.render(frame, w, h)
-        if self._fbo:
-            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._fbo)
-            GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, 0)
-            GL.glBlitFramebuffer(0, 0, w, h, 0, 0, w, h, GL.GL_COLOR_BUFFER_BIT, GL.GL_NEAREST)
-            GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
-        return self.context.read_rgba()
-
-    def close(self) -> None:
-        """Free the GL objects and the context (idempotent)."""
-        if self.context.is_open:
-            self.context.make_current()
-            self._delete_fbo()
-            self.renderer.release()
-        self.context.close()

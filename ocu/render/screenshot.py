@@ -1,11 +1,11 @@
-"""`ocu screenshot OUT.png`: render the robot model to a PNG with no display (OSMesa)."""
+"""`ocu screenshot OUT.png`: render the robot model to a PNG with no display (OSMesa or EGL)."""
 
 from __future__ import annotations
 
 import argparse
 import math
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -74,10 +74,13 @@ def render_model(
     ghost: Mapping[str, float] | None = None,
     stale: Sequence[str] = (),
     samples: int = 4,
+    report: Callable[[str], None] | None = None,
 ) -> npt.NDArray[np.uint8]:
-    """An RGBA image (rows top first) of the model in a pose, framed from a preset view."""
-    configure_gl_platform("osmesa")
-    from ocu.render.osmesa import OffscreenRenderer  # after the platform choice
+    """An RGBA image (rows top first) of the model in a pose, framed from a preset view.
+
+    `report` is told which offscreen path drew (e.g. 'EGL (llvmpipe ...)')."""
+    configure_gl_platform("offscreen")
+    from ocu.render.offscreen import OffscreenRenderer  # after the platform choice
     from ocu.render.renderer import ModelRenderer
 
     live = model.tree.copy()
@@ -94,6 +97,8 @@ def render_model(
     width, height = size
     offscreen = OffscreenRenderer(ModelRenderer(model), width, height, samples=samples)
     try:
+        if report is not None:
+            report(offscreen.describe())
         frame = build_frame(
             model, camera, width / height, live=live, ghost=ghost_tree, stale_joints=stale
         )
@@ -106,7 +111,10 @@ def build_parser() -> argparse.ArgumentParser:
     """The command line of `ocu screenshot`."""
     parser = argparse.ArgumentParser(
         prog="ocu screenshot",
-        description="Render the robot model to a PNG without a display (OSMesa).",
+        description=(
+            "Render the robot model to a PNG without a display (OSMesa where installed, "
+            "else EGL; PYOPENGL_PLATFORM=osmesa|egl chooses)."
+        ),
     )
     parser.add_argument("out", type=Path, help="PNG file to write")
     parser.add_argument(
@@ -152,12 +160,21 @@ def main(argv: list[str] | None = None) -> int:
                     file=sys.stderr,
                 )
         size = parse_size(args.size)
-        rgba = render_model(model, size, args.view, joints=joints, ghost=ghost, stale=args.stale)
+        paths: list[str] = []
+        rgba = render_model(
+            model,
+            size,
+            args.view,
+            joints=joints,
+            ghost=ghost,
+            stale=args.stale,
+            report=paths.append,
+        )
         save_png(rgba, args.out)
     except (ScreenshotError, UrdfError, ProfileError, OSError, RuntimeError) as err:
         print(f"ocu screenshot: {err}", file=sys.stderr)
         return 1
-    print(f"wrote {args.out} ({size[0]}x{size[1]})")
+    print(f"wrote {args.out} ({size[0]}x{size[1]}) drawn through {', '.join(paths)}")
     return 0
 
 

@@ -362,6 +362,15 @@ class Model3DWidget(QWidget):
         return self._surface.error
 
     @property
+    def drawn_through(self) -> str:
+        """Which GL path draws: 'the display's OpenGL', or the offscreen one with its renderer
+        (e.g. 'EGL (llvmpipe ...)') once it has drawn."""
+        offscreen = getattr(self._surface, "_offscreen", None)
+        if offscreen is not None:
+            return str(offscreen.describe())
+        return "the display's OpenGL" if self.gl_mode == "native" else self.gl_mode
+
+    @property
     def buffer_uploads(self) -> int:
         """Vertex buffer uploads so far: one per mesh, at the first frame, never again."""
         renderer = getattr(self._surface, "renderer", None)
@@ -599,7 +608,7 @@ class _SoftwareSurface(QWidget):
         if self.error is not None:
             return False
         try:
-            from ocu.render.osmesa import OffscreenRenderer
+            from ocu.render.offscreen import OffscreenRenderer
             from ocu.render.renderer import ModelRenderer
 
             self.renderer = ModelRenderer(self._owner.model)

@@ -98,7 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     # Before Qt and PyOpenGL are imported: no display, the 3D view through OSMesa.
     os.environ["QT_QPA_PLATFORM"] = "offscreen"
-    configure_gl_platform("osmesa")
+    configure_gl_platform("offscreen")
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(message)s")
     with tempfile.TemporaryDirectory(prefix="ocu-screenshot-") as config_dir:
         try:
@@ -141,6 +141,7 @@ def _shoot(
             recorder=Recorder(profile),  # the Record button shows; nothing is recorded
         )
         saved: list[str] = []
+        drawn_through: list[str] = []
         try:
             window.resize(*size)
             window.show()
@@ -153,6 +154,7 @@ def _shoot(
             def grab() -> None:
                 window.model_view.reset_view()  # frame the pose reached
                 window.model_view.render_now()
+                drawn_through.append(window.model_view.drawn_through)
                 picture = window.grab()
                 args.out.parent.mkdir(parents=True, exist_ok=True)
                 if picture.save(str(args.out), "PNG"):
@@ -167,5 +169,5 @@ def _shoot(
             window.deleteLater()
     if not saved:
         raise ScreenshotError(f"cannot write {args.out}")
-    print(f"wrote {args.out} ({size[0]}x{size[1]})")
+    print(f"wrote {args.out} ({size[0]}x{size[1]}); 3D view drawn through {drawn_through[0]}")
     return 0

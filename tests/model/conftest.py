@@ -6,14 +6,16 @@ import os
 
 # Both must be decided before OpenGL or a QApplication is created.
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+from ocu.render.platform import offscreen_gl_mode
+
+os.environ.setdefault("PYOPENGL_PLATFORM", offscreen_gl_mode())
 
 from collections.abc import Iterator
 
 import pytest
 
 from ocu.model.urdf import RobotModel, load_urdf
-from ocu.render.osmesa import OffscreenRenderer
+from ocu.render.offscreen import OffscreenRenderer
 from ocu.render.renderer import ModelRenderer
 
 

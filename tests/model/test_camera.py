@@ -82,11 +82,20 @@ def test_unknown_view_is_refused() -> None:
         _camera().set_view("back")
 
 
+def _with_osmesa(name: str) -> str | None:
+    return "libOSMesa.so.8"
+
+
+def _without_osmesa(name: str) -> str | None:
+    return None
+
+
 @pytest.mark.parametrize(
     ("environ", "qt_platform", "system", "expected"),
     [
         ({"PYOPENGL_PLATFORM": "osmesa", "DISPLAY": ":0"}, None, "linux", "osmesa"),
-        ({"PYOPENGL_PLATFORM": "egl"}, None, "linux", "native"),
+        ({"PYOPENGL_PLATFORM": "egl", "DISPLAY": ":0"}, None, "linux", "egl"),
+        ({"PYOPENGL_PLATFORM": "glx"}, None, "linux", "native"),
         ({"QT_QPA_PLATFORM": "offscreen", "DISPLAY": ":0"}, None, "linux", "osmesa"),
         ({"DISPLAY": ":0"}, "minimal", "linux", "osmesa"),
         ({}, None, "linux", "osmesa"),
@@ -100,4 +109,20 @@ def test_unknown_view_is_refused() -> None:
 def test_gl_platform_choice(
     environ: dict[str, str], qt_platform: str | None, system: str, expected: str
 ) -> None:
-    assert choose_gl_platform(environ, qt_platform, system) == expected
+    assert choose_gl_platform(environ, qt_platform, system, _with_osmesa) == expected
+
+
+@pytest.mark.parametrize(
+    ("environ", "expected"),
+    [
+        ({}, "egl"),
+        ({"QT_QPA_PLATFORM": "offscreen", "DISPLAY": ":0"}, "egl"),
+        ({"PYOPENGL_PLATFORM": "osmesa"}, "osmesa"),
+        ({"DISPLAY": ":0"}, "native"),
+    ],
+)
+def test_without_osmesa_offscreen_drawing_goes_through_egl(
+    environ: dict[str, str], expected: str
+) -> None:
+    # Mesa 25.1 removed OSMesa: the Debian after 13 has no libosmesa6.
+    assert choose_gl_platform(environ, None, "linux", _without_osmesa) == expected

@@ -13,7 +13,7 @@ from PIL import Image
 from ocu.model.tree import KinematicTree
 from ocu.model.urdf import RobotModel
 from ocu.render.camera import OrbitCamera
-from ocu.render.osmesa import OffscreenRenderer
+from ocu.render.offscreen import OffscreenRenderer
 from ocu.render.renderer import interleave
 from ocu.render.scene import BACKGROUND, build_frame
 from ocu.render.screenshot import main as screenshot_main
