@@ -28,9 +28,10 @@ def _available(mode: OffscreenMode) -> bool:
 
 def _shoot(mode: OffscreenMode, out: Path) -> str:
     env = {**os.environ, "PYOPENGL_PLATFORM": mode}
+    command = [sys.executable, "-m", "ocu", "screenshot", str(out), "--size", "400x300"]
+    command += ["--joints", "shoulder=40", "elbow=-60", "--ghost", "waist=30"]
     result = subprocess.run(
-        [sys.executable, "-m", "ocu", "screenshot", str(out), "--size", "400x300"]
-        + ["--joints", "shoulder=40", "elbow=-60", "--ghost", "waist=30"],
+        command,
         env=env,
         capture_output=True,
         text=True,

@@ -233,9 +233,40 @@ def test_a_robot_without_a_moving_joint_loads_and_renders(tmp_path: Path) -> Non
     assert set(model.tree.world_transforms()) == {"a", "b"}
 
 
+def _collada_document(mesh: trimesh.Trimesh) -> str:
+    """A minimal Collada 1.4.1 file of one triangle mesh, written as text: exporting through
+    trimesh would go through pycollada's writer, which sets ndarray.shape (deprecated in numpy
+    2.5); what is tested here is our reading of a file, through pycollada's reader."""
+    positions = " ".join(f"{v:.6f}" for v in np.asarray(mesh.vertices).ravel())
+    indices = " ".join(str(int(i)) for i in np.asarray(mesh.faces).ravel())
+    count, points = len(mesh.faces), len(mesh.vertices)
+    return f"""<?xml version="1.0" encoding="utf-8"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+  <asset><unit name="meter" meter="1"/><up_axis>Z_UP</up_axis></asset>
+  <library_geometries>
+    <geometry id="part" name="part"><mesh>
+      <source id="part-positions">
+        <float_array id="part-positions-array" count="{points * 3}">{positions}</float_array>
+        <technique_common><accessor source="#part-positions-array" count="{points}" stride="3">
+          <param name="X" type="float"/><param name="Y" type="float"/><param name="Z" type="float"/>
+        </accessor></technique_common>
+      </source>
+      <vertices id="part-vertices"><input semantic="POSITION" source="#part-positions"/></vertices>
+      <triangles count="{count}"><input semantic="VERTEX" source="#part-vertices" offset="0"/>
+        <p>{indices}</p></triangles>
+    </mesh></geometry>
+  </library_geometries>
+  <library_visual_scenes><visual_scene id="scene">
+    <node id="part-node"><instance_geometry url="#part"/></node>
+  </visual_scene></library_visual_scenes>
+  <scene><instance_visual_scene url="#scene"/></scene>
+</COLLADA>
+"""
+
+
 def test_collada_meshes_load_through_pycollada(tmp_path: Path) -> None:
     box = trimesh.creation.box(extents=(0.3, 0.2, 0.1))
-    (tmp_path / "part.dae").write_bytes(box.export(file_type="dae"))
+    (tmp_path / "part.dae").write_text(_collada_document(box))
     text = _urdf(
         '<link name="a"><visual><geometry><mesh filename="part.dae"/></geometry></visual></link>'
     )
