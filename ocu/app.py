@@ -54,7 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
         "starts the built-in simulator on 127.0.0.1 and connects to it.",
         epilog="Subcommands: `ocu screenshot OUT.png [--joints name=deg ...]` renders the model "
         "without a display; `ocu screenshot --window OUT.png [--seconds S]` the whole console "
-        "on the built-in simulator; `ocu inspect FILE.mcap` summarises a recording; "
+        "on the built-in simulator; `ocu urdf-check FOLDER` loads every URDF in a folder and "
+        "reports what loaded, warned or failed; `ocu inspect FILE.mcap` summarises a recording; "
         "`ocu probe --robot HOST[:PORT]` checks what a robot sends against the profile; "
         "`ocu calibrate --robot HOST[:PORT] --out PROFILE.toml [--yes]` measures the robot "
         "and writes a profile (docs/calibration.md).",
@@ -123,6 +124,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from ocu.render.screenshot import main as screenshot_main
 
         return screenshot_main(args_list[1:])
+    if args_list and args_list[0] == "urdf-check":
+        from ocu.model.check import main as urdf_check_main
+
+        return urdf_check_main(args_list[1:])
     if args_list and args_list[0] == "inspect":
         from ocu.record.inspect import main as inspect_main
 

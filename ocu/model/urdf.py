@@ -7,41 +7,64 @@ self-collision check (a collision mesh as the box around it), and drawn instead 
 has a visual. Inertial elements are ignored.
 
 A real robot's description is rarely perfect. What spoils only a part of it — a mesh that
-cannot be found or read, a mimic of a joint that does not exist — is skipped with a warning
-(`RobotModel.warnings`) and the rest loads; what leaves no tree of links is an error. A file
-that still holds xacro (`.xacro`, `$(find ...)`, `${...}`) gets a hint to run xacro first.
+cannot be found or read, a mimic of a joint that does not exist, degenerate geometry — is
+skipped with a warning (`RobotModel.warnings`) and the rest loads. What other tools read and
+means one thing only (numbers separated by commas, blank lines before `<?xml`, a vector with
+an extra number, a spherical joint, a capsule) is read as they read it, with a warning naming
+the line and the tool; what leaves no tree of links, or cannot be read at all, is an error.
+A file that still holds xacro (`<xacro:...>`, `$(...)`, `${...}` left in its elements) gets a
+hint to run xacro first.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import io
 import math
-import os
+import re
 import sys
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from xml.parsers import expat
 
 import numpy as np
 import trimesh
 
+from ocu.model.collada import prepare_collada
 from ocu.model.mesh import MeshData, Rgba, empty_mesh, merge_meshes, mesh_from_trimesh
+from ocu.model.packages import package_folders, package_roots
 from ocu.model.tree import JOINT_TYPES, Joint, KinematicTree, Matrix, Mimic, TreeError, transform
 
-_UNSUPPORTED_TYPES = ("floating", "planar")
+# Joint types a display model draws fixed at their rest pose: urdfdom reads floating and
+# planar (robot_state_publisher publishes no transform for them), pybullet reads spherical.
+_AT_REST_TYPES = {
+    "floating": "urdfdom reads it; robot_state_publisher publishes no motion for it",
+    "planar": "urdfdom reads it; robot_state_publisher publishes no motion for it",
+    "spherical": "pybullet reads it as a ball joint; urdfdom refuses it",
+}
 XACRO_HINT = (
     "this looks like an unprocessed xacro file: expand it first, e.g. "
     "`xacro robot.urdf.xacro > robot.urdf` (ROS's xacro package)"
 )
 COLLISION_ONLY_NOTE = "no link has visual geometry: the collision geometry is drawn instead"
+COLLISION_FALLBACK_NOTE = (
+    "none of the visual geometry could be drawn: the collision geometry is drawn instead"
+)
 COLLISION_KINDS = ("box", "cylinder", "sphere")
+# A number with a stray dot after it ("-1.57."): C's strtod/atof, used by urdfdom's and
+# pybullet's readers, stop before the dot.
+_TRAILING_DOT = re.compile(r"^([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\.$")
+_XACRO_MARK = re.compile(r"\$\{[^}]*\}?|\$\([^)]*\)?")
 
 
 @dataclass(frozen=True)
 class CollisionShape:
     """A collision primitive in its link's frame: a box (size = extents), a cylinder along
-    its z (size = radius, radius, length) or a sphere (size = radius x3)."""
+    its z (size = radius, radius, length) or a sphere (size = radius x3). A URDF capsule
+    (pybullet's extension) is kept as a cylinder of its radius and length: the collision
+    check treats every cylinder as the capsule of that radius and length."""
 
     kind: str
     origin: Matrix
@@ -85,50 +108,76 @@ def default_urdf_path() -> Path:
     return Path(sys.prefix) / "share" / "ocu" / "assets" / "engineer.urdf"
 
 
-def load_urdf(path: str | Path | None = None, *, meshes: bool = True) -> RobotModel:
+def load_urdf(
+    path: str | Path | None = None,
+    *,
+    meshes: bool = True,
+    package_paths: Sequence[str | Path] = (),
+) -> RobotModel:
     """Read a URDF file and every mesh it names; UrdfError with the reason on failure.
 
     Without `meshes` no visual mesh file is read (kinematics and collision shapes only).
+    `package_paths` are extra folders searched for `package://` packages (before
+    `OCU_PACKAGE_PATH`, `ROS_PACKAGE_PATH` and `AMENT_PREFIX_PATH`; see ocu.model.packages).
     """
     urdf_path = Path(path) if path is not None else default_urdf_path()
     try:
-        text = urdf_path.read_text(encoding="utf-8")
+        text = urdf_path.read_text(encoding="utf-8-sig")
     except OSError as err:
         hint = f"; {XACRO_HINT}" if urdf_path.name.endswith(".xacro") else ""
         raise UrdfError(f"cannot read URDF {urdf_path}: {err.strerror}{hint}") from err
     except UnicodeDecodeError as err:
         raise UrdfError(f"{urdf_path}: not UTF-8 text: {err}") from err
-    return parse_urdf(text, base_dir=urdf_path.parent, source=str(urdf_path), meshes=meshes)
-
-
-def looks_like_xacro(text: str, source: str = "") -> bool:
-    """Whether a URDF still holds xacro markup (or is named .xacro)."""
-    return (
-        source.endswith(".xacro")
-        or "xmlns:xacro" in text
-        or "<xacro:" in text
-        or "$(" in text
-        or "${" in text
+    return parse_urdf(
+        text,
+        base_dir=urdf_path.parent,
+        source=str(urdf_path),
+        meshes=meshes,
+        package_paths=package_paths,
     )
 
 
+def looks_like_xacro(text: str, source: str = "") -> bool:
+    """Whether a URDF still holds xacro markup outside its comments (or is named .xacro):
+    a `<xacro:...>` element or a `${...}`/`$(...)` expression. Declaring the xacro namespace
+    or mentioning xacro in a comment is not xacro left over."""
+    if source.endswith(".xacro"):
+        return True
+    code = re.sub(r"<!--.*?-->", "", text, flags=re.DOTALL)
+    return "<xacro:" in code or "${" in code or "$(" in code
+
+
 def parse_urdf(
-    text: str, base_dir: str | Path = ".", source: str = "<urdf>", *, meshes: bool = True
+    text: str,
+    base_dir: str | Path = ".",
+    source: str = "<urdf>",
+    *,
+    meshes: bool = True,
+    package_paths: Sequence[str | Path] = (),
 ) -> RobotModel:
     """Build a model from URDF text; relative mesh paths are resolved against base_dir."""
-    xacro = looks_like_xacro(text, source)
+    warnings: list[str] = []
+    text, first_line = _readable_text(text, source, warnings)
     try:
-        root = ET.fromstring(text)
-    except ET.ParseError as err:
-        hint = f"; {XACRO_HINT}" if xacro else ""
-        raise UrdfError(f"{source}: not valid XML: {err}{hint}") from err
+        root, lines = _parse_xml(text, first_line)
+    except UrdfError as err:
+        hint = f"; {XACRO_HINT}" if looks_like_xacro(text, source) else ""
+        raise UrdfError(f"{source}: not valid XML: {err}{hint}") from None
     if root.tag != "robot":
         raise UrdfError(f"{source}: the root element is <{root.tag}>, not <robot>")
-    reader = _Reader(source, Path(base_dir), xacro=xacro)
+    reader = _Reader(source, Path(base_dir), lines=lines, package_paths=package_paths)
+    reader.warnings.extend(warnings)
+    leftovers = _xacro_leftovers(root, reader)
+    reader.xacro = bool(leftovers) or source.endswith(".xacro")
+    if leftovers:
+        shown = "; ".join(leftovers[:3])
+        more = f" (and {len(leftovers) - 3} more)" if len(leftovers) > 3 else ""
+        reader.warnings.append(f"{source}: xacro left in the file: {shown}{more}; {XACRO_HINT}")
     materials = _named_materials(root, reader)
     link_elements = root.findall("link")
     if not link_elements:
-        raise reader.fail("no <link> elements")
+        hint = f"; {XACRO_HINT}" if root.find("xacro:include") is not None else ""
+        raise reader.fail(f"no <link> elements{hint}")
     link_names = [reader.required(element, "name", "<link>") for element in link_elements]
     joints = [reader.joint(element) for element in root.findall("joint")]
     joints = _drop_dangling_mimics(joints, reader)
@@ -137,8 +186,8 @@ def parse_urdf(
         tree = KinematicTree(root_link, link_names, joints)
     except TreeError as err:
         raise reader.fail(str(err)) from err
-    has_visuals = any(element.find("visual") is not None for element in link_elements)
-    has_collisions = any(element.find("collision") is not None for element in link_elements)
+    has_visuals = any(_has_geometry(element, "visual") for element in link_elements)
+    has_collisions = any(_has_geometry(element, "collision") for element in link_elements)
     from_collision = has_collisions and not has_visuals
     if from_collision:
         reader.warnings.append(COLLISION_ONLY_NOTE)
@@ -147,13 +196,19 @@ def parse_urdf(
         name: reader.link_mesh(element, name, materials, drawn, read_files=meshes)
         for element, name in zip(link_elements, link_names, strict=True)
     }
+    if meshes and has_collisions and not from_collision and not _any_triangles(link_meshes):
+        # Visual geometry there is, but none of it could be drawn (missing meshes, say).
+        from_collision = True
+        reader.warnings.append(COLLISION_FALLBACK_NOTE)
+        link_meshes = {
+            name: reader.link_mesh(element, name, materials, "collision")
+            for element, name in zip(link_elements, link_names, strict=True)
+        }
     collisions = {
         name: shapes
         for element, name in zip(link_elements, link_names, strict=True)
         if (shapes := reader.collision_shapes(element, name))
     }
-    if xacro and not reader.warnings:
-        reader.warnings.append(XACRO_HINT)
     return RobotModel(
         name=root.get("name", "robot"),
         tree=tree,
@@ -162,6 +217,89 @@ def parse_urdf(
         collisions=collisions,
         warnings=tuple(reader.warnings),
         drawn_from_collision=from_collision,
+    )
+
+
+def _readable_text(text: str, source: str, warnings: list[str]) -> tuple[str, int]:
+    """The text an XML parser can take, and the file line its first line is: a NUL byte ends
+    the text (as for the C readers of urdfdom and pybullet, which stop there); whitespace
+    before `<?xml` is dropped (TinyXML, which both use, skips it)."""
+    nul = text.find("\0")
+    if nul >= 0:
+        line = text.count("\n", 0, nul) + 1
+        rest = text[nul:].strip("\0 \t\r\n")
+        what = "NUL bytes" if not rest else f"a NUL byte and {len(text) - nul - 1} more characters"
+        warnings.append(
+            f"{source}: line {line}: {what} after the XML, ignored (urdfdom and pybullet "
+            "read the file as text that ends at the first NUL)"
+        )
+        text = text[:nul]
+    stripped = text.lstrip()
+    first_line = 1
+    if stripped.startswith("<?xml") and stripped != text:
+        first_line = text.count("\n", 0, len(text) - len(stripped)) + 1
+        warnings.append(
+            f"{source}: line {first_line}: the <?xml ...?> declaration is not at the start "
+            "of the file (blank lines before it), read anyway (TinyXML, used by urdfdom and "
+            "pybullet, skips them)"
+        )
+        text = stripped
+    return text, first_line
+
+
+def _parse_xml(text: str, first_line: int = 1) -> tuple[ET.Element, dict[int, int]]:
+    """Elements (prefixes kept as written, e.g. `xacro:macro`; comments dropped) and the file
+    line of each (by id of the element)."""
+    builder = ET.TreeBuilder()
+    parser = expat.ParserCreate()
+    lines: dict[int, int] = {}
+
+    def start(tag: str, attributes: dict[str, str]) -> None:
+        element = builder.start(tag, attributes)
+        lines[id(element)] = parser.CurrentLineNumber + first_line - 1
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = builder.end
+    parser.CharacterDataHandler = builder.data
+    parser.ordered_attributes = False
+    try:
+        parser.Parse(text, True)
+        root = builder.close()
+    except expat.ExpatError as err:
+        line = (err.lineno or 1) + first_line - 1
+        raise UrdfError(f"{expat.ErrorString(err.code)}: line {line}, column {err.offset}") from err
+    except AssertionError as err:  # TreeBuilder: no element at all
+        raise UrdfError("no element") from err
+    return root, lines
+
+
+def _xacro_leftovers(root: ET.Element, reader: _Reader) -> list[str]:
+    """Where xacro markup is left: `<xacro:...>` elements and `${...}`/`$(...)` in
+    attributes or text, each with its line."""
+    found: list[str] = []
+    for element in root.iter():
+        line = reader.line_of(element)
+        if element.tag.startswith("xacro:"):
+            found.append(f"line {line}: <{element.tag}>")
+            continue
+        for name, value in element.attrib.items():
+            mark = _XACRO_MARK.search(value)
+            if mark:
+                found.append(f"line {line}: {mark.group(0)} in {name}=")
+        mark = _XACRO_MARK.search(element.text or "")
+        if mark:
+            found.append(f"line {line}: {mark.group(0)} in <{element.tag}>")
+    return found
+
+
+def _any_triangles(meshes: Mapping[str, MeshData]) -> bool:
+    return any(mesh.triangle_count for mesh in meshes.values())
+
+
+def _has_geometry(link: ET.Element, kind: str) -> bool:
+    return any(
+        (geometry := element.find("geometry")) is not None and len(geometry) > 0
+        for element in link.findall(kind)
     )
 
 
@@ -231,83 +369,135 @@ class _MeshSkippedError(Exception):
 
 
 class _Reader:
-    """Element parsers whose errors name the file and the element."""
+    """Element parsers whose errors and warnings name the file, the element and its line."""
 
-    def __init__(self, source: str, base_dir: Path, *, xacro: bool = False) -> None:
+    def __init__(
+        self,
+        source: str,
+        base_dir: Path,
+        *,
+        xacro: bool = False,
+        lines: Mapping[int, int] | None = None,
+        package_paths: Sequence[str | Path] = (),
+    ) -> None:
         self.source = source
         self.base_dir = base_dir
         self.xacro = xacro
+        self.lines = lines or {}
+        self.package_paths = tuple(package_paths)
         self.warnings: list[str] = []
 
-    def fail(self, message: str) -> UrdfError:
+    def line_of(self, element: ET.Element) -> int | None:
+        return self.lines.get(id(element))
+
+    def _at(self, element: ET.Element | None) -> str:
+        line = self.line_of(element) if element is not None else None
+        return f"line {line}: " if line is not None else ""
+
+    def fail(self, message: str, element: ET.Element | None = None) -> UrdfError:
         hint = f"; {XACRO_HINT}" if self.xacro else ""
-        return UrdfError(f"{self.source}: {message}{hint}")
+        return UrdfError(f"{self.source}: {self._at(element)}{message}{hint}")
+
+    def warn(self, message: str, element: ET.Element | None = None) -> None:
+        self.warnings.append(f"{self.source}: {self._at(element)}{message}")
 
     def required(self, element: ET.Element, attribute: str, where: str) -> str:
         value = element.get(attribute)
         if not value:
-            raise self.fail(f"{where} without a {attribute!r} attribute")
+            raise self.fail(f"{where} without a {attribute!r} attribute", element)
         return value
 
-    def floats(self, text: str | None, count: int, where: str, default: float = 0.0) -> list[float]:
+    def floats(
+        self,
+        element: ET.Element | None,
+        attribute: str,
+        count: int,
+        where: str,
+        default: float = 0.0,
+    ) -> list[float]:
+        """`count` numbers from an attribute (absent: the default). Read as urdfdom and
+        pybullet read them, with a warning, when unambiguous: commas between the numbers,
+        a stray dot after one ("-1.57."), and extra numbers after the first three of a
+        vector (pybullet takes the first three)."""
+        text = element.get(attribute) if element is not None else None
         if text is None:
             return [default] * count
-        try:
-            values = [float(v) for v in text.split()]
-        except ValueError:
-            raise self.fail(f"{where}: {text!r} is not {count} numbers") from None
+        fixes: list[str] = []
+        pieces = text.split()
+        if "," in text:
+            pieces = [p for p in re.split(r"[\s,]+", text.strip()) if p]
+            fixes.append("commas between the numbers (pybullet reads it)")
+        values: list[float] = []
+        for piece in pieces:
+            try:
+                values.append(float(piece))
+                continue
+            except ValueError:
+                pass
+            dotted = _TRAILING_DOT.match(piece)
+            if dotted is None:
+                raise self.fail(
+                    f"{where} {attribute}: {text!r} is not {count} numbers", element
+                ) from None
+            values.append(float(dotted.group(1)))
+            fixes.append(
+                f"{piece!r} read as {dotted.group(1)} (urdfdom and pybullet stop at the second dot)"
+            )
+        if len(values) > count == 3:
+            fixes.append(
+                f"{len(values)} numbers where 3 belong, the first three used (as pybullet does)"
+            )
+            values = values[:3]
         if len(values) != count or not all(math.isfinite(v) for v in values):
-            raise self.fail(f"{where}: {text!r} is not {count} finite numbers")
+            raise self.fail(f"{where} {attribute}: {text!r} is not {count} finite numbers", element)
+        if fixes:
+            self.warn(f"{where} {attribute}={text!r}: {'; '.join(fixes)}", element)
         return values
 
     def origin(self, parent: ET.Element, where: str) -> Matrix:
         element = parent.find("origin")
         if element is None:
             return np.eye(4)
-        xyz = self.floats(element.get("xyz"), 3, f"{where} origin xyz")
-        rpy = self.floats(element.get("rpy"), 3, f"{where} origin rpy")
+        xyz = self.floats(element, "xyz", 3, f"{where} origin")
+        rpy = self.floats(element, "rpy", 3, f"{where} origin")
         return transform(xyz, rpy)
 
     def joint(self, element: ET.Element) -> Joint:
         name = self.required(element, "name", "<joint>")
         where = f"joint {name!r}"
         kind = self.required(element, "type", where)
-        if kind in _UNSUPPORTED_TYPES:
-            raise self.fail(
-                f"{where}: joint type {kind!r} is not supported (a display model "
-                f"needs one of {', '.join(JOINT_TYPES)})"
+        if kind in _AT_REST_TYPES:
+            self.warn(
+                f"{where}: a {kind} joint ({_AT_REST_TYPES[kind]}) is drawn fixed at its rest pose",
+                element,
             )
+            kind = "fixed"
         if kind not in JOINT_TYPES:
             raise self.fail(
-                f"{where}: unknown joint type {kind!r} (expected one of {', '.join(JOINT_TYPES)})"
+                f"{where}: unknown joint type {kind!r} (expected one of "
+                f"{', '.join((*JOINT_TYPES, *_AT_REST_TYPES))})",
+                element,
             )
         links = []
         for tag in ("parent", "child"):
             link_element = element.find(tag)
             if link_element is None:
-                raise self.fail(f"{where}: no <{tag}> element")
+                raise self.fail(f"{where}: no <{tag}> element", element)
             links.append(self.required(link_element, "link", f"{where} <{tag}>"))
         axis_element = element.find("axis")
         axis = [1.0, 0.0, 0.0]
         if axis_element is not None and axis_element.get("xyz") is not None:
-            axis = self.floats(axis_element.get("xyz"), 3, f"{where} axis")
-        limits: tuple[float, float] | None = None
-        limit_element = element.find("limit")
-        if kind in ("revolute", "prismatic"):
-            if limit_element is None:
-                raise self.fail(f"{where}: a {kind} joint needs a <limit lower=.. upper=..>")
-            lower = self.floats(limit_element.get("lower"), 1, f"{where} limit lower")[0]
-            upper = self.floats(limit_element.get("upper"), 1, f"{where} limit upper")[0]
-            limits = (lower, upper)
+            axis = self.floats(axis_element, "xyz", 3, f"{where} axis")
+        limits = self.limits(element, kind, where)
         mimic: Mimic | None = None
         mimic_element = element.find("mimic")
         if mimic_element is not None:
             mimic = Mimic(
                 joint=self.required(mimic_element, "joint", f"{where} <mimic>"),
                 multiplier=self.floats(
-                    mimic_element.get("multiplier"), 1, f"{where} mimic", default=1.0
+                    mimic_element, "multiplier", 1, f"{where} mimic", default=1.0
                 )[0],
-                offset=self.floats(mimic_element.get("offset"), 1, f"{where} mimic")[0],
+                offset=self.floats(mimic_element, "offset", 1, f"{where} mimic")[0],
             )
         try:
             return Joint(
@@ -321,12 +511,36 @@ class _Reader:
                 mimic=mimic,
             )
         except TreeError as err:
-            raise self.fail(str(err)) from err
+            raise self.fail(str(err), element) from err
+
+    def limits(self, element: ET.Element, kind: str, where: str) -> tuple[float, float] | None:
+        """A revolute or prismatic joint's (lower, upper); None (no limits) where pybullet
+        reads none: no <limit>, or lower above upper."""
+        if kind not in ("revolute", "prismatic"):
+            return None
+        limit_element = element.find("limit")
+        if limit_element is None:
+            self.warn(
+                f"{where}: a {kind} joint without <limit> moves without limits (pybullet "
+                "reads it so; urdfdom refuses it)",
+                element,
+            )
+            return None
+        lower = self.floats(limit_element, "lower", 1, f"{where} limit")[0]
+        upper = self.floats(limit_element, "upper", 1, f"{where} limit")[0]
+        if lower > upper:
+            self.warn(
+                f"{where}: limit lower={lower:g} is above upper={upper:g}: read as no limits "
+                "(as pybullet does)",
+                limit_element,
+            )
+            return None
+        return (lower, upper)
 
     def material_color(self, element: ET.Element, known: Mapping[str, Rgba]) -> Rgba | None:
         color_element = element.find("color")
         if color_element is not None:
-            rgba = self.floats(color_element.get("rgba"), 4, "material color rgba")
+            rgba = self.floats(color_element, "rgba", 4, "material color")
             return (rgba[0], rgba[1], rgba[2], rgba[3])
         name = element.get("name")
         return known.get(name) if name else None
@@ -341,7 +555,7 @@ class _Reader:
         read_files: bool = True,
     ) -> MeshData:
         """The link's visual (or collision) geometry as one mesh; a mesh file that cannot be
-        found or read is left out with a warning."""
+        found or read, or geometry that cannot be drawn, is left out with a warning."""
         parts: list[MeshData] = []
         for index, visual in enumerate(element.findall(drawn)):
             where = f"link {link!r} {drawn} {index}"
@@ -350,13 +564,14 @@ class _Reader:
             origin = self.origin(visual, where)
             geometry = visual.find("geometry")
             if geometry is None or len(geometry) == 0:
-                raise self.fail(f"{where}: no <geometry>")
+                self.warn(f"{where}: no <geometry>; nothing drawn for it", visual)
+                continue
             if geometry[0].tag == "mesh" and not read_files:
                 continue
             try:
                 placed = self.geometry(geometry[0], where)
             except _MeshSkippedError as err:
-                self.warnings.append(f"{self.source}: {err}; the rest of the robot is drawn")
+                self.warn(f"{err}; the rest of the robot is drawn", geometry[0])
                 continue
             for mesh, placement in placed:
                 parts.append(mesh_from_trimesh(mesh, origin @ placement, color))
@@ -370,23 +585,22 @@ class _Reader:
             origin = self.origin(collision, where)
             geometry = collision.find("geometry")
             if geometry is None or len(geometry) == 0:
-                raise self.fail(f"{where}: no <geometry>")
+                self.warn(f"{where}: no <geometry>; no collision shape for it", collision)
+                continue
             shape = geometry[0]
-            if shape.tag == "box":
-                size = self.floats(shape.get("size"), 3, f"{where} box size")
-                shapes.append(CollisionShape("box", origin, (size[0], size[1], size[2])))
-            elif shape.tag == "cylinder":
-                radius = self.floats(shape.get("radius"), 1, f"{where} cylinder radius")[0]
-                length = self.floats(shape.get("length"), 1, f"{where} cylinder length")[0]
-                shapes.append(CollisionShape("cylinder", origin, (radius, radius, length)))
-            elif shape.tag == "sphere":
-                radius = self.floats(shape.get("radius"), 1, f"{where} sphere radius")[0]
-                shapes.append(CollisionShape("sphere", origin, (radius, radius, radius)))
+            try:
+                size = self.primitive_size(shape, where)
+            except _MeshSkippedError as err:
+                self.warn(f"{err}; no collision shape for it", shape)
+                continue
+            if size is not None:
+                kind = "cylinder" if shape.tag == "capsule" else shape.tag
+                shapes.append(CollisionShape(kind, origin, size))
             elif shape.tag == "mesh":
                 try:
                     placed = self.geometry(shape, where)
                 except _MeshSkippedError as err:
-                    self.warnings.append(f"{self.source}: {err}; no collision shape for it")
+                    self.warn(f"{err}; no collision shape for it", shape)
                     continue
                 points = np.vstack(
                     [
@@ -405,46 +619,101 @@ class _Reader:
                         (float(extents[0]), float(extents[1]), float(extents[2])),
                     )
                 )
-            else:
-                raise self.fail(f"{where}: unknown geometry <{shape.tag}>")
         return tuple(shapes)
 
-    def geometry(self, element: ET.Element, where: str) -> list[tuple[trimesh.Trimesh, Matrix]]:
+    def primitive_size(self, element: ET.Element, where: str) -> tuple[float, float, float] | None:
+        """A primitive's size as CollisionShape keeps it; None for a mesh. Degenerate sizes
+        (zero or negative) and shapes that cannot be drawn raise _MeshSkippedError."""
         tag = element.tag
         if tag == "box":
-            size = self.floats(element.get("size"), 3, f"{where} box size")
-            return [(trimesh.creation.box(extents=size), np.eye(4))]
-        if tag == "cylinder":
-            radius = self.floats(element.get("radius"), 1, f"{where} cylinder radius")[0]
-            length = self.floats(element.get("length"), 1, f"{where} cylinder length")[0]
-            return [
-                (trimesh.creation.cylinder(radius=radius, height=length, sections=24), np.eye(4))
-            ]
-        if tag == "sphere":
-            radius = self.floats(element.get("radius"), 1, f"{where} sphere radius")[0]
-            return [(trimesh.creation.icosphere(subdivisions=2, radius=radius), np.eye(4))]
-        if tag == "mesh":
-            filename = self.required(element, "filename", f"{where} <mesh>")
-            scale = self.floats(element.get("scale"), 3, f"{where} mesh scale", default=1.0)
-            path = self.resolve(filename, where)
-            scaling = np.diag([*scale, 1.0])
-            return [(mesh, placement @ scaling) for mesh, placement in self.read_mesh(path, where)]
-        raise self.fail(f"{where}: unknown geometry <{tag}>")
+            size = self.floats(element, "size", 3, f"{where} box")
+            result = (size[0], size[1], size[2])
+        elif tag in ("cylinder", "capsule"):
+            radius = self.floats(element, "radius", 1, f"{where} {tag}")[0]
+            length = self.floats(element, "length", 1, f"{where} {tag}")[0]
+            result = (radius, radius, length)
+        elif tag == "sphere":
+            radius = self.floats(element, "radius", 1, f"{where} sphere")[0]
+            result = (radius, radius, radius)
+        elif tag == "mesh":
+            return None
+        elif tag == "plane":
+            raise _MeshSkippedError(f"{where}: <plane> (pybullet's infinite plane) is not drawn")
+        else:
+            raise _MeshSkippedError(f"{where}: unknown geometry <{tag}>, left out")
+        usable = result[0] > 0.0 and result[2] >= 0.0 if tag == "capsule" else min(result) > 0.0
+        if not usable:
+            raise _MeshSkippedError(
+                f"{where}: degenerate <{tag}> ({_describe_size(element)}): dropped"
+            )
+        return result
 
-    def resolve(self, filename: str, where: str) -> Path:
-        candidates = _mesh_candidates(filename, self.base_dir)
+    def geometry(self, element: ET.Element, where: str) -> list[tuple[trimesh.Trimesh, Matrix]]:
+        size = self.primitive_size(element, where)
+        tag = element.tag
+        if size is not None:
+            if tag == "box":
+                return [(trimesh.creation.box(extents=size), np.eye(4))]
+            if tag == "cylinder":
+                shape = trimesh.creation.cylinder(radius=size[0], height=size[2], sections=24)
+                return [(shape, np.eye(4))]
+            if tag == "capsule":
+                shape = trimesh.creation.capsule(height=size[2], radius=size[0], count=(24, 12))
+                return [(shape, np.eye(4))]
+            return [(trimesh.creation.icosphere(subdivisions=2, radius=size[0]), np.eye(4))]
+        filename = self.required(element, "filename", f"{where} <mesh>")
+        scale = self.floats(element, "scale", 3, f"{where} mesh", default=1.0)
+        if not all(abs(v) > 0.0 for v in scale):
+            raise _MeshSkippedError(f"{where}: mesh scale {element.get('scale')!r}: dropped")
+        path = self.resolve(filename, where, element)
+        scaling = np.diag([*scale, 1.0])
+        return [(mesh, placement @ scaling) for mesh, placement in self.read_mesh(path, where)]
+
+    def resolve(self, filename: str, where: str, element: ET.Element | None = None) -> Path:
+        candidates = _mesh_candidates(filename, self.base_dir, self.package_paths)
         for candidate in candidates:
             if candidate.is_file():
                 return candidate
-        looked = ", ".join(str(c) for c in candidates)
+        # A path relative to a data folder's root rather than to the URDF (pybullet finds it
+        # through setAdditionalSearchPath): look under the folders above the URDF.
+        if not filename.startswith(("package://", "model://", "file://", "/")):
+            roots = [Path(r) for r in package_roots(self.package_paths)]
+            for folder in (*self.base_dir.resolve().parents, *roots):
+                candidate = folder / filename
+                if candidate.is_file():
+                    self.warn(
+                        f"{where}: mesh {filename} is not next to the URDF; found as "
+                        f"{candidate}, under {folder} (as pybullet finds it through its "
+                        "additional search path)",
+                        element,
+                    )
+                    return candidate
+        shown = [str(c) for c in candidates[:8]]
+        if len(candidates) > 8:
+            shown.append(f"and {len(candidates) - 8} more")
         hint = f"; {XACRO_HINT}" if "$(" in filename or "${" in filename else ""
+        extra = (
+            "; name the folder holding the package with --package-path or OCU_PACKAGE_PATH"
+            if filename.startswith(("package://", "model://"))
+            else ""
+        )
         raise _MeshSkippedError(
-            f"{where}: mesh file not found: {filename} (looked in: {looked}){hint}"
+            f"{where}: mesh file not found: {filename} (looked in: {', '.join(shown)}){extra}{hint}"
         )
 
     def read_mesh(self, path: Path, where: str) -> list[tuple[trimesh.Trimesh, Matrix]]:
+        unit = np.eye(4)
+        declared = 0
         try:
-            loaded = trimesh.load(str(path))
+            if path.suffix.lower() == ".dae":
+                prepared = prepare_collada(path.read_bytes())
+                unit = np.diag([prepared.scale] * 3 + [1.0])
+                declared = prepared.declared_triangles
+                for note in prepared.notes:
+                    self.warn(f"{where}: mesh {path}: {note}")
+                loaded = trimesh.load(io.BytesIO(prepared.data), file_type="dae")
+            else:
+                loaded = trimesh.load(str(path))
         except Exception as err:  # trimesh raises many types for unreadable files
             hint = (
                 " (reading .dae needs the pycollada package: pip install pycollada)"
@@ -460,33 +729,54 @@ class _Reader:
             meshes = []
         meshes = [m for m in meshes if len(m.faces) > 0]
         if not meshes:
+            if declared:
+                raise _MeshSkippedError(
+                    f"{where}: mesh {path} declares {declared} triangles, but pycollada "
+                    "could read none of them"
+                )
             raise _MeshSkippedError(f"{where}: mesh {path} holds no triangles")
-        return [(mesh, np.eye(4)) for mesh in meshes]
+        finite = [_finite_part(mesh) for mesh in meshes]
+        dropped = sum(len(m.faces) - len(f.faces) for m, f in zip(meshes, finite, strict=True))
+        if dropped:
+            self.warn(f"{where}: mesh {path}: {dropped} triangles with non-finite corners dropped")
+        meshes = [m for m in finite if len(m.faces) > 0]
+        if not meshes:
+            raise _MeshSkippedError(f"{where}: mesh {path} holds no finite triangles")
+        return [(mesh, unit) for mesh in meshes]
 
 
-def _mesh_candidates(filename: str, base_dir: Path) -> list[Path]:
+def _describe_size(element: ET.Element) -> str:
+    return " ".join(f"{name}={value!r}" for name, value in element.attrib.items()) or "no size"
+
+
+def _finite_part(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The mesh without faces that touch a NaN or infinite vertex."""
+    vertices = np.asarray(mesh.vertices)
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if not bad.any():
+        return mesh
+    keep = ~bad[np.asarray(mesh.faces)].any(axis=1)
+    part = mesh.copy()
+    part.update_faces(keep)
+    return part
+
+
+def _mesh_candidates(
+    filename: str, base_dir: Path, package_paths: Sequence[str | Path] = ()
+) -> list[Path]:
     """Where a URDF mesh reference may point, most likely first."""
     if filename.startswith("file://"):
         return [Path(filename.removeprefix("file://"))]
     for scheme in ("package://", "model://"):
         if filename.startswith(scheme):
             package, _, rest = filename.removeprefix(scheme).partition("/")
-            candidates: list[Path] = []
+            folders = (base_dir.resolve(), *base_dir.resolve().parents)
             if not package:
                 # `package:///path`: no package name; the path is absolute, or relative to
                 # the URDF's folder or one of its parents.
                 rest = rest.lstrip("/")
-                folders = (base_dir.resolve(), *base_dir.resolve().parents)
-                candidates = [Path("/") / rest, *(folder / rest for folder in folders[:4])]
-                return list(dict.fromkeys(candidates))
-            folder_chain = (base_dir.resolve(), *base_dir.resolve().parents)
-            for folder in folder_chain[:4]:
-                if folder.name == package:
-                    candidates.append(folder / rest)
-                candidates.append(folder / package / rest)
-            for entry in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep):
-                if entry:
-                    candidates.extend((Path(entry) / package / rest, Path(entry) / rest))
+                return list(dict.fromkeys([Path("/") / rest, *(f / rest for f in folders)]))
+            candidates = [f / rest for f in package_folders(package, base_dir, package_paths)]
             candidates.append(base_dir / rest)
             return list(dict.fromkeys(candidates))
     path = Path(filename)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from ocu.model.packages import PACKAGE_PATH_VARIABLE
 from ocu.model.urdf import RobotModel, UrdfError, load_urdf
 from ocu.profile import ProfileError, load_profile
 from ocu.render.camera import VIEWS, OrbitCamera
@@ -89,10 +90,16 @@ def render_model(
     if ghost:
         ghost_tree = live.copy()
         ghost_tree.set_positions(ghost)
+    if model.triangle_count == 0:
+        raise ScreenshotError(
+            f"{model.source}: nothing to draw: the model holds no triangles (see the notes)"
+        )
     low, high = model_bounds(model, live)
     if ghost_tree is not None:
         ghost_low, ghost_high = model_bounds(model, ghost_tree)
         low, high = np.minimum(low, ghost_low), np.maximum(high, ghost_high)
+    if not (np.isfinite(low).all() and np.isfinite(high).all()):
+        raise ScreenshotError(f"{model.source}: nothing to draw: the model's extent is not finite")
     camera = OrbitCamera.framing(low, high, view)
     width, height = size
     offscreen = OffscreenRenderer(ModelRenderer(model), width, height, samples=samples)
@@ -134,7 +141,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--view", choices=tuple(VIEWS), default="iso", help="camera preset")
     parser.add_argument("--urdf", type=Path, default=None, help="another URDF to draw")
     parser.add_argument("--profile", type=Path, default=None, help="robot profile TOML")
+    add_package_path_option(parser)
     return parser
+
+
+def add_package_path_option(parser: argparse.ArgumentParser) -> None:
+    """`--package-path DIR` (repeatable): folders searched for `package://` packages."""
+    parser.add_argument(
+        "--package-path",
+        action="append",
+        type=Path,
+        default=[],
+        metavar="DIR",
+        help=f"a folder holding ROS packages named by package:// mesh paths (repeatable; "
+        f"also {PACKAGE_PATH_VARIABLE}, ROS_PACKAGE_PATH, AMENT_PREFIX_PATH)",
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -142,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         load_profile(args.profile)  # a bad profile is reported here, as everywhere else
-        model = load_urdf(args.urdf)
+        model = load_urdf(args.urdf, package_paths=args.package_path)
         joints = parse_angles(args.joints, model, "--joints")
         ghost = parse_angles(args.ghost, model, "--ghost")
         for name in args.stale:

@@ -349,12 +349,14 @@ def test_unknown_and_unsupported_joint_types(tmp_path: Path) -> None:
     with pytest.raises(
         UrdfError,
         match=r"joint 'j': unknown joint type 'hinge' \(expected one of fixed, revolute, "
-        r"continuous, prismatic\)",
+        r"continuous, prismatic, floating, planar, spherical\)",
     ):
         parse_urdf(text, tmp_path)
-    text = _urdf(_box_link("a") + _box_link("b") + _joint("j", "a", "b", "floating"))
-    with pytest.raises(UrdfError, match=r"joint 'j': joint type 'floating' is not supported"):
-        parse_urdf(text, tmp_path)
+    for kind in ("floating", "planar", "spherical"):
+        text = _urdf(_box_link("a") + _box_link("b") + _joint("j", "a", "b", kind))
+        model = parse_urdf(text, tmp_path)
+        assert model.tree.joint("j").type == "fixed"
+        assert re.search(rf"line 3: joint 'j': a {kind} joint .* drawn fixed", model.warnings[0])
 
 
 def test_other_structural_errors(tmp_path: Path) -> None:
@@ -366,15 +368,13 @@ def test_other_structural_errors(tmp_path: Path) -> None:
         r"joint 'j': child link 'z' is not defined": _urdf(
             _box_link("a") + _joint("j", "a", "z")
         ),
-        r"joint 'j': a revolute joint needs a <limit": _urdf(
-            _box_link("a") + _box_link("b") + _joint("j", "a", "b", "revolute")
-        ),
         r"joint 'j' origin xyz: '1 2' is not 3": _urdf(
             _box_link("a") + _box_link("b")
             + _joint("j", "a", "b", extra='<origin xyz="1 2"/>')
         ),
-        r"link 'a' visual 0: unknown geometry <cone>": _urdf(
-            '<link name="a"><visual><geometry><cone/></geometry></visual></link>'
+        r"joint 'j' limit lower: '-1.5.7' is not 1 numbers": _urdf(
+            _box_link("a") + _box_link("b")
+            + _joint("j", "a", "b", "revolute", '<limit lower="-1.5.7" upper="1"/>')
         ),
     }  # fmt: skip
     for message, text in cases.items():
