@@ -23,6 +23,7 @@ import io
 import math
 import re
 import sys
+import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -711,7 +712,17 @@ class _Reader:
                 declared = prepared.declared_triangles
                 for note in prepared.notes:
                     self.warn(f"{where}: mesh {path}: {note}")
-                loaded = trimesh.load(io.BytesIO(prepared.data), file_type="dae")
+                with warnings.catch_warnings():
+                    # pycollada 0.9.3 (the newest) reshapes its arrays by setting
+                    # ndarray.shape, which numpy 2.5 deprecates: harmless until numpy removes
+                    # it, and nothing this program can change. Only that warning from pycollada.
+                    warnings.filterwarnings(
+                        "ignore",
+                        message="Setting the shape on a NumPy array has been deprecated",
+                        category=DeprecationWarning,
+                        module=r"collada(\.|$)",
+                    )
+                    loaded = trimesh.load(io.BytesIO(prepared.data), file_type="dae")
             else:
                 loaded = trimesh.load(str(path))
         except Exception as err:  # trimesh raises many types for unreadable files
