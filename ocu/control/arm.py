@@ -20,9 +20,17 @@ Safety, after MoveIt Servo: a jog slows down when the Jacobian's condition numbe
 the margin before it); and it slows down from `slow_distance_m` and stops at `clearance_m`
 from the chassis, the ground and the arm itself, judged where the arm will be a delay ahead.
 The reason shows in `status`. A move's whole path is checked before it starts and refused if it
-comes closer than the clearance. Below a channel's starting speed a servo does not move: the
-controller then pulses at that speed when the error asks for it, and the predictor (which
-models the deadband) keeps count.
+comes closer than the clearance. Clearances are judged pair by pair: a pair already too close
+(an arm left there by a stall) may only move apart, so the arm can always be moved out.
+
+While the command sent drives the chassis the robot does not turn its `locked_while_driving`
+joints (the waist; `PositionController.driving`): a move that needs them is refused, or
+stopped if it is under way, and a jog does without them (its reference follows what the
+other joints can do, so nothing swings once the chassis stops). `check_targets` gives the
+position controller's typed targets the same checks.
+
+Below a channel's starting speed a servo does not move: the controller then pulses at that
+speed when the error asks for it, and the predictor (which models the deadband) keeps count.
 """
 
 from __future__ import annotations

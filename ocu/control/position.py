@@ -24,7 +24,9 @@ phase margin; a model error of the servo's speed is corrected one delay late). "
 said only when a reading taken after the joint's last command landed confirms it within the
 band; a joint whose readings are too noisy to confirm gives up after a settle timeout with a
 message instead of hunting forever. The stall check compares a reading's travel with the
-travel commanded one delay earlier. A joint whose reading is implausible (see
+travel commanded one delay earlier. The model counts what the robot does with a command: below
+a servo's starting speed nothing, and on a `locked_while_driving` channel (the waist) nothing
+while the same command drives the chassis (`driving`). A joint whose reading is implausible (see
 ocu.control.plausibility) is never acted on.
 """
 

@@ -7,7 +7,8 @@ against the body's (the chassis, tracks, flippers, cameras), and arm links again
 where at least two arm joints lie between them, except neighbours (one moving joint between
 them: the joint's limits keep them apart) and pairs already touching in the zero pose
 (MoveIt's "adjacent" and "default" rules). An optional
-ground plane keeps the arm above the floor.
+ground plane keeps the arm above the floor. Along a path (`path_violation`) every pair keeps
+the clearance, except one already closer at the start: it may only move apart until clear.
 
 Distances are exact for the shapes: segment to segment (Ericson, Real-Time Collision Detection
 §5.1.9) and segment to box by minimising the convex piecewise-quadratic distance over its
