@@ -551,7 +551,7 @@ class ArmController:
             )  # fmt: skip
             step = direction / max(peak, 1.0) * lookahead
             future = kin.gaps(q + step, others)
-            closing = np.flatnonzero(future < gaps - 1e-5)
+            closing = np.flatnonzero((future < gaps - 1e-5) & (future < settings.slow_distance_m))
             if closing.size:
                 column = int(closing[np.argmin(future[closing])])
                 results.append(

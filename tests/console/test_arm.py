@@ -15,7 +15,7 @@ import pytest
 from ocu import hotkeys
 from ocu.console.arm import ArmGoal
 from ocu.console.model import Source
-from ocu.control.arm import SLOW, STOP
+from ocu.control.arm import OK, SLOW, STOP
 from ocu.control.position import PositionError
 from ocu.hotkeys import KeyMap, load_key_map
 from ocu.kinematics.arm import ArmError, ToolPose
@@ -52,6 +52,8 @@ def test_jog_follows_the_line_and_release_stops_at_once(
         rig.tick()
         trace.append(rig.position())
     moved = rig.position() - start
+    assert rig.arm.status.level == OK  # far from everything: neither slowed nor a reason
+    assert rig.arm.status.reason == ""
     assert moved[1] == pytest.approx(0.05 * 2.0, abs=0.01)  # 5 cm/s for 2 s (plus the delay)
     assert _deviation(trace, start, np.array([0.0, 1.0, 0.0])) < 0.002
     assert hotkeys.release(model, key_map, "A")
