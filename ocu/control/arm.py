@@ -463,12 +463,12 @@ class ArmController:
         inverse = damped_pseudo_inverse(jac * weights[:, None], JOG_DAMPING) * weights[None, :]
         direction = inverse @ wanted
         scale, level, reason, condition, clearance = self._safety(eventual, direction, now)
-        share = 1.0
+        share = 1.0  # of the twist the arm can make without the locked joints
         if locked.any():
             possible = jac @ direction
-            share = float(np.linalg.norm(possible * weights)) / max(
-                float(np.linalg.norm(wanted * weights)), 1e-12
-            )
+            asked = float(np.linalg.norm(wanted * weights))
+            if asked > 1e-12:
+                share = float(np.linalg.norm(possible * weights)) / asked
             wanted = possible
         # Within each joint's maximum speed, keeping the direction.
         peak = 1.0
