@@ -55,7 +55,7 @@ from ocu.console.tracking import (
 from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
 from ocu.control.drive import DriveBounds, scale_drive
-from ocu.control.position import PositionController
+from ocu.control.position import PositionController, PositionError
 from ocu.control.tracking import TrackingOptions
 from ocu.kinematics.arm import ArmError, ArmKinematics
 from ocu.model.urdf import UrdfError, load_urdf
@@ -537,6 +537,12 @@ class ConsoleModel:
             probe.set_target(joint, angle_rad)
         if not targets_rad:
             return
+        if self.arm is not None:
+            # The same collision, ground and driving checks as the arm's own moves.
+            try:
+                self.arm.controller.check_targets(targets_rad, self.clock())
+            except ArmError as err:
+                raise PositionError(str(err)) from err
         self._operator_acted()
         for joint, angle_rad in targets_rad.items():
             self.controller.set_target(joint, angle_rad)

@@ -20,9 +20,17 @@ Safety, after MoveIt Servo: a jog slows down when the Jacobian's condition numbe
 the margin before it); and it slows down from `slow_distance_m` and stops at `clearance_m`
 from the chassis, the ground and the arm itself, judged where the arm will be a delay ahead.
 The reason shows in `status`. A move's whole path is checked before it starts and refused if it
-comes closer than the clearance. Below a channel's starting speed a servo does not move: the
-controller then pulses at that speed when the error asks for it, and the predictor (which
-models the deadband) keeps count.
+comes closer than the clearance. Clearances are judged pair by pair: a pair already too close
+(an arm left there by a stall) may only move apart, so the arm can always be moved out.
+
+While the command sent drives the chassis the robot does not turn its `locked_while_driving`
+joints (the waist; `PositionController.driving`): a move that needs them is refused, or
+stopped if it is under way, and a jog does without them (its reference follows what the
+other joints can do, so nothing swings once the chassis stops). `check_targets` gives the
+position controller's typed targets the same checks.
+
+Below a channel's starting speed a servo does not move: the controller then pulses at that
+speed when the error asks for it, and the predictor (which models the deadband) keeps count.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionController
@@ -54,6 +63,13 @@ JOG_DAMPING = 0.02
 LOOKAHEAD_MIN_S = 0.15
 # Path checks sample the move at least this finely (rad of the joint that moves most).
 PATH_STEP_RAD = math.radians(1.0)
+# A move from a pose where two parts already overlap stops if they overlap this much more than
+# at its start (the estimate wanders a little about the checked path); others stop at contact.
+OVERLAP_GROWTH_M = 0.001
+# A jog without the locked joints (the chassis drives) that keeps less than this share of the
+# twist shows why (slowed); below the second share it counts as stopped.
+LOCKED_SHARE_SHOWN = 0.95
+LOCKED_SHARE_STOP = 0.05
 MAX_TICK_S = 0.2
 OK, SLOW, STOP = "ok", "slow", "stop"
 
@@ -97,6 +113,7 @@ class _Move:
     started_at: float
     label: str
     goal_pose: ToolPose
+    start_gaps: Vector  # every checked pair's gap where the move started
 
 
 class ArmController:
@@ -125,13 +142,17 @@ class ArmController:
                 raise ArmError(f"arm joint {joint!r} has no velocity channel")
             channels.append(channel)
         self.channels: tuple[str, ...] = tuple(channels)
+        # Joints the robot does not turn while the chassis moves (the waist).
+        self.locked_while_driving = np.array(
+            [profile.channels[c].locked_while_driving for c in channels], dtype=bool
+        )
         self._others: dict[str, float] = {}
         self._jog: _Jog | None = None
         self._move: _Move | None = None
         self._last_tick: float | None = None
         self._messages: list[str] = []
         self.status = ArmStatus()
-        self._told = ""
+        self._told = (OK, "")
 
     # ---- state -------------------------------------------------------------------------
 
@@ -279,15 +300,82 @@ class ArmController:
             raise ArmError(f"the maximum speed of {', '.join(stopped)} is zero")
         accel = np.full(len(self.joints), self.settings.acceleration_rad_s2)
         move = plan(start, target, speeds, accel)
+        held = self._held_by_driving(move.delta)
+        if held:
+            raise ArmError(f"the chassis is driving: {held}; stop it first")
         travel = float(np.max(np.abs(move.delta))) if move.delta.size else 0.0
         count = max(2, math.ceil(travel / PATH_STEP_RAD) + 1)
-        others = self.others(now)
-        hit = self.kinematics.check_path(move.points(count), others)
+        hit = self.kinematics.check_path(move.points(count), self.others(now))
         if hit is not None:
-            index, contact = hit
-            where = "the goal" if index == count - 1 else f"{index / (count - 1):.0%} of the way"
-            raise ArmError(f"the path comes too close at {where}: {contact.describe()}")
+            raise ArmError(hit.describe(count))
         return move
+
+    def check_targets(self, targets: Mapping[str, float], now: float) -> None:
+        """Joint targets for the position controller (typed ones), checked as a move is.
+
+        The position controller runs each joint on its own at its channel's maximum speed
+        from where it is headed, so that is the path checked: ArmError when it breaks the
+        clearance rule (the ground, the chassis, the arm itself), or turns a joint the robot
+        locks while the chassis drives. Not checked before every arm joint has a reading (the
+        model of the arm has no pose to start from; the position controller moves no joint
+        without its own reading).
+        """
+        try:
+            _, eventual = self.estimate(now)
+        except ArmError:
+            return
+        start = {**self.others(now), **self.kinematics.mapping(eventual)}
+        goal: dict[str, float] = {}
+        speeds: dict[str, float] = {}
+        channels = self.profile.channels
+        for joint, angle in targets.items():
+            motor = self.profile.motors.get(joint)
+            if joint not in start or motor is None or motor.channel is None:
+                continue
+            travel = float(angle) - start[joint]
+            if abs(travel) <= self.tolerance_rad:
+                continue
+            if self.position.driving and channels[motor.channel].locked_while_driving:
+                raise ArmError(
+                    f"the chassis is driving: the robot does not turn the {joint} while it "
+                    "drives; stop it first"
+                )
+            speed = self.limits.get(motor.channel)
+            if speed > 0.0:
+                goal[joint], speeds[joint] = float(angle), speed
+        if not goal:
+            return
+        duration = max(abs(goal[j] - start[j]) / speeds[j] for j in goal)
+        count = max(2, math.ceil(duration * max(speeds.values()) / PATH_STEP_RAD) + 1)
+        poses: list[Mapping[str, float]] = []
+        for t in np.linspace(0.0, duration, count):
+            pose = dict(start)
+            for joint, angle in goal.items():
+                travel = angle - start[joint]
+                pose[joint] = start[joint] + math.copysign(
+                    min(speeds[joint] * t, abs(travel)), travel
+                )
+            poses.append(pose)
+        hit = self.kinematics.check_poses(poses)
+        if hit is not None:
+            raise ArmError(hit.describe(count))
+
+    def _locked_now(self) -> npt.NDArray[np.bool_]:
+        """The arm joints the robot refuses to turn now (the chassis drives)."""
+        if self.position.driving:
+            return self.locked_while_driving
+        return np.zeros(len(self.joints), dtype=bool)
+
+    def _held_by_driving(self, travel: Vector) -> str:
+        """Why a travel cannot be made while the chassis drives ('' when it can)."""
+        turning = [
+            joint
+            for joint, locked, delta in zip(self.joints, self._locked_now(), travel, strict=True)
+            if locked and abs(delta) > self.tolerance_rad
+        ]
+        if not turning:
+            return ""
+        return f"the robot does not turn the {', '.join(turning)} while it drives"
 
     def move_to(self, goal: Mapping[str, float] | Vector, now: float, label: str) -> SyncMove:
         """Plan a synchronized move (see plan_move) and start it; stops any jog."""
@@ -298,7 +386,8 @@ class ArmController:
     def start(self, move: SyncMove, now: float, label: str) -> None:
         """Start a move planned by plan_move just now; stops any jog."""
         self._jog = None
-        self._move = _Move(move, now, label, self.kinematics.tool_pose(move.goal))
+        gaps = self.kinematics.gaps(move.start, self.others(now))
+        self._move = _Move(move, now, label, self.kinematics.tool_pose(move.goal), gaps)
         self._set_status(ArmStatus(state="moving", goal=label))
 
     # ---- the control step --------------------------------------------------------------
@@ -366,10 +455,21 @@ class ArmController:
         rotation = kin.frame_rotation(jog.frame, current, self.others(now))
         wanted = np.concatenate([rotation @ jog.twist[:3], jog.twist[3:]])
         jac = kin.task_jacobian(eventual)
+        # While the chassis drives the robot does not turn the waist: the jog does without it
+        # (its sideways part is left out), and the reference follows what the arm can do.
+        locked = self._locked_now()
+        jac[:, locked] = 0.0
         weights = np.array([1.0 / kin.length_scale_m] * 3 + [1.0])
         inverse = damped_pseudo_inverse(jac * weights[:, None], JOG_DAMPING) * weights[None, :]
         direction = inverse @ wanted
         scale, level, reason, condition, clearance = self._safety(eventual, direction, now)
+        share = 1.0  # of the twist the arm can make without the locked joints
+        if locked.any():
+            possible = jac @ direction
+            asked = float(np.linalg.norm(wanted * weights))
+            if asked > 1e-12:
+                share = float(np.linalg.norm(possible * weights)) / asked
+            wanted = possible
         # Within each joint's maximum speed, keeping the direction.
         peak = 1.0
         for i, channel in enumerate(self.channels):
@@ -379,8 +479,14 @@ class ArmController:
         if peak < 1.0 and level == OK:
             level, reason = SLOW, "a joint at its maximum speed"
         scale *= peak
+        shown = scale
+        if share < LOCKED_SHARE_SHOWN and level == OK:
+            names = ", ".join(j for j, lock in zip(self.joints, locked, strict=True) if lock)
+            level = STOP if share < LOCKED_SHARE_STOP else SLOW
+            reason = f"the robot does not turn the {names} while the chassis drives"
+            shown = share
         self._set_status(
-            ArmStatus("jogging", level, reason, scale, condition, clearance), message=level == STOP
+            ArmStatus("jogging", level, reason, shown, condition, clearance), message=level == STOP
         )
         if scale <= 0.0:
             jog.reference = actual.copy()
@@ -430,10 +536,13 @@ class ArmController:
             elif room < 2.0 * margin and margin > 0.0:
                 results.append(((room - margin) / margin, text))
         # Collisions, where the arm will be one delay (and a bit) ahead.
+        # Each pair on its own: one already too close may move apart (the jog leaves it) while
+        # every pair that comes closer slows and stops the jog.
         clearance: float | None = None
-        contact = kin.contact(q, self.others(now))
-        if contact is not None:
-            clearance = contact.distance_m
+        others = self.others(now)
+        gaps = kin.gaps(q, others)
+        if gaps.size:
+            clearance = float(np.min(gaps))
             lookahead = max(LOOKAHEAD_MIN_S, 2.0 * (self.position.delay_s or 0.0))
             peak = max(
                 (abs(direction[i]) / max(self.limits.get(c), 1e-9)
@@ -441,9 +550,13 @@ class ArmController:
                 default=1.0,
             )  # fmt: skip
             step = direction / max(peak, 1.0) * lookahead
-            future = kin.contact(q + step, self.others(now))
-            if future is not None and future.distance_m < contact.distance_m - 1e-5:
-                results.append(self._clearance_scale(future))
+            future = kin.gaps(q + step, others)
+            closing = np.flatnonzero((future < gaps - 1e-5) & (future < settings.slow_distance_m))
+            if closing.size:
+                column = int(closing[np.argmin(future[closing])])
+                results.append(
+                    self._clearance_scale(kin.collision.pair_contact(column, float(future[column])))
+                )
         if not results:
             return 1.0, OK, "", condition, clearance
         scale, reason = min(results, key=lambda item: item[0])
@@ -478,10 +591,22 @@ class ArmController:
         reference, speed = move.path.sample(elapsed)
         error = reference - eventual
         gain = self.position.gain_per_s
-        contact = self.kinematics.contact(eventual, self.others(now))
-        if contact is not None and contact.distance_m < 0.0:
-            self._finish_move(f"arm: move to {move.label} stopped: {contact.describe()}")
+        held = self._held_by_driving(move.path.goal - eventual)
+        if held:
+            self._finish_move(f"arm: move to {move.label} stopped: the chassis drives, and {held}")
             return None
+        # A pair that started clear stops the move at contact; one that started overlapping
+        # (the move takes it apart) only if it overlaps more.
+        gaps = self.kinematics.gaps(eventual, self.others(now))
+        if gaps.size:
+            floor = np.minimum(move.start_gaps, 0.0)
+            floor[move.start_gaps < 0.0] -= OVERLAP_GROWTH_M
+            deeper = np.flatnonzero(gaps < floor)
+            if deeper.size:
+                column = int(deeper[np.argmin(gaps[deeper])])
+                contact = self.kinematics.collision.pair_contact(column, float(gaps[column]))
+                self._finish_move(f"arm: move to {move.label} stopped: {contact.describe()}")
+                return None
         if elapsed < move.path.duration_s:
             return speed + gain * error
         # The profile has ended: hold the goal until a reading confirms it.
@@ -522,6 +647,9 @@ class ArmController:
 
     def _set_status(self, status: ArmStatus, *, message: bool = False) -> None:
         self.status = status
-        if message and status.reason and status.reason != self._told:
+        # Told once per stop; a stop whose reason read the same while it only slowed (a
+        # joint limit's) is told too.
+        told = (status.level, status.reason)
+        if message and status.reason and told != self._told:
             self._messages.append(f"arm: {status.describe()}")
-        self._told = status.reason if status.level != OK else ""
+        self._told = told if status.level != OK else (OK, "")

@@ -24,7 +24,9 @@ phase margin; a model error of the servo's speed is corrected one delay late). "
 said only when a reading taken after the joint's last command landed confirms it within the
 band; a joint whose readings are too noisy to confirm gives up after a settle timeout with a
 message instead of hunting forever. The stall check compares a reading's travel with the
-travel commanded one delay earlier. A joint whose reading is implausible (see
+travel commanded one delay earlier. The model counts what the robot does with a command: below
+a servo's starting speed nothing, and on a `locked_while_driving` channel (the waist) nothing
+while the same command drives the chassis (`driving`). A joint whose reading is implausible (see
 ocu.control.plausibility) is never acted on.
 """
 
@@ -287,6 +289,9 @@ class PositionController:
             motor.channel: motor.name for motor in profile.positioned_motors if motor.channel
         }
         self.delay_s: float | None = None
+        # Whether the last command sent moves the chassis: the robot then refuses to turn
+        # its `locked_while_driving` channels (the waist).
+        self.driving = False
         self.faults: dict[str, str] = {}
         self._tracks: dict[str, _Track] = {}
         self._messages: list[str] = []
@@ -393,10 +398,18 @@ class PositionController:
 
     def note_sent(self, now: float, velocities: Mapping[str, float]) -> None:
         """The whole command that went to the robot at `now` (channels missing are zero)."""
+        channels = self.profile.channels
+        self.driving = any(
+            abs(float(velocities.get(name, 0.0))) >= channels[name].min_speed
+            for name in self.profile.drive_channels or ()
+        )
         for channel, joint in self._channel_joint.items():
             velocity = float(velocities.get(channel, 0.0))
             # Below its starting speed the servo does not move (documents): the model agrees.
-            if abs(velocity) < self.profile.channels[channel].min_speed:
+            if abs(velocity) < channels[channel].min_speed:
+                velocity = 0.0
+            # Nor does a channel the robot locks while the chassis moves (the waist).
+            if self.driving and channels[channel].locked_while_driving:
                 velocity = 0.0
             self.predictors[joint].command(now, velocity)
 

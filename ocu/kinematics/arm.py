@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from ocu.kinematics.analytic import AnalyticSolution, UnreachableError, YawPitchArm
 from ocu.kinematics.chain import Chain, ChainError, Vector
-from ocu.kinematics.collision import CollisionModel, Contact
+from ocu.kinematics.collision import CollisionModel, Contact, path_violation
 from ocu.kinematics.numeric import IkError, solve
 from ocu.model.mesh import MeshData
 from ocu.model.tree import KinematicTree, Matrix
@@ -70,6 +70,27 @@ class ToolPose:
             f"x {number(self.x * 1000, 0)} y {number(self.y * 1000, 0)} "
             f"z {number(self.z * 1000, 0)} mm, pitch {number(math.degrees(self.pitch), 1)}°"
         )
+
+
+@dataclass(frozen=True)
+class PathHit:
+    """Where a path breaks the clearance: the index of its pose, the pair there, and that
+    pair at the start when it was already too close (it came closer still)."""
+
+    index: int
+    contact: Contact
+    start: Contact | None = None
+
+    def describe(self, count: int) -> str:
+        """'the path comes too close at 45% of the way: right_jaw and right_track overlap by
+        12 mm' (of a path sampled at `count` poses)."""
+        where = (
+            "the goal" if self.index == count - 1 else f"{self.index / (count - 1):.0%} of the way"
+        )
+        text = f"the path comes too close at {where}: {self.contact.describe()}"
+        if self.start is not None:
+            text += f" (at the start {self.start.describe()}: a move may only part them)"
+        return text
 
 
 def outward(pose: Matrix, axis_xy: Vector) -> Vector:
@@ -269,18 +290,37 @@ class ArmKinematics:
             return None
         return self.collision.closest({**others, **self.mapping(q)})
 
-    def check_path(
-        self, points: list[Vector], others: Mapping[str, float]
-    ) -> tuple[int, Contact] | None:
-        """The first pose along a path closer than the clearance (its index), else None."""
+    def gaps(self, q: Vector, others: Mapping[str, float]) -> Vector:
+        """Every checked pair's gap with the arm at q (empty without a collision model);
+        `collision.pair_contact` names a column."""
         if not self.has_collision_model:
+            return np.zeros(0)
+        gaps: Vector = self.collision.gaps_along([{**others, **self.mapping(q)}])[0]
+        return gaps
+
+    def check_path(self, points: list[Vector], others: Mapping[str, float]) -> PathHit | None:
+        """Where a path of the arm (its first point: where the arm is) breaks the clearance,
+        with the other joints at `others`; None when it does not (see check_poses)."""
+        return self.check_poses([{**others, **self.mapping(q)} for q in points])
+
+    def check_poses(self, poses: list[Mapping[str, float]]) -> PathHit | None:
+        """Where a path of whole poses (joint name -> angle; the first: where the robot is)
+        breaks the clearance, else None.
+
+        Every pair keeps the clearance, except one already closer at the start: that one may
+        only move apart until it is clear (ocu.kinematics.collision.path_violation).
+        """
+        if not self.has_collision_model or not poses:
             return None
-        clearance = self.settings.clearance_m
-        poses = [{**others, **self.mapping(q)} for q in points]
-        for index, contact in enumerate(self.collision.closest_along(poses)):
-            if contact is not None and contact.distance_m < clearance:
-                return index, contact
-        return None
+        gaps = self.collision.gaps_along(poses)
+        found = path_violation(gaps, self.settings.clearance_m)
+        if found is None:
+            return None
+        index, column = found
+        contact = self.collision.pair_contact(column, float(gaps[index, column]))
+        start = self.collision.pair_contact(column, float(gaps[0, column]))
+        too_close = start.distance_m < self.settings.clearance_m
+        return PathHit(index, contact, start if too_close else None)
 
     # ---- workspace ---------------------------------------------------------------------
 

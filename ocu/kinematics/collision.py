@@ -7,7 +7,8 @@ against the body's (the chassis, tracks, flippers, cameras), and arm links again
 where at least two arm joints lie between them, except neighbours (one moving joint between
 them: the joint's limits keep them apart) and pairs already touching in the zero pose
 (MoveIt's "adjacent" and "default" rules). An optional
-ground plane keeps the arm above the floor.
+ground plane keeps the arm above the floor. Along a path (`path_violation`) every pair keeps
+the clearance, except one already closer at the start: it may only move apart until clear.
 
 Distances are exact for the shapes: segment to segment (Ericson, Real-Time Collision Detection
 §5.1.9) and segment to box by minimising the convex piecewise-quadratic distance over its
@@ -29,6 +30,8 @@ from ocu.model.urdf import CollisionShape
 Array = npt.NDArray[np.float64]
 GROUND = "the ground"
 EPSILON = 1e-12
+# A pair's gap this little smaller than before is the same gap (rounding), not an approach.
+SAME_GAP_M = 1e-6
 
 
 @dataclass(frozen=True)
@@ -321,34 +324,62 @@ class CollisionModel:
         capsule_d, box_d, _ = self._measure([angles])
         return capsule_d[0], box_d[0]
 
-    def _contact(self, capsule_d: Array, box_d: Array, ground: Array) -> Contact | None:
-        best: Contact | None = None
-        if capsule_d.size:
-            k = int(np.argmin(capsule_d))
-            i, j = self._capsule_pairs[k]
-            best = Contact(float(capsule_d[k]), self.capsules[i].link, self.capsules[j].link)
-        if box_d.size:
-            k = int(np.argmin(box_d))
-            if best is None or box_d[k] < best.distance_m:
-                i, j = self._box_pairs[k]
-                best = Contact(float(box_d[k]), self.capsules[i].link, self.boxes[j].link)
-        if ground.size:
-            k = int(np.argmin(ground))
-            if best is None or ground[k] < best.distance_m:
-                best = Contact(float(ground[k]), self.capsules[self._ground[k]].link, GROUND)
-        return best
+    def gaps_along(self, poses: Sequence[Mapping[str, float]]) -> Array:
+        """(poses, pairs): every checked pair's gap in each pose (the ground's columns last);
+        `pair_contact` names a column."""
+        capsule_d, box_d, ground = self._measure(poses)
+        return np.concatenate([capsule_d, box_d, ground], axis=1)
+
+    def pair_contact(self, column: int, distance_m: float) -> Contact:
+        """The two links of one column of `gaps_along`, at a gap."""
+        capsule_count, box_count = len(self._capsule_pairs), len(self._box_pairs)
+        if column < capsule_count:
+            i, j = self._capsule_pairs[column]
+            return Contact(distance_m, self.capsules[i].link, self.capsules[j].link)
+        if column < capsule_count + box_count:
+            i, j = self._box_pairs[column - capsule_count]
+            return Contact(distance_m, self.capsules[i].link, self.boxes[j].link)
+        index = self._ground[column - capsule_count - box_count]
+        return Contact(distance_m, self.capsules[index].link, GROUND)
+
+    def _contact(self, gaps: Array) -> Contact | None:
+        if not gaps.size:
+            return None
+        column = int(np.argmin(gaps))
+        return self.pair_contact(column, float(gaps[column]))
 
     def closest(self, angles: Mapping[str, float]) -> Contact | None:
         """The closest checked pair (or the ground) in a pose; None when nothing is checked."""
-        capsule_d, box_d, ground = self._measure([angles])
-        return self._contact(capsule_d[0], box_d[0], ground[0])
+        return self._contact(self.gaps_along([angles])[0])
 
     def closest_along(self, poses: Sequence[Mapping[str, float]]) -> list[Contact | None]:
         """`closest` for many poses at once (a path), in one batched computation."""
         if not poses:
             return []
-        capsule_d, box_d, ground = self._measure(poses)
-        return [self._contact(capsule_d[k], box_d[k], ground[k]) for k in range(len(poses))]
+        gaps = self.gaps_along(poses)
+        return [self._contact(row) for row in gaps]
+
+
+def path_violation(gaps: Array, clearance_m: float) -> tuple[int, int] | None:
+    """The first pose along a path, and its pair, that breaks the clearance rule; else None.
+
+    `gaps` is (poses, pairs), the first pose where the path starts. Every pair keeps the
+    clearance, except one already closer at the start: it may not come closer than it was
+    (as MoveIt Servo lets a jog leave a collision) until it has cleared, then it keeps the
+    clearance too. The arm can thus always be moved out of a pose it was left in too close.
+    """
+    if not gaps.size:
+        return None
+    start = gaps[0]
+    cleared = np.logical_or.accumulate(gaps >= clearance_m, axis=0)
+    floor = np.where(cleared, clearance_m, np.minimum(start, clearance_m) - SAME_GAP_M)
+    bad = gaps < floor
+    rows = np.flatnonzero(bad.any(axis=1))
+    if not rows.size:
+        return None
+    row = int(rows[0])
+    columns = np.flatnonzero(bad[row])
+    return row, int(columns[np.argmin(gaps[row, columns])])
 
 
 def _path_joints(tree: KinematicTree, a: str, b: str) -> list[str]:

@@ -15,7 +15,8 @@ import pytest
 from ocu import hotkeys
 from ocu.console.arm import ArmGoal
 from ocu.console.model import Source
-from ocu.control.arm import SLOW, STOP
+from ocu.control.arm import OK, SLOW, STOP
+from ocu.control.position import PositionError
 from ocu.hotkeys import KeyMap, load_key_map
 from ocu.kinematics.arm import ArmError, ToolPose
 from ocu.profile import RobotProfile
@@ -51,6 +52,8 @@ def test_jog_follows_the_line_and_release_stops_at_once(
         rig.tick()
         trace.append(rig.position())
     moved = rig.position() - start
+    assert rig.arm.status.level == OK  # far from everything: neither slowed nor a reason
+    assert rig.arm.status.reason == ""
     assert moved[1] == pytest.approx(0.05 * 2.0, abs=0.01)  # 5 cm/s for 2 s (plus the delay)
     assert _deviation(trace, start, np.array([0.0, 1.0, 0.0])) < 0.002
     assert hotkeys.release(model, key_map, "A")
@@ -145,6 +148,8 @@ def test_a_joint_limit_stops_the_jog_with_its_margin(
             break
     assert rig.arm.status.level == STOP
     assert "near its limit" in rig.arm.status.reason
+    # The stop reaches the Events dock like the others (it slowed with the same reason first).
+    assert any("STOPPED" in m and "neck near its limit" in m for m in rig.messages)
     rig.run(1.0)
     margin = profile.arm.joint_limit_margin_rad  # type: ignore[union-attr]
     for joint in rig.arm.kinematics.joints:
@@ -255,12 +260,14 @@ def test_moves_yield_to_the_operator_space_and_a_lost_link(
 
 
 def test_a_path_through_the_chassis_is_refused(profile: RobotProfile, tmp_path: Path) -> None:
-    """From a low reach on the right, swinging straight to 'look back' sweeps the gripper
-    through the right track: refused, nothing moves."""
+    """From a low reach on the right, swinging straight to 'look back' sweeps the arm
+    through the right flipper: refused, nothing moves. The jaws start below the ground by the
+    model; the refusal names what the path runs into, not where it starts (which was refused
+    at 0 % before a move could leave a pose that is too close)."""
     low_right = {"waist": math.radians(-60.0), "shoulder": math.radians(-5.0),
                  "elbow": math.radians(40.0), "neck": math.radians(-20.0)}  # fmt: skip
     rig = Rig(profile, tmp_path, start=low_right)
-    with pytest.raises(ArmError, match=r"the path comes too close at \d+% of the way: .* overlap"):
+    with pytest.raises(ArmError, match=r"too close at [1-9]\d*% of the way: .* right_flipper"):
         rig.arm.go_to("look_back")
     rig.run(0.3)
     assert rig.arm_velocities() == {}
@@ -280,3 +287,169 @@ def test_stored_poses_are_saved_beside_the_hotkeys(profile: RobotProfile, tmp_pa
     again.arm.go_to("over the deck")
     again.run_until_idle()
     assert np.linalg.norm(again.truth().position - rig.truth().position) < 0.005
+
+
+# ---- the waist is locked while the chassis drives (issue 19, item 6) -----------------------
+
+
+def _arm_commands(rig: Rig, since: int) -> list[dict[str, float]]:
+    """The arm's channels in every command the simulator received from index `since` on."""
+    return [
+        {c: v for c, v in command.velocities.items() if c in rig.arm.channels and v != 0.0}
+        for _, command in rig.robot.sent[since:]
+    ]
+
+
+def test_a_stored_pose_or_pose_goal_that_turns_the_waist_is_refused_while_driving(
+    profile: RobotProfile, tmp_path: Path, key_map: KeyMap
+) -> None:
+    """The robot does not turn the waist while the chassis moves: a move that needs it would
+    not be the path that was checked. Refused with the reason; nothing of the arm is sent."""
+    rig = Rig(profile, tmp_path)
+    model = rig.model
+    hotkeys.press(model, key_map, "W")  # drive forward
+    rig.run(0.3)
+    assert rig.robot.physics.velocities["drive_linear"] > 0.0
+    since = len(rig.robot.sent)
+    before = dict(rig.robot.joints)
+    hotkeys.press(model, key_map, "F5")  # look back: the waist turns by 170°
+    assert any("the chassis is driving" in m and "waist" in m for m in rig.messages)
+    with pytest.raises(ArmError, match="the chassis is driving: the robot does not turn the waist"):
+        rig.arm.preview_pose(ToolPose(0.45, -0.25, 0.55, math.radians(-45.0)))
+    rig.run(0.5)
+    assert not rig.arm.controller.active
+    assert not any(_arm_commands(rig, since))
+    for joint in rig.arm.kinematics.joints:
+        assert rig.robot.joints[joint] == before[joint]
+    # Stopped, the same key moves the arm there.
+    hotkeys.release(model, key_map, "W")
+    rig.run(0.3)
+    hotkeys.press(model, key_map, "F5")
+    rig.run_until_idle()
+    assert rig.robot.joints["waist"] == pytest.approx(
+        profile.arm.poses["look_back"]["waist"],  # type: ignore[union-attr]
+        abs=math.radians(0.3),
+    )
+
+
+def test_a_move_under_way_stops_when_a_planner_drives_the_chassis(
+    profile: RobotProfile, tmp_path: Path
+) -> None:
+    rig = Rig(profile, tmp_path)
+    rig.arm.go_to("look_back")
+    rig.run(0.5)
+    assert rig.arm_velocities().get("waist")
+    rig.model.set_external_velocities({"drive_linear": 0.3})  # ROS drives; not the operator
+    rig.tick()
+    assert not rig.arm.controller.active
+    assert rig.arm_velocities() == {}
+    assert any(
+        "move to look_back stopped: the chassis drives, and the robot does not turn the waist" in m
+        for m in rig.messages
+    )
+    since = len(rig.robot.sent)
+    rig.run(0.5)
+    assert not any(_arm_commands(rig, since))
+
+
+def test_a_jog_while_driving_leaves_the_waist_still_and_says_so(
+    profile: RobotProfile, tmp_path: Path, key_map: KeyMap
+) -> None:
+    """A sideways jog needs the waist: while the chassis drives it stops with the reason and
+    the waist is never commanded; once the chassis stops the jog goes on at its speed (its
+    reference did not run ahead meanwhile). Forward needs no waist and moves."""
+    rig = Rig(profile, tmp_path)
+    model = rig.model
+    hotkeys.press(model, key_map, "C")
+    model.set_velocity("drive_linear", 0.3)
+    since = len(rig.robot.sent)
+    start = rig.position()
+    hotkeys.press(model, key_map, "A")  # left: the waist
+    rig.run(1.0)
+    assert rig.arm.status.level == STOP
+    assert "the robot does not turn the waist while the chassis drives" in rig.arm.status.reason
+    assert any("STOPPED" in m and "does not turn the waist" in m for m in rig.messages)
+    assert all("waist" not in sent for sent in _arm_commands(rig, since))
+    assert abs(rig.position()[1] - start[1]) < 0.002
+    model.set_velocity("drive_linear", 0.0)  # the chassis stops; A is still held
+    rig.run(0.1)
+    rig.tick()
+    assert rig.arm.status.level != STOP
+    before = rig.position()
+    rig.run(1.0)
+    moved = rig.position()[1] - before[1]
+    assert 0.03 < moved < 0.05 * 1.0 + 0.01  # the jog's 5 cm/s, no catching up
+    hotkeys.release(model, key_map, "A")
+    # Forward needs no waist: it moves while the chassis drives.
+    model.set_velocity("drive_linear", 0.3)
+    rig.run(0.3)  # what was in flight has landed
+    waist = rig.robot.joints["waist"]
+    since = len(rig.robot.sent)
+    before = rig.position()
+    hotkeys.press(model, key_map, "W")
+    rig.run(1.0)
+    hotkeys.release(model, key_map, "W")
+    assert float(np.linalg.norm(rig.position() - before)) > 0.03
+    assert rig.robot.joints["waist"] == waist
+    assert all("waist" not in sent for sent in _arm_commands(rig, since))
+
+
+# ---- a pose already too close can be left (issue 19, item 6) -------------------------------
+
+# The folded arm with its head 1 mm into the turret by the model (where a stall left it).
+TOO_CLOSE = {"waist": 0.0, "shoulder": 0.0, "elbow": math.radians(-125.0),
+             "neck": math.radians(-79.2)}  # fmt: skip
+
+
+def test_a_stored_pose_that_takes_overlapping_links_apart_is_allowed(
+    profile: RobotProfile, tmp_path: Path, key_map: KeyMap
+) -> None:
+    rig = Rig(profile, tmp_path, start=TOO_CLOSE)
+    contact = rig.truth_contact()
+    assert contact is not None
+    assert {contact.link_a, contact.link_b} == {"turret", "head_cameras"}
+    assert -0.0015 < contact.distance_m < 0.0
+    since = len(rig.robot.sent)
+    hotkeys.press(rig.model, key_map, "F3")  # ready: the elbow takes the head away
+    assert not any("arm: the path comes too close" in m for m in rig.messages)
+    rig.run(0.5)
+    assert any(_arm_commands(rig, since))
+    rig.run_until_idle()
+    assert any(m.startswith("arm: reached ready") for m in rig.messages)
+    ready = rig.kinematics.vector(profile.arm.poses["ready"])  # type: ignore[union-attr]
+    assert np.allclose(rig.kinematics.vector(rig.robot.joints), ready, atol=math.radians(0.3))
+
+
+# ---- typed joint targets get the arm's path check (issue 19, item 6) -----------------------
+
+
+def test_a_typed_joint_target_into_the_ground_is_refused_and_nothing_moves(
+    profile: RobotProfile, tmp_path: Path
+) -> None:
+    rig = Rig(profile, tmp_path, start=profile.arm.poses["look_forward"])  # type: ignore[union-attr]
+    model = rig.model
+    goal = {"shoulder": math.radians(-10.0), "elbow": math.radians(40.0)}
+    q = rig.kinematics.vector({**rig.robot.joints, **goal})
+    into = rig.kinematics.contact(q, rig.robot.joints)
+    assert into is not None
+    assert into.link_b == "the ground"
+    assert into.distance_m < -0.18  # the jaws 190 mm into the ground
+    since = len(rig.robot.sent)
+    before = dict(rig.robot.joints)
+    with pytest.raises(PositionError, match=r"the path comes too close at .*the ground"):
+        model.set_targets(goal)
+    assert model.targets == {}
+    rig.run(0.5)
+    assert not any(_arm_commands(rig, since))
+    assert rig.robot.joints == before
+    # Driving, a typed waist target is refused the same way; a harmless target still moves.
+    model.set_velocity("drive_linear", 0.3)
+    with pytest.raises(PositionError, match="the chassis is driving"):
+        model.set_targets({"waist": math.radians(20.0)})
+    model.set_velocity("drive_linear", 0.0)
+    model.set_targets({"neck": math.radians(-30.0)})
+    for _ in range(100):
+        rig.tick()
+        if not model.targets:
+            break
+    assert rig.robot.joints["neck"] == pytest.approx(math.radians(-30.0), abs=math.radians(0.6))

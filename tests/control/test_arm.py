@@ -76,3 +76,27 @@ def test_speeds_below_the_servos_start_pulse_or_rest(profile: RobotProfile) -> N
     assert arm._servo(channel, -floor * 0.6) == -floor
     assert arm._servo(channel, floor * 0.3) == 0.0
     assert arm._servo(channel, 50.0) == arm.limits.get(channel)
+
+
+def test_the_prediction_knows_the_robot_keeps_the_waist_still_while_driving(
+    profile: RobotProfile,
+) -> None:
+    """The robot refuses to turn a `locked_while_driving` channel while the chassis moves:
+    the predictor must not count such a command as motion (the arm's feedback and its
+    collision checks stand on that prediction)."""
+    arm, position, robot = _rig(profile)
+    robot.run_until(0.5)
+    waist = robot.joints["waist"]
+    command = {"drive_linear": 0.3, "waist": 0.3}
+    robot.send(Command(velocities=command))
+    position.note_sent(0.5, command)
+    assert position.driving
+    robot.run_until(1.5)
+    assert robot.joints["waist"] == waist  # the simulator kept it still
+    assert position.predictors["waist"].eventual(1.5) == pytest.approx(waist, abs=1e-3)
+    with pytest.raises(ArmError, match="the chassis is driving: the robot does not turn the waist"):
+        arm.plan_move(profile.arm.poses["look_back"], 1.5)  # type: ignore[union-attr]
+    # Without the drive the waist command counts again.
+    position.note_sent(1.5, {"waist": 0.3})
+    assert not position.driving
+    assert position.predictors["waist"].eventual(1.6) > waist + 0.02

@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 
 from ocu.kinematics.arm import ArmKinematics, ToolPose
-from ocu.kinematics.collision import GROUND, segment_box_distances, segment_distances
+from ocu.kinematics.collision import (
+    GROUND,
+    path_violation,
+    segment_box_distances,
+    segment_distances,
+)
 from ocu.kinematics.trajectory import TrajectoryError, plan
 from ocu.model.urdf import load_urdf
 from ocu.profile import RobotProfile
@@ -94,6 +99,52 @@ def test_stored_poses_and_the_moves_between_them_are_clear(arm: ArmKinematics) -
         for second in poses.values():
             move = plan(first, second, speed, accel)
             assert arm.check_path(move.points(40), {}) is None
+
+
+def test_a_pair_too_close_at_the_start_may_only_move_apart_until_clear() -> None:
+    clearance = 0.01
+    # Columns: a pair clear throughout; one overlapping at the start that comes apart.
+    leaving = np.array([[0.05, -0.001], [0.04, 0.0], [0.03, 0.02], [0.02, 0.03]])
+    assert path_violation(leaving, clearance) is None
+    # The same, but the clear pair comes within the clearance on the way.
+    assert path_violation(np.array([[0.05, -0.001], [0.009, 0.0]]), clearance) == (1, 0)
+    # Deeper first: refused where it gets worse than at the start.
+    assert path_violation(np.array([[0.05, -0.001], [0.05, -0.002]]), clearance) == (1, 1)
+    # Apart but not yet clear, then back toward it (no worse than the start): allowed;
+    # once clear it must keep the clearance.
+    assert (
+        path_violation(np.array([[0.05, -0.001], [0.05, 0.005], [0.05, -0.001]]), clearance) is None
+    )
+    assert path_violation(np.array([[0.05, -0.001], [0.05, 0.02], [0.05, 0.005]]), clearance) == (
+        2,
+        1,
+    )
+    # Two poses wrong: the first is told, with its closest offending pair.
+    bad = np.array([[0.05, 0.05], [0.005, 0.001], [-0.01, 0.05]])
+    assert path_violation(bad, clearance) == (1, 1)
+
+
+def test_a_path_out_of_an_overlap_is_allowed_and_deeper_is_refused(arm: ArmKinematics) -> None:
+    """Folded with the head 1 mm into the turret (where a stall left it): the way out is not
+    refused at 0 % any more; a way deeper in still is, naming the pair as it was."""
+    too_close = arm.vector({"waist": 0.0, "shoulder": 0.0, "elbow": math.radians(-125.0),
+                            "neck": math.radians(-79.2)})  # fmt: skip
+    start = arm.contact(too_close, {})
+    assert start is not None
+    assert (start.link_a, start.link_b) == ("turret", "head_cameras")
+    assert -0.0015 < start.distance_m < 0.0
+    ready = arm.vector(arm.settings.poses["ready"])
+    out = [too_close + (ready - too_close) * s for s in np.linspace(0.0, 1.0, 60)]
+    assert arm.check_path(out, {}) is None
+    deeper = too_close.copy()
+    deeper[3] = math.radians(-70.0)
+    hit = arm.check_path([too_close + (deeper - too_close) * s for s in np.linspace(0, 1, 20)], {})
+    assert hit is not None
+    assert hit.index == 1
+    assert hit.describe(20) == (
+        "the path comes too close at 5% of the way: turret and head_cameras overlap by 2 mm "
+        "(at the start turret and head_cameras overlap by 1 mm: a move may only part them)"
+    )
 
 
 def test_synchronized_trapezoid_all_joints_start_and_arrive_together() -> None:

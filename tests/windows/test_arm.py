@@ -189,3 +189,36 @@ def test_pose_goal_from_the_dock_and_a_pick_in_the_3d_view(
     QTest.keyClick(console, Qt.Key.Key_I)
     assert view.workspace_visible
     assert "workspace" in [o.mesh for o in view.overlays()]
+
+
+def test_a_stored_pose_is_refused_while_driving_with_the_reason_in_the_events_dock(
+    make_console: ConsoleFactory, ready_sim: RobotSimulator, profile: RobotProfile, qtbot: QtBot
+) -> None:
+    """The robot does not turn the waist while the chassis moves (issue 19): look back from
+    an F-key while W drives is refused, the reason in the Events dock, and no arm motion
+    reaches the simulator; stopped, the same key moves the arm."""
+    sim = ready_sim
+    console = make_console(sim)
+    qtbot.waitUntil(lambda: console.model.arm.tool_pose() is not None, timeout=DEADLINE_MS)  # type: ignore[union-attr]
+    QTest.keyPress(console, Qt.Key.Key_W)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0.0, "the chassis driving")
+    since = time.monotonic()
+    QTest.keyClick(console, Qt.Key.Key_F5)
+
+    def events() -> list[str]:
+        return [console.event_log.item(i).text() for i in range(console.event_log.count())]
+
+    qtbot.waitUntil(
+        lambda: any("the chassis is driving" in line and "waist" in line for line in events()),
+        timeout=DEADLINE_MS,
+    )
+    mark = sim.state().rcp_count
+    wait_sim(qtbot, sim, lambda s: s.rcp_count >= mark + 3, "RCPs while driving")
+    received = [r for r in sim.received_commands() if r.time_s >= since]
+    assert received
+    assert not any(any(arm_axes(profile, r)) for r in received)
+    assert not sim.state().waist_suppressed
+    QTest.keyRelease(console, Qt.Key.Key_W)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] == 0.0, "the chassis stopped")
+    start_pose(console, sim, qtbot, Qt.Key.Key_F5)
+    wait_sim(qtbot, sim, lambda s: s.velocities["waist"] != 0.0, "the waist turning")
