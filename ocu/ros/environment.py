@@ -76,15 +76,23 @@ def master_uri() -> str:
 
 def master_online(uri: str | None = None, timeout_s: float = 1.0) -> bool:
     """Whether a ROS master answers at `uri` ($ROS_MASTER_URI if None); ROS not needed."""
+    return master_pid(uri, timeout_s) is not None
+
+
+def master_pid(uri: str | None = None, timeout_s: float = 1.0) -> int | None:
+    """The process id of the ROS master at `uri` (a restarted master has another), None
+    when none answers."""
     proxy = xmlrpc.client.ServerProxy(uri or master_uri(), transport=_TimeoutTransport(timeout_s))
     try:
         reply = proxy.getPid("/ocu_probe")
     except (OSError, xmlrpc.client.Error, ValueError):
-        return False
+        return None
     finally:
         proxy("close")()
     # ROS master API: [code, status message, pid], code 1 = success.
-    return isinstance(reply, list) and len(reply) == 3 and reply[0] == 1
+    if isinstance(reply, list) and len(reply) == 3 and reply[0] == 1:
+        return int(reply[2])
+    return None
 
 
 def master_knows(

@@ -35,7 +35,13 @@ from ocu.ros.bridge import (
     BridgeError,
     BridgeSettings,
 )
-from ocu.ros.environment import master_knows, master_online, master_uri, missing_ros
+from ocu.ros.environment import (
+    master_knows,
+    master_online,
+    master_pid,
+    master_uri,
+    missing_ros,
+)
 
 log = logging.getLogger("ocu.ros")
 
@@ -318,7 +324,8 @@ class SignalStop(threading.Event):
 
 
 class MasterWatch:
-    """Notices that the ROS master restarted: it answers but no longer knows this node.
+    """Notices that the ROS master restarted: another master process answers at its URI, or
+    the master answers without this node.
 
     rospy registers a node's topics once, at start; a new master knows none of them, so no
     new publisher can reach the node (its existing connections go on). The node cannot
@@ -330,13 +337,15 @@ class MasterWatch:
 
         self.name = rospy.get_name()
         self.uri = rospy.get_node_uri() or ""
+        self._pid = master_pid()
         self._registered = False
         self._silent = False
 
     def restarted(self) -> bool:
-        """Poll the master once (at most 1 s); True once it answers without this node."""
-        known = master_knows(self.name, self.uri)
-        if known is None:
+        """Poll the master (two calls of at most 1 s); True once it restarted."""
+        pid = master_pid()
+        known = master_knows(self.name, self.uri) if pid is not None else None
+        if pid is None or known is None:
             if not self._silent:
                 self._silent = True
                 log.warning(
@@ -347,18 +356,22 @@ class MasterWatch:
             return False
         if self._silent:
             self._silent = False
-            if known:
-                log.info("the ROS master answers again")
+            log.info("the ROS master answers again")
+        if self._pid is None:
+            self._pid = pid
         if known:
             self._registered = True
+        # Unknown right after start: rospy registers from a thread of its own, a moment later.
+        if pid == self._pid and (known or not self._registered):
             return False
-        if not self._registered:
-            return False  # not registered yet (the node is starting): nothing lost
         log.error(
-            "the ROS master at %s restarted and no longer knows %s: new publishers cannot reach "
-            "it and rospy cannot register again; stopping the robot and exiting with status %d "
-            'for a supervisor to restart the node (roslaunch: respawn="true")',
+            "the ROS master at %s restarted (pid %d, was %d) and no longer knows %s: new "
+            "publishers cannot reach it and rospy cannot register again; stopping the robot "
+            "and exiting with status %d for a supervisor to restart the node (roslaunch: "
+            'respawn="true")',
             master_uri(),
+            pid,
+            self._pid,
             self.name,
             EXIT_MASTER_RESTARTED,
         )

@@ -635,6 +635,8 @@ class RosBridge:
         if self.navigator is not None:
             # What the safety zones do now ("zones off: no range data", "slowed: ...").
             bridge.values.append(KeyValue(key="safety zones", value=self.navigator.zones.text))
+            sources = ", ".join(self.navigator.scan_sources()) or "none"
+            bridge.values.append(KeyValue(key="scan sources", value=sources))
         message.status = [
             _diagnostic_status(link_report(link.state, link.stats(), self.hardware_id)),
             bridge,
