@@ -69,9 +69,10 @@ private parameters (set with _name:=value, a launch file or rosparam):
                     arm_poses.toml in $OCU_CONFIG_DIR or ~/.config/ocu
 
 topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose, follow_path
-(nav_msgs/Path in odom), scan (placed by frame_id; /tf, /tf_static) in; joint_states, camera/compressed,
-camera/<name>/image/compressed, arm/tool_pose, odom, /tf (odom -> base_link, base_link ->
-tool0), scan (when the robot sends ranges), /diagnostics out (see docs/ros.md and docs/arm.md)
+(nav_msgs/Path in odom), scan (placed by frame_id; /tf, /tf_static) in; joint_states,
+camera/compressed, camera/<name>/image/compressed, arm/tool_pose, odom, /tf (odom ->
+base_link, base_link -> tool0), scan (when the robot sends ranges), /diagnostics out (see
+docs/ros.md and docs/arm.md)
 
 _name:=value arguments hold for this run only: the node puts back (or deletes) what they
 replaced on the parameter server when it exits.
