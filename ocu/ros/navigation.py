@@ -38,6 +38,9 @@ MAX_PATH_COORDINATE_M = 1e4
 MAX_SCAN_TILT_RAD = math.radians(5.0)
 # Deeper than this, a chain of frames is a loop or a broken tree.
 MAX_FRAME_DEPTH = 32
+# More beams than a planar laser has (0.1° over a full turn is 3600): the zones' search
+# holds every point at every step of the arc, and a million-beam scan would take gigabytes.
+MAX_SCAN_BEAMS = 4096
 
 
 class NavigationError(ValueError):
@@ -138,6 +141,8 @@ def scan_from_ros(
     values = (angle_min, angle_increment, range_min, range_max)
     if not all(math.isfinite(v) for v in values) or angle_increment == 0.0 or not ranges:
         raise NavigationError("LaserScan: angles and limits must be finite, beams present")
+    if len(ranges) > MAX_SCAN_BEAMS:
+        raise NavigationError(f"LaserScan: {len(ranges)} beams, at most {MAX_SCAN_BEAMS}")
     if not 0.0 <= range_min < range_max:
         raise NavigationError(f"LaserScan: range_min {range_min} not below range_max {range_max}")
     # REP 117: below range_min or nan is no measurement; above range_max, or +inf, no return.

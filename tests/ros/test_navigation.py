@@ -85,6 +85,16 @@ def test_scans_and_paths_from_other_nodes() -> None:
             received_at=0.0,
             wall_time=0.0,
         )
+    with pytest.raises(NavigationError, match="1000000 beams, at most 4096"):
+        scan_from_ros(
+            angle_min=0.0,
+            angle_increment=1e-6,
+            range_min=0.1,
+            range_max=5.0,
+            ranges=[1.0] * 1_000_000,
+            received_at=0.0,
+            wall_time=0.0,
+        )
     assert path_points("/odom", [(1, 2)]) == [(1.0, 2.0)]
     with pytest.raises(NavigationError, match="the path is in 'map'; give it in 'odom'"):
         path_points("map", [(1, 2)])
@@ -321,7 +331,7 @@ def test_the_node_publishes_odom_tf_and_scan_and_follows_a_path(
         sim.stop()
     assert code == 0, process.output()
     assert "follow_path: 2 poses in odom, path mode started" in process.output()
-    assert "path done" in process.output()
+    assert "path done" in process.output(), process.output()
 
 
 @pytest.mark.slow
