@@ -343,9 +343,11 @@ def test_the_creep_starts_0_5_s_after_the_last_scan_and_odom_is_20_hz(
         sim.stop()
     assert code == 0, process.output()
     stale_s = profile.navigation.scan_stale_after_s
-    # Within the node's loop period (20 ms) and the local delivery of the last scan.
-    assert stale_s - 0.01 <= sent_after_s <= stale_s + 0.1, sent_after_s
-    assert 18.5 <= rate_hz <= 21.0, rate_hz
+    # Not before 0.5 s (it was 0.35 s: the 0.15 s one-way delay taken off); after it, within
+    # the node's loop (20 ms), the last scan's local delivery and a loaded machine's lag.
+    assert stale_s - 0.01 <= sent_after_s <= stale_s + 0.3, sent_after_s
+    # It was 16.7 Hz at most (every third tick of the 50 Hz loop).
+    assert 18.0 <= rate_hz <= 21.0, rate_hz
 
 
 # ---- a restarted master -------------------------------------------------------------------
