@@ -3,8 +3,9 @@ assisted modes of one robot, together (no Qt, no ROS; thread-safe).
 
 The console model and the ROS node each hold one and feed it what the link reports —
 telemetry (track speeds, the round trip), extension status (the IMU heading), range scans
-(from the robot, or from another ROS node), and every command that went on the wire — and
-ask it three things:
+(from the robot, and from other ROS nodes: each source keeps its own newest scan, and the
+zones take the nearest obstacle of every fresh one), and every command that went on the
+wire — and ask it three things:
 
 - `estimate()`: where the robot is, how sure that is, whether it is stale;
 - `guard(v, ω)`: what the safety zones let through of a drive command, with the status
@@ -37,11 +38,10 @@ from ocu.nav.zones import (
     ZoneDecision,
     apply_zones,
     cap_ratio,
-    direction_of,
     fastest_point_speed,
 )
 from ocu.profile import RobotProfile
-from ocu.records import SCAN_FROM_ROBOT, Command, ScanFrame, StatusFrame, TelemetryFrame
+from ocu.records import Command, ScanFrame, StatusFrame, TelemetryFrame
 
 # What the robot covers before a command composed now takes effect, besides the link delay:
 # the console recomposes at 20 Hz, and one period more for the command to go out.
@@ -122,9 +122,10 @@ class Navigator:
         self.grid = OccupancyGrid() if grid else None
         self._grid_at: float | None = None
         self.trail: deque[tuple[float, float]] = deque(maxlen=TRAIL_LENGTH)
+        # The newest scan of each source (the robot's sensor; each ROS publisher and frame)
+        # with its points in the robot's frame: the zones use every fresh one.
+        self._sources: dict[str, tuple[ScanFrame, Points]] = {}
         self._scan: ScanFrame | None = None
-        self._scan_points: Points = np.zeros((0, 2))
-        self._robot_scan_at: float | None = None
         self._one_way_s = 0.0
         self._assist: LinearShuttle | PathFollower | None = None
         self._assist_external = False
@@ -177,21 +178,29 @@ class Navigator:
                 sent_at, command.velocity(self.drive[0]), command.velocity(self.drive[1])
             )
 
-    def on_scan(self, scan: ScanFrame) -> bool:
-        """A range scan; False if ignored (another node's while the robot sends its own)."""
+    def on_scan(
+        self,
+        scan: ScanFrame,
+        *,
+        source: str | None = None,
+        mount_xy_m: tuple[float, float] | None = None,
+    ) -> bool:
+        """A range scan from `source` (default: the scan's own, "robot" or "ros"), its sensor
+        at `mount_xy_m` on the chassis facing along `angle_min_rad`'s zero (default: the
+        profile's sensor mount). Each source keeps its newest scan; True (always taken)."""
         with self._lock:
-            if scan.source == SCAN_FROM_ROBOT:
-                self._robot_scan_at = scan.received_at
-            elif self.robot_scans(scan.received_at):
-                return False
+            mount = self.settings.scan_mount_xy_m if mount_xy_m is None else mount_xy_m
+            self._sources[scan.source if source is None else source] = (
+                scan,
+                scan_points(scan, mount),
+            )
             self._scan = scan
-            self._scan_points = scan_points(scan, self.settings.scan_mount_xy_m)
             last = self._grid_at
             # (a tenth of slack: a 10 Hz sensor's scans arrive a little early or late)
             due = last is None or not 0.0 <= scan.received_at - last < 0.9 * GRID_PERIOD_S
             if self.grid is not None and due:
                 taken = self.odometry.estimate(scan.received_at - self._one_way_s).pose
-                self.grid.integrate(scan, taken, self.settings.scan_mount_xy_m)
+                self.grid.integrate(scan, taken, mount)
                 self._grid_at = scan.received_at
             self.revision += 1
             return True
@@ -199,18 +208,10 @@ class Navigator:
     def forget_scans(self) -> None:
         """A new connection: no scan yet (the zones are off until one comes, not blind)."""
         with self._lock:
+            self._sources.clear()
             self._scan = None
-            self._scan_points = np.zeros((0, 2))
-            self._robot_scan_at = None
             self._stopped_motion = None
             self.revision += 1
-
-    def robot_scans(self, now: float | None = None) -> bool:
-        """Whether the robot itself sends range scans (one arrived lately)."""
-        with self._lock:
-            now = self.clock() if now is None else now
-            at = self._robot_scan_at
-            return at is not None and now - at <= max(self.settings.scan_stale_after_s, 1.0)
 
     def set_time_scale(self, scale: float) -> None:
         """Robot seconds per second of the events' clock (a replay's speed)."""
@@ -248,9 +249,30 @@ class Navigator:
             return self._one_way_s
 
     def scan(self) -> tuple[ScanFrame | None, Points]:
-        """The latest scan and its points in the robot's frame."""
+        """The latest scan, and the points of every fresh source in the robot's frame (all
+        of the latest's when none is fresh)."""
         with self._lock:
-            return self._scan, self._scan_points
+            if self._scan is None:
+                return None, np.zeros((0, 2))
+            fresh = self._fresh(self.clock())
+            if not fresh:
+                latest = max(self._sources.values(), key=lambda entry: entry[0].received_at)
+                return self._scan, latest[1]
+            return self._scan, np.concatenate([points for _, points in fresh.values()])
+
+    def scan_sources(self) -> list[str]:
+        """The sources that sent a scan on this connection."""
+        with self._lock:
+            return sorted(self._sources)
+
+    def _fresh(self, now: float) -> dict[str, tuple[ScanFrame, Points]]:
+        """The sources whose newest scan arrived within `scan_stale_after_s`."""
+        limit = self.settings.scan_stale_after_s
+        return {
+            name: entry
+            for name, entry in self._sources.items()
+            if now - entry[0].received_at <= limit
+        }
 
     def scan_age_s(self, now: float | None = None) -> float | None:
         """How old the latest scan is (from its capture), None without one."""
@@ -302,14 +324,16 @@ class Navigator:
             passed = ZoneDecision(linear_m_s, angular_rad_s)
             if self.footprint is None:
                 state = ZoneState(passed, False, False, ZONES_OFF_NO_FOOTPRINT)
+            elif not self._sources:
+                state = ZoneState(passed, False, overridden, ZONES_OFF_NO_DATA)
             else:
-                age = self.scan_age_s(now)
-                if age is None:
-                    state = ZoneState(passed, False, overridden, ZONES_OFF_NO_DATA)
-                elif age > self.settings.scan_stale_after_s:
-                    state = self._blind(linear_m_s, angular_rad_s, age, overridden)
-                else:
-                    state = self._apply(linear_m_s, angular_rad_s, age, overridden)
+                # Staleness counts from arrival (what the OCU has heard since), not from the
+                # capture: a round-trip estimate must not shorten the time a sensor is given.
+                fresh = self._fresh(now)
+                stale = sorted(set(self._sources) - set(fresh))
+                state = self._apply(linear_m_s, angular_rad_s, fresh, overridden, now)
+                if stale:
+                    state = self._blind(state, stale, overridden)
             if overridden:
                 distance = state.decision.message() if state.decision is not None else ""
                 detail = f": {distance.split(': ', 1)[-1]}" if distance else ""
@@ -317,17 +341,46 @@ class Navigator:
             self._zones = state
             return state
 
-    def _blind(self, linear: float, angular: float, age_s: float, overridden: bool) -> ZoneState:
-        """The innermost zone's caps for a robot whose range data stopped coming."""
+    def _blind(self, state: ZoneState, stale: list[str], overridden: bool) -> ZoneState:
+        """The fresh sources' decision further held to the innermost zone's caps: a source
+        stopped sending, and nothing is known of what it saw."""
+        assert state.decision is not None
         zones = self.settings.zones
-        v, w = cap_ratio(linear, angular, zones.max_linear_m_s[0], zones.max_angular_rad_s[0])
-        limited = (v, w) != (linear, angular)
-        decision = ZoneDecision(v, w, None, direction_of(linear), zone=0, limited=limited)
-        text = f"{ZONES_BLIND}: at most {zones.max_linear_m_s[0]:.2f} m/s"
+        before = state.decision
+        v, w = cap_ratio(
+            before.linear_m_s,
+            before.angular_rad_s,
+            zones.max_linear_m_s[0],
+            zones.max_angular_rad_s[0],
+        )
+        if before.limited and (v, w) == (before.linear_m_s, before.angular_rad_s):
+            decision = before  # the fresh sources' obstacle holds it down already
+            text = before.message()
+        else:
+            limited = before.limited or (v, w) != (before.linear_m_s, before.angular_rad_s)
+            decision = ZoneDecision(
+                v, w, before.distance_m, before.direction, zone=0, limited=limited
+            )
+            text = f"{ZONES_BLIND}: at most {zones.max_linear_m_s[0]:.2f} m/s"
+        if len(self._sources) > 1:
+            text += f" ({', '.join(stale)} silent)"
         return ZoneState(decision, True, overridden, text, blind=True)
 
-    def _apply(self, linear: float, angular: float, age_s: float, overridden: bool) -> ZoneState:
+    def _apply(
+        self,
+        linear: float,
+        angular: float,
+        fresh: dict[str, tuple[ScanFrame, Points]],
+        overridden: bool,
+        now: float,
+    ) -> ZoneState:
+        """The zones for the nearest obstacle of every fresh source."""
         assert self.footprint is not None
+        if not fresh:
+            return ZoneState(ZoneDecision(linear, angular), True, overridden, ZONES_CLEAR)
+        points = np.concatenate([p for _, p in fresh.values()])
+        # The oldest fresh scan sets the margin: its points may have come closest since.
+        age_s = now - min(scan.received_at for scan, _ in fresh.values()) + self._one_way_s
         current = self.odometry.estimate(self.clock())
         speed = max(
             fastest_point_speed(self.footprint, linear, angular),
@@ -341,7 +394,7 @@ class Navigator:
         decision = apply_zones(
             linear,
             angular,
-            self._scan_points,
+            points,
             self.footprint,
             zones,
             margin_m=margin,

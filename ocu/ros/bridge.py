@@ -38,12 +38,13 @@ from typing import Protocol
 
 import numpy as np
 
-from ocu.console.poses import PoseError, PoseStore
+from ocu.console.poses import MAX_NAME_LENGTH, PoseError, PoseStore
 from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
 from ocu.control.drive import DriveBounds, DriveError, scale_drive
 from ocu.control.position import PositionController, PositionError
 from ocu.kinematics.arm import ArmError, ArmKinematics, ToolPose, pitch_axis, pitch_of
+from ocu.kinematics.chain import Vector
 from ocu.model.tree import Matrix
 from ocu.model.urdf import UrdfError, load_urdf
 from ocu.profile import RobotProfile
@@ -61,6 +62,35 @@ RATE_RANGE_HZ = (5.0, 500.0)
 # Telemetry loss above this fraction makes the link diagnostics a warning.
 LOSS_WARNING = 0.2
 UNKNOWN_CAMERA = "unknown"
+# At most one line per kind of complaint and this interval: a bad publisher can send 100 Hz.
+WARNING_INTERVAL_S = 2.0
+# A text from a message (a pose name, a frame) is quoted in a log line up to this length.
+QUOTE_CHARS = 60
+
+
+class Throttle:
+    """At most one log line per key and interval (a bad publisher can send 100 Hz)."""
+
+    def __init__(self, interval_s: float = WARNING_INTERVAL_S) -> None:
+        self.interval_s = interval_s
+        self._lock = threading.Lock()
+        self._last: dict[str, float] = {}
+
+    def allow(self, key: str) -> bool:
+        now = time.monotonic()
+        with self._lock:
+            last = self._last.get(key)
+            if last is not None and now - last < self.interval_s:
+                return False
+            self._last[key] = now
+            return True
+
+
+def quoted(text: str, limit: int = QUOTE_CHARS) -> str:
+    """`text` for a log line: repr'd, cut to `limit` characters with its full length said."""
+    if len(text) <= limit:
+        return repr(text)
+    return f"{text[:limit]!r}... ({len(text)} characters)"
 
 
 class BridgeError(ValueError):
@@ -131,18 +161,83 @@ def drive_bounds(settings: BridgeSettings, limits: VelocityLimits) -> DriveBound
     )
 
 
+def bound_drive(
+    linear_m_s: float, angular_rad_s: float, bounds: DriveBounds
+) -> tuple[float, float, bool]:
+    """(v, ω) divided by one factor so that neither exceeds its maximum, and whether it was.
+
+    The same rule as `scale_drive`'s eq. 5.1-5.2, computed without overflow: v / v_max of a
+    finite but huge v (1e308 / 0.3) is infinite, which `scale_drive` reads as "a maximum of
+    zero" and stops the tracks. Non-finite speeds and zero maxima are left to `scale_drive`.
+    """
+    v, w = linear_m_s, angular_rad_s
+    if not (math.isfinite(v) and math.isfinite(w)) or (v == 0.0 and w == 0.0):
+        return v, w, False
+    v_max, w_max = bounds.max_linear_m_s, bounds.max_angular_rad_s
+    if (v != 0.0 and v_max <= 0.0) or (w != 0.0 and w_max <= 0.0):
+        return v, w, False
+    # Divided by the larger magnitude first, every quotient below is finite.
+    scale = max(abs(v), abs(w))
+    unit_v, unit_w = v / scale, w / scale
+    ratio = max(
+        abs(unit_v) / v_max if v_max > 0.0 else 0.0,
+        abs(unit_w) / w_max if w_max > 0.0 else 0.0,
+    )
+    if scale * ratio <= 1.0:
+        return v, w, False
+    return unit_v / ratio, unit_w / ratio, True
+
+
 def twist_to_drive(
     linear_x: float, angular_z: float, settings: BridgeSettings, limits: VelocityLimits
 ) -> dict[str, float]:
     """Drive channel velocities for a Twist, scaled by one factor (the turn radius kept).
 
-    Speeds below `ocu.control.drive.ZERO_EPSILON` are zero; a non-finite one is a BridgeError.
+    Speeds below `ocu.control.drive.ZERO_EPSILON` are zero; a non-finite one is a BridgeError;
+    a huge one is brought down to its maximum like any other above it.
     """
+    bounds = drive_bounds(settings, limits)
+    linear_x, angular_z, _ = bound_drive(linear_x, angular_z, bounds)
     try:
-        linear, angular = scale_drive(linear_x, angular_z, drive_bounds(settings, limits))
+        linear, angular = scale_drive(linear_x, angular_z, bounds)
     except DriveError as err:
         raise BridgeError(str(err)) from err
     return dict(zip(settings.drive, (linear, angular), strict=True))
+
+
+def bound_arm_twist(
+    linear: Sequence[float],
+    angular: Sequence[float],
+    axis: Vector,
+    max_linear_m_s: float,
+    max_pitch_rad_s: float,
+) -> tuple[list[float], bool]:
+    """A twist of tool0 as the arm's jog (vx, vy, vz, pitch rate), bounded before any
+    kinematics sees it: the linear velocity to `max_linear_m_s` (its direction kept), the
+    pitch rate (the angular velocity about `axis`, a unit vector) to ±`max_pitch_rad_s`.
+    Returns the jog and whether it was bounded; ArmError unless six finite numbers."""
+    values = [float(v) for v in (*linear, *angular)]
+    if len(values) != 6 or not all(math.isfinite(v) for v in values):
+        raise ArmError("a twist needs six finite numbers")
+    clamped = False
+    velocity = np.array(values[:3])
+    scale = float(np.max(np.abs(velocity)))
+    if scale > 0.0:
+        unit = velocity / scale  # finite whatever the scale: no overflow in the norm
+        norm = float(np.linalg.norm(unit))
+        speed = scale * norm  # may be inf: only compared
+        if speed > max_linear_m_s:
+            velocity = unit / norm * max_linear_m_s
+            clamped = True
+    spin = np.array(values[3:])
+    scale = float(np.max(np.abs(spin)))
+    pitch_rate = 0.0
+    if scale > 0.0:
+        pitch_rate = scale * float(np.dot(spin / scale, axis))  # may be ±inf: clamped next
+        if abs(pitch_rate) > max_pitch_rad_s:
+            pitch_rate = math.copysign(max_pitch_rad_s, pitch_rate)
+            clamped = True
+    return [*(float(v) for v in velocity), pitch_rate], clamped
 
 
 class CmdVelTimeout:
@@ -468,6 +563,7 @@ class BridgeCore:
                 log.warning("stored arm poses: %s", self.poses.error)
         self._arm: ArmController | None = None
         self._arm_owned = False
+        self._throttle = Throttle()
 
     # ---- life --------------------------------------------------------------------------
 
@@ -631,6 +727,19 @@ class BridgeCore:
                 )
             try:
                 drive = twist_to_drive(linear_x, angular_z, self.settings, self._limits)
+                bounds = drive_bounds(self.settings, self._limits)
+                if bound_drive(linear_x, angular_z, bounds)[2] and self._throttle.allow("cmd_vel"):
+                    linear, turn = self.settings.drive
+                    log.warning(
+                        "cmd_vel linear.x %.4g m/s, angular.z %.4g rad/s above the maxima "
+                        "(%.2f m/s, %.2f rad/s): scaled to %.3f m/s, %.3f rad/s",
+                        linear_x,
+                        angular_z,
+                        bounds.max_linear_m_s,
+                        bounds.max_angular_rad_s,
+                        drive[linear],
+                        drive[turn],
+                    )
             except BridgeError:
                 # A broken publisher is no quiet one: it does not open the gate.
                 self._last_motion_at = now
@@ -761,6 +870,12 @@ class BridgeCore:
             assert self.poses is not None
             now = self.clock()
             try:
+                if len(name) > MAX_NAME_LENGTH:
+                    # Not looked up (nor echoed whole by the store's message): no name is longer.
+                    raise PoseError(
+                        f"no stored pose is named {quoted(name)}: names are at most "
+                        f"{MAX_NAME_LENGTH} characters"
+                    )
                 goal = self.poses.get(name)
                 move = arm.plan_move(goal, now)
             except (ArmError, PoseError) as err:
@@ -793,11 +908,28 @@ class BridgeCore:
                 self._rejected += 1
                 raise
             tool = arm.kinematics.tool_matrix(current)
-            pitch_rate = float(np.dot(values[3:], pitch_axis(tool, arm.kinematics.axis_xy)))
+            settings = arm.settings
+            # Bounded here, before the kinematics: a finite 1e308 overflows the Jacobian's
+            # products into nan, and the chain refuses it in the control step.
+            jog, clamped = bound_arm_twist(
+                values[:3],
+                values[3:],
+                pitch_axis(tool, arm.kinematics.axis_xy),
+                settings.max_linear_speed_m_s,
+                settings.max_pitch_speed_rad_s,
+            )
+            if clamped and self._throttle.allow("arm twist"):
+                log.warning(
+                    "arm twist above the maxima (%.3f m/s, %.1f°/s): bounded to "
+                    "(%.3f, %.3f, %.3f) m/s, %.1f°/s",
+                    settings.max_linear_speed_m_s,
+                    math.degrees(settings.max_pitch_speed_rad_s),
+                    *jog[:3],
+                    math.degrees(jog[3]),
+                )
             if moving:
                 self._arm_takes_over()
-            timeout_s = arm.settings.twist_timeout_s
-            arm.jog([*values[:3], pitch_rate], "base", now, expires_after_s=timeout_s)
+            arm.jog(jog, "base", now, expires_after_s=settings.twist_timeout_s)
             self._update_state()
             return True
 
@@ -858,16 +990,27 @@ class BridgeCore:
                     self._send_drive(self.settings.drive_zero)
             messages: list[str] = []
             velocities: dict[str, float] = {}
+            # A controller that raises halts its own motion with the reason; the loop, the
+            # other controllers and the node go on (MoveIt Servo halts, it does not exit).
             if self._goal_channels:
-                velocities = self._controller.update(now)
+                try:
+                    velocities = self._controller.update(now)
+                except Exception as err:
+                    velocities = {}
+                    self._controller.cancel()
+                    self._controller_failed("joint goals", err)
                 for channel in self._goal_channels:
                     velocities.setdefault(channel, 0.0)
                 self._goal_channels = {
                     self._controller.channel_of(j) for j in self._controller.targets
                 }
-                messages = self._controller.pop_messages()
+                messages += self._controller.pop_messages()
             if self._arm is not None and (self._arm_owned or self._arm.active):
-                arm_velocities = self._arm.update(now)
+                try:
+                    arm_velocities = self._arm.update(now)
+                except Exception as err:
+                    arm_velocities = {}
+                    self._arm.stop(self._controller_failed("arm", err))
                 for channel in self._arm.channels:
                     velocities[channel] = arm_velocities.get(channel, 0.0)
                 self._arm_owned = self._arm.active
@@ -878,6 +1021,29 @@ class BridgeCore:
                 self._controller.note_sent(now, {**self._drive, **velocities})
             self._update_state()
             return messages
+
+    def _controller_failed(self, what: str, err: Exception) -> str:
+        """Log (throttled) that a controller raised and was stopped; returns the reason."""
+        reason = f"the {what} controller failed ({type(err).__name__}: {err})"
+        if self._throttle.allow(f"failed {what}"):
+            log.error("%s: %s stopped, ROS control goes on", reason, what, exc_info=err)
+        return reason
+
+    def halt(self, reason: str) -> list[str]:
+        """Zero everything ROS moves and drop its goals, keeping control (the next command is
+        obeyed); returns the channels zeroed. For a failure in the host's loop."""
+        with self._lock:
+            stopped = self._owned_channels() if self._in_control else []
+            if stopped:
+                assert self._sink is not None
+                self._sink.set_velocities(**dict.fromkeys(stopped, 0.0))
+                self._controller.note_sent(self.clock(), {})
+            if self._in_control:
+                self._release()
+                self._update_state()
+        if stopped:
+            log.error("ROS motion halted (%s): %s zeroed", reason, ", ".join(stopped))
+        return stopped
 
     def _send_drive(self, drive: dict[str, float]) -> None:
         assert self._sink is not None

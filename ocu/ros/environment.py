@@ -76,12 +76,39 @@ def master_uri() -> str:
 
 def master_online(uri: str | None = None, timeout_s: float = 1.0) -> bool:
     """Whether a ROS master answers at `uri` ($ROS_MASTER_URI if None); ROS not needed."""
+    return master_pid(uri, timeout_s) is not None
+
+
+def master_pid(uri: str | None = None, timeout_s: float = 1.0) -> int | None:
+    """The process id of the ROS master at `uri` (a restarted master has another), None
+    when none answers."""
     proxy = xmlrpc.client.ServerProxy(uri or master_uri(), transport=_TimeoutTransport(timeout_s))
     try:
         reply = proxy.getPid("/ocu_probe")
     except (OSError, xmlrpc.client.Error, ValueError):
-        return False
+        return None
     finally:
         proxy("close")()
     # ROS master API: [code, status message, pid], code 1 = success.
-    return isinstance(reply, list) and len(reply) == 3 and reply[0] == 1
+    if isinstance(reply, list) and len(reply) == 3 and reply[0] == 1:
+        return int(reply[2])
+    return None
+
+
+def master_knows(
+    node_name: str, node_uri: str, uri: str | None = None, timeout_s: float = 1.0
+) -> bool | None:
+    """Whether the master at `uri` has `node_name` registered at `node_uri`; None when the
+    master does not answer. A restarted master has forgotten every node (rospy does not
+    register again): False."""
+    proxy = xmlrpc.client.ServerProxy(uri or master_uri(), transport=_TimeoutTransport(timeout_s))
+    try:
+        reply = proxy.lookupNode("/ocu_probe", node_name)
+    except (OSError, xmlrpc.client.Error, ValueError):
+        return None
+    finally:
+        proxy("close")()
+    if not (isinstance(reply, list) and len(reply) == 3):
+        return None
+    # [1, status, uri] when known; [-1, "unknown node", ""] when not.
+    return reply[0] == 1 and str(reply[2]).rstrip("/") == node_uri.rstrip("/")

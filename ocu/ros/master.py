@@ -30,8 +30,11 @@ def free_port() -> int:
 class RosMaster:
     """`roscore -p PORT` as a child process; `env` holds what a ROS process needs to use it."""
 
-    def __init__(self, work_dir: Path, start_timeout_s: float = START_TIMEOUT_S) -> None:
-        self.port = free_port()
+    def __init__(
+        self, work_dir: Path, start_timeout_s: float = START_TIMEOUT_S, *, port: int | None = None
+    ) -> None:
+        """`port`: a given one (a master restarted where the old one was), else a free one."""
+        self.port = free_port() if port is None else port
         self.uri = f"http://127.0.0.1:{self.port}"
         home = work_dir / "ros_home"
         logs = work_dir / "ros_log"

@@ -5,7 +5,9 @@
     ocu-ros _robot:=10.0.0.5:10000 _twist_stamped:=true
 
 SIGINT and SIGTERM (and a shutdown asked through ROS) stop the bridge, then shut the link
-down, which sends zeros last, then stop the built-in simulator.
+down, which sends zeros last, then stop the built-in simulator. So does a restart of the ROS
+master, which rospy cannot survive (the new master knows none of the node's topics): the node
+then exits with status 3 for a supervisor (roslaunch's respawn) to start it again.
 """
 
 from __future__ import annotations
@@ -33,13 +35,21 @@ from ocu.ros.bridge import (
     BridgeError,
     BridgeSettings,
 )
-from ocu.ros.environment import master_online, master_uri, missing_ros
+from ocu.ros.environment import (
+    master_knows,
+    master_online,
+    master_pid,
+    master_uri,
+    missing_ros,
+)
 
 log = logging.getLogger("ocu.ros")
 
 NODE_NAME = "ocu_ros"
 MASTER_POLL_S = 0.5
 STOP_POLL_S = 0.5
+# The exit status when the ROS master restarted under the node (it must be started again).
+EXIT_MASTER_RESTARTED = 3
 
 PARAMETERS = """\
 private parameters (set with _name:=value, a launch file or rosparam):
@@ -59,12 +69,16 @@ private parameters (set with _name:=value, a launch file or rosparam):
                     arm_poses.toml in $OCU_CONFIG_DIR or ~/.config/ocu
 
 topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose, follow_path
-(nav_msgs/Path in odom), scan (when the robot sends none) in; joint_states, camera/compressed,
-camera/<name>/image/compressed, arm/tool_pose, odom, /tf (odom -> base_link, base_link ->
-tool0), scan (when the robot sends ranges), /diagnostics out (see docs/ros.md and docs/arm.md)
+(nav_msgs/Path in odom), scan (placed by frame_id; /tf, /tf_static) in; joint_states,
+camera/compressed, camera/<name>/image/compressed, arm/tool_pose, odom, /tf (odom ->
+base_link, base_link -> tool0), scan (when the robot sends ranges), /diagnostics out (see
+docs/ros.md and docs/arm.md)
 
 _name:=value arguments hold for this run only: the node puts back (or deletes) what they
 replaced on the parameter server when it exits.
+
+exit status: 0 stopped by a signal or ROS, 1 the robot or the simulator could not be used,
+2 a bad parameter, 3 the ROS master restarted (restart the node: roslaunch respawn="true")
 """
 
 
@@ -313,6 +327,61 @@ class SignalStop(threading.Event):
             log.info("%s: shutting down", self.signal_name)
 
 
+class MasterWatch:
+    """Notices that the ROS master restarted: another master process answers at its URI, or
+    the master answers without this node.
+
+    rospy registers a node's topics once, at start; a new master knows none of them, so no
+    new publisher can reach the node (its existing connections go on). The node cannot
+    register again, so it says so and exits for a supervisor to restart it.
+    """
+
+    def __init__(self) -> None:
+        import rospy
+
+        self.name = rospy.get_name()
+        self.uri = rospy.get_node_uri() or ""
+        self._pid = master_pid()
+        self._registered = False
+        self._silent = False
+
+    def restarted(self) -> bool:
+        """Poll the master (two calls of at most 1 s); True once it restarted."""
+        pid = master_pid()
+        known = master_knows(self.name, self.uri) if pid is not None else None
+        if pid is None or known is None:
+            if not self._silent:
+                self._silent = True
+                log.warning(
+                    "the ROS master at %s does not answer: connected topics go on, new "
+                    "publishers cannot find this node until it is back",
+                    master_uri(),
+                )
+            return False
+        if self._silent:
+            self._silent = False
+            log.info("the ROS master answers again")
+        if self._pid is None:
+            self._pid = pid
+        if known:
+            self._registered = True
+        # Unknown right after start: rospy registers from a thread of its own, a moment later.
+        if pid == self._pid and (known or not self._registered):
+            return False
+        log.error(
+            "the ROS master at %s restarted (pid %d, was %d) and no longer knows %s: new "
+            "publishers cannot reach it and rospy cannot register again; stopping the robot "
+            "and exiting with status %d for a supervisor to restart the node (roslaunch: "
+            'respawn="true")',
+            master_uri(),
+            pid,
+            self._pid,
+            self.name,
+            EXIT_MASTER_RESTARTED,
+        )
+        return True
+
+
 def _wait_for_master(stop: threading.Event) -> bool:
     uri = master_uri()
     told = False
@@ -415,9 +484,12 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         bridge.start(link, limits)
         link.start()
         log.info("commanding %s:%d; SIGINT or SIGTERM stops the robot and exits", *robot)
+        master = MasterWatch()
         while not stop.wait(STOP_POLL_S):
             if bridge.failed.is_set():
                 return 1
+            if master.restarted():
+                return EXIT_MASTER_RESTARTED
         if isinstance(stop, SignalStop):
             stop.log_reason()
         return 0

@@ -26,7 +26,9 @@ With a Navigator (driving with a map, ocu.nav.navigator):
 
 - out `odom` nav_msgs/Odometry (frame `odom`, child `base_link`) and `/tf` odom -> base_link
 - out `scan` sensor_msgs/LaserScan, when the robot sends range scans
-- in  `scan` another node's LaserScan, for the safety zones while the robot sends none
+- in  `scan` other nodes' LaserScans for the safety zones, each publisher and frame a source
+  of its own, placed by its frame (`base_link`, or a frame linked to it on /tf, /tf_static)
+- in  `/tf`, `/tf_static` other nodes' transforms, to place their scans
 - in  `follow_path` nav_msgs/Path in `odom`: the path mode (Samson's controller) follows it;
   a cmd_vel, the operator, LINK LOST or stale odometry ends it
 """
@@ -65,15 +67,18 @@ from ocu.ros.bridge import (
     BridgeState,
     DiagnosticReport,
     StateCallback,
+    Throttle,
     VelocitySink,
     bridge_report,
     camera_name,
     joint_state,
     link_report,
     quaternion_xyzw,
+    quoted,
 )
 from ocu.ros.environment import ensure_ros_path
 from ocu.ros.navigation import (
+    FrameTree,
     GuardedSink,
     NavigationError,
     laser_scan_data,
@@ -110,12 +115,12 @@ TWIST_CMD_TOPIC = "arm/twist_cmd"
 NAMED_POSE_TOPIC = "arm/named_pose"
 TOOL_POSE_TOPIC = "arm/tool_pose"
 TF_TOPIC = "/tf"
+TF_STATIC_TOPIC = "/tf_static"
 ODOM_TOPIC = "odom"
 SCAN_TOPIC = "scan"
 FOLLOW_PATH_TOPIC = "follow_path"
 ODOM_PERIOD_S = 0.05
 DIAGNOSTICS_PERIOD_S = 1.0
-WARNING_INTERVAL_S = 2.0
 STOP_JOIN_TIMEOUT_S = 5.0
 
 
@@ -138,6 +143,29 @@ def init_node(
         root.setLevel(level)
 
 
+class Schedule:
+    """A periodic task on a faster loop: due once per period on average. Moving the next
+    time from the last one (not from `now`) keeps the rate when the loop's tick does not
+    divide the period (a 20 Hz topic on a 50 Hz loop was 16.7 Hz: every third tick)."""
+
+    def __init__(self, period_s: float, start: float) -> None:
+        self.period_s = period_s
+        self._next = start
+
+    def due(self, now: float) -> bool:
+        if now < self._next:
+            return False
+        # After a stall, start again from now rather than firing a burst to catch up.
+        self._next = max(self._next + self.period_s, now - self.period_s / 2.0)
+        return True
+
+
+def _caller(message: Any) -> str:
+    """The node that published a message (its connection header's callerid)."""
+    header = getattr(message, "_connection_header", None) or {}
+    return str(header.get("callerid", ""))
+
+
 def _stamp(wall_time: float) -> Any:
     return rospy.Time.from_sec(wall_time)
 
@@ -150,22 +178,6 @@ def _diagnostic_status(report: DiagnosticReport) -> Any:
     status.hardware_id = report.hardware_id
     status.values = [KeyValue(key=key, value=value) for key, value in report.values]
     return status
-
-
-class _Throttle:
-    """At most one log line per key and interval (a bad publisher can send 100 Hz)."""
-
-    def __init__(self, interval_s: float) -> None:
-        self.interval_s = interval_s
-        self._last: dict[str, float] = {}
-
-    def allow(self, key: str) -> bool:
-        now = time.monotonic()
-        last = self._last.get(key)
-        if last is not None and now - last < self.interval_s:
-            return False
-        self._last[key] = now
-        return True
 
 
 class _Publishers:
@@ -260,7 +272,9 @@ class RosBridge:
         self._stop = threading.Event()
         # Set when the bridge thread died; the node then exits (the console shows "off").
         self.failed = threading.Event()
-        self._throttle = _Throttle(WARNING_INTERVAL_S)
+        self._throttle = Throttle()
+        # Other nodes' transforms, to place their scans by frame.
+        self.frames = FrameTree()
 
     # ---- life --------------------------------------------------------------------------
 
@@ -302,7 +316,9 @@ class RosBridge:
                 ]
             if navigator is not None:
                 self._subscribers += [
-                    rospy.Subscriber(SCAN_TOPIC, LaserScan, self._on_scan, queue_size=1),
+                    rospy.Subscriber(SCAN_TOPIC, LaserScan, self._on_scan, queue_size=10),
+                    rospy.Subscriber(TF_TOPIC, TFMessage, self._on_tf, queue_size=50),
+                    rospy.Subscriber(TF_STATIC_TOPIC, TFMessage, self._on_tf, queue_size=50),
                     rospy.Subscriber(FOLLOW_PATH_TOPIC, Path, self._on_follow_path, queue_size=1),
                 ]
             self._stop.clear()
@@ -409,14 +425,17 @@ class RosBridge:
         self._publish(publishers.scan, message)
 
     def _on_scan(self, message: Any) -> None:
-        """Another node's scan: the zones use it while the robot sends none of its own."""
+        """Another node's scan: a source of its own (publisher and frame) for the zones,
+        placed on the chassis by its frame."""
         navigator = self.navigator
-        if navigator is None or navigator.robot_scans():
+        if navigator is None:
             return
-        header = getattr(message, "_connection_header", None) or {}
-        if header.get("callerid") == rospy.get_name():
+        caller = _caller(message)
+        if caller == rospy.get_name():
             return  # our own robot's scan coming back
+        frame = str(message.header.frame_id)
         try:
+            mount = self.frames.mount(frame)
             scan = scan_from_ros(
                 angle_min=float(message.angle_min),
                 angle_increment=float(message.angle_increment),
@@ -427,10 +446,28 @@ class RosBridge:
                 wall_time=message.header.stamp.to_sec() or time.time(),
             )
         except NavigationError as err:
-            if self._throttle.allow("scan"):
-                log.warning("scan ignored: %s", err)
+            if self._throttle.allow(f"scan {caller[:80]}"):
+                log.warning("scan from %s ignored: %s", quoted(caller), err)
             return
-        navigator.on_scan(scan)
+        source = f"{caller or 'an unnamed publisher'} in {frame.lstrip('/')[:80]}"
+        navigator.on_scan(mount.place(scan), source=source, mount_xy_m=(mount.x_m, mount.y_m))
+
+    def _on_tf(self, message: Any) -> None:
+        """Other nodes' transforms (our own odom and tool0 are not needed to place scans)."""
+        if _caller(message) == rospy.get_name():
+            return
+        for transform in message.transforms:
+            t, r = transform.transform.translation, transform.transform.rotation
+            try:
+                self.frames.set(
+                    str(transform.header.frame_id),
+                    str(transform.child_frame_id),
+                    (t.x, t.y, t.z),
+                    (r.x, r.y, r.z, r.w),
+                )
+            except NavigationError as err:
+                if self._throttle.allow("tf"):
+                    log.warning("transform from %s ignored: %s", quoted(_caller(message)), err)
 
     def _on_follow_path(self, message: Any) -> None:
         try:
@@ -439,7 +476,8 @@ class RosBridge:
                 [(p.pose.position.x, p.pose.position.y) for p in message.poses],
             )
         except NavigationError as err:
-            log.error("%s", err)
+            if self._throttle.allow("follow_path"):
+                log.error("%s", err)
             return
         if self.on_path is not None:
             self.on_path(points)
@@ -451,8 +489,9 @@ class RosBridge:
             return
         try:
             navigator.start_path(points, external=True)
-        except ValueError as err:
-            log.error("follow_path refused: %s", err)
+        except (ValueError, ArithmeticError) as err:
+            if self._throttle.allow("follow_path"):
+                log.error("follow_path refused: %s", err)
             return
         self._path_running = True
         log.info("follow_path: %d poses in odom, path mode started", len(points))
@@ -596,6 +635,8 @@ class RosBridge:
         if self.navigator is not None:
             # What the safety zones do now ("zones off: no range data", "slowed: ...").
             bridge.values.append(KeyValue(key="safety zones", value=self.navigator.zones.text))
+            sources = ", ".join(self.navigator.scan_sources()) or "none"
+            bridge.values.append(KeyValue(key="scan sources", value=sources))
         message.status = [
             _diagnostic_status(link_report(link.state, link.stats(), self.hardware_id)),
             bridge,
@@ -650,7 +691,9 @@ class RosBridge:
         frame = str(header.frame_id).lstrip("/")
         if frame and frame != base:
             if self._throttle.allow(topic):
-                log.error("%s rejected: frame %r, only %r is understood", topic, frame, base)
+                log.error(
+                    "%s rejected: frame %s, only %r is understood", topic, quoted(frame), base
+                )
             return False
         return True
 
@@ -674,12 +717,14 @@ class RosBridge:
         )
 
     def _on_named_pose(self, message: Any) -> None:
+        name = str(message.data)
         try:
-            self.core.on_named_pose(str(message.data))
+            self.core.on_named_pose(name)
         except ArmError as err:
-            log.error("named pose %r rejected: %s", message.data, err)
+            if self._throttle.allow(NAMED_POSE_TOPIC):
+                log.error("named pose rejected: %s", err)
             return
-        log.info("moving the arm to %s", message.data)
+        log.info("moving the arm to %s", name)
 
     def _on_arm_twist(self, message: Any) -> None:
         if not self._frame_ok(message.header, TWIST_CMD_TOPIC):
@@ -712,18 +757,26 @@ class RosBridge:
         period_s = 1.0 / self.settings.rate_hz
         next_step = time.monotonic()
         next_diagnostics = next_step
-        next_odometry = next_step
+        odometry = Schedule(ODOM_PERIOD_S, next_step)
         link = self._link
         while not self._stop.is_set():
             now = time.monotonic()
             if self.heartbeat and link is not None:
                 link.heartbeat()
-            self._step_navigation(now)
-            for text in self.core.step(now):
-                log.info("%s", text)
-            if now >= next_odometry:
-                next_odometry = now + ODOM_PERIOD_S
-                self.publish_odometry()
+            try:
+                self._step_navigation(now)
+                for text in self.core.step(now):
+                    log.info("%s", text)
+                if odometry.due(now):
+                    self.publish_odometry()
+            except Exception as err:
+                # One failing step halts what ROS moves, with the reason; the loop (the
+                # cmd_vel timeout, the heartbeat) and the node go on serving.
+                self._stop_path()
+                reason = f"{type(err).__name__}: {err}"
+                if self._throttle.allow("loop"):
+                    log.exception("ROS bridge step failed (%s)", reason)
+                self.core.halt(f"the bridge's step failed: {reason}")
             if now >= next_diagnostics:
                 next_diagnostics = now + DIAGNOSTICS_PERIOD_S
                 try:

@@ -93,8 +93,14 @@ class NodeProcess:
     """`python -m ocu.ros.node` as a child with a unique node name; output kept in a file."""
 
     def __init__(
-        self, work_dir: Path, robot: tuple[str, int], *args: str, name: str | None = None
+        self,
+        work_dir: Path,
+        robot: tuple[str, int],
+        *args: str,
+        name: str | None = None,
+        env: dict[str, str] | None = None,
     ) -> None:
+        """`env`: variables over this process's (another master's ROS_MASTER_URI)."""
         self.name = name or f"ocu_ros_test_{next(_names)}"
         self.log_path = work_dir / f"{self.name}_{next(_names)}.log"
         command = [
@@ -111,7 +117,7 @@ class NodeProcess:
             stdin=subprocess.DEVNULL,
             stdout=self._log,
             stderr=subprocess.STDOUT,
-            env=dict(os.environ, PYTHONUNBUFFERED="1"),
+            env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})),
         )
 
     def output(self) -> str:

@@ -23,11 +23,13 @@ from ocu.ros.bridge import (
     CmdVelTimeout,
     DiagnosticLevel,
     LinkGate,
+    bound_arm_twist,
     bridge_report,
     camera_name,
     joint_state,
     link_report,
     quaternion_xyzw,
+    quoted,
     rotation_of,
     twist_to_drive,
 )
@@ -662,3 +664,126 @@ def test_arm_goals_and_twists_stop_when_the_link_is_lost(
     assert sink.current["waist"] == 0.0
     with pytest.raises(ArmError, match="no stored pose 'dance'"):
         core.on_named_pose("dance")
+
+
+# ---- hostile values: bounded before anything computes with them ---------------------------
+
+
+@pytest.mark.parametrize(
+    ("linear", "angular", "expected"),
+    [
+        (1e308, 0.0, (0.3, 0.0)),  # was a stop: 1e308 / 0.3 overflowed to "a zero maximum"
+        (-1e308, 0.0, (-0.3, 0.0)),
+        (0.0, -1e308, (0.0, -0.8)),
+        (1e308, 1e308, (0.3, 0.3)),  # the ratio (the turn radius) kept
+        (5e307, -1e308, (0.3, -0.6)),  # v/0.3 dominates w/0.8
+    ],
+)
+def test_a_huge_cmd_vel_is_clamped_to_the_maxima_and_logged(
+    core: BridgeCore,
+    *,
+    sink: Sink,
+    caplog: pytest.LogCaptureFixture,
+    linear: float,
+    angular: float,
+    expected: tuple[float, float],
+) -> None:
+    caplog.set_level(logging.WARNING, logger="ocu.ros")
+    drive = core.on_cmd_vel(linear, angular)
+    assert drive is not None
+    assert (drive[DRIVE_LINEAR], drive[DRIVE_TURN]) == pytest.approx(expected)
+    assert sink.current == drive
+    assert "above the maxima (0.30 m/s, 0.80 rad/s): scaled to" in caplog.text
+    # Throttled: a publisher at 100 Hz gets one line per interval.
+    for _ in range(50):
+        core.on_cmd_vel(linear, angular)
+    assert caplog.text.count("above the maxima") == 1
+
+
+@pytest.mark.parametrize("value", [1e308, -1e308, 1e200])
+def test_a_huge_arm_twist_is_bounded_before_the_kinematics(
+    core: BridgeCore,
+    *,
+    sink: Sink,
+    clock: Clock,
+    profile: RobotProfile,
+    caplog: pytest.LogCaptureFixture,
+    value: float,
+) -> None:
+    assert profile.arm is not None
+    caplog.set_level(logging.WARNING, logger="ocu.ros")
+    limits = VelocityLimits(profile)
+    core.on_telemetry(_arm_readings(profile.arm.poses["ready"]), clock.now, 0.05)
+    for twist in [((value, 0.0, 0.0), (0.0, 0.0, 0.0)), ((0.0, 0.0, 0.0), (0.0, value, value))]:
+        for _ in range(5):
+            assert core.on_arm_twist(*twist) is True
+            clock.now += 0.02
+            core.step()  # the old code raised ChainError here: joint values must be finite
+            arm = {c: sink.current[c] for c in ("waist", "shoulder", "elbow", "neck")}
+            assert all(abs(v) <= limits.get(c) for c, v in arm.items()), arm
+        assert state_of(core) is BridgeState.COMMANDING
+        core.on_arm_twist((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert "arm twist above the maxima (0.150 m/s" in caplog.text
+
+
+def test_bound_arm_twist_keeps_the_direction_and_the_pitch_sign() -> None:
+    axis = np.array([0.0, -1.0, 0.0])
+    jog, clamped = bound_arm_twist((3e307, 4e307, 0.0), (0.0, -1e308, 0.0), axis, 0.15, 0.5)
+    assert clamped
+    assert jog == pytest.approx([0.09, 0.12, 0.0, 0.5])
+    jog, clamped = bound_arm_twist((0.01, 0.0, 0.0), (0.0, 0.2, 0.0), axis, 0.15, 0.5)
+    assert not clamped
+    assert jog == pytest.approx([0.01, 0.0, 0.0, -0.2])
+    with pytest.raises(ArmError, match="six finite numbers"):
+        bound_arm_twist((math.inf, 0.0, 0.0), (0.0, 0.0, 0.0), axis, 0.15, 0.5)
+
+
+def test_a_controller_that_raises_halts_its_motion_and_the_core_goes_on(
+    core: BridgeCore,
+    *,
+    sink: Sink,
+    clock: Clock,
+    profile: RobotProfile,
+    caplog: pytest.LogCaptureFixture,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    assert profile.arm is not None
+    core.on_telemetry(_arm_readings(profile.arm.poses["ready"]), clock.now, 0.05)
+    core.on_cmd_vel(0.25, 0.0)
+    core.on_arm_twist((0.0, 0.05, 0.0), (0.0, 0.0, 0.0))
+    clock.now += 0.02
+    core.step()
+    assert sink.current["waist"] > 0.0
+    arm = core._arm
+    assert arm is not None
+
+    def broken(now: float) -> dict[str, float]:
+        raise FloatingPointError("a fault injected into the arm's control step")
+
+    monkeypatch.setattr(arm, "update", broken)
+    clock.now += 0.02
+    core.step()  # does not raise
+    assert all(sink.current[c] == 0.0 for c in ("waist", "shoulder", "elbow", "neck"))
+    assert sink.current[DRIVE_LINEAR] == 0.25  # the other controllers go on
+    assert "the arm controller failed (FloatingPointError: a fault injected" in caplog.text
+    monkeypatch.undo()
+    assert core.on_arm_twist((0.0, 0.05, 0.0), (0.0, 0.0, 0.0)) is True
+    clock.now += 0.02
+    core.step()
+    assert sink.current["waist"] > 0.0
+
+
+def test_a_long_pose_name_is_refused_without_being_looked_up_or_echoed(
+    core: BridgeCore, sink: Sink, clock: Clock, profile: RobotProfile
+) -> None:
+    assert profile.arm is not None
+    core.on_telemetry(_arm_readings(profile.arm.poses["ready"]), clock.now, 0.05)
+    with pytest.raises(ArmError) as info:
+        core.on_named_pose("x" * 1_000_000)
+    assert len(str(info.value)) < 200
+    assert "(1000000 characters)" in str(info.value)
+
+
+def test_quoted_cuts_long_texts() -> None:
+    assert quoted("base_link") == "'base_link'"
+    assert quoted("y" * 500) == repr("y" * 60) + "... (500 characters)"

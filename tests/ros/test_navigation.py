@@ -15,14 +15,16 @@ import pytest
 
 from ocu.control.commands import CommandMapper
 from ocu.nav.geometry import Pose
-from ocu.nav.navigator import ZONES_OFF_NO_DATA, Navigator
+from ocu.nav.navigator import ZONES_BLIND, ZONES_OFF_NO_DATA, Navigator
 from ocu.nav.world import load_world, parse_world
 from ocu.profile import RobotProfile
 from ocu.records import ScanFrame
 from ocu.ros.master import RosMaster
 from ocu.ros.navigation import (
+    FrameTree,
     GuardedSink,
     NavigationError,
+    PlanarMount,
     odometry_data,
     path_points,
     quaternion_yaw,
@@ -83,6 +85,16 @@ def test_scans_and_paths_from_other_nodes() -> None:
             received_at=0.0,
             wall_time=0.0,
         )
+    with pytest.raises(NavigationError, match="1000000 beams, at most 4096"):
+        scan_from_ros(
+            angle_min=0.0,
+            angle_increment=1e-6,
+            range_min=0.1,
+            range_max=5.0,
+            ranges=[1.0] * 1_000_000,
+            received_at=0.0,
+            wall_time=0.0,
+        )
     assert path_points("/odom", [(1, 2)]) == [(1.0, 2.0)]
     with pytest.raises(NavigationError, match="the path is in 'map'; give it in 'odom'"):
         path_points("map", [(1, 2)])
@@ -113,6 +125,140 @@ def test_the_guarded_sink_slows_a_steady_command_as_the_wall_nears(profile: Robo
     navigator.on_scan(wall(0.02))
     guarded.refresh()
     assert sink.calls[-1] == {"drive_linear": 0.0, "drive_turn": 0.0}
+
+
+def wall_scan(gap_m: float, at: float) -> ScanFrame:
+    """A noiseless scan of a wall `gap_m` beyond the footprint's front (0.62 m; the
+    simulated sensor measures 0.05 m short)."""
+    x = 0.67 + gap_m
+    world = parse_world({"wall": [{"from_m": [x, -3.0], "to_m": [x, 3.0]}]})
+    packet = RangeSensor(world, RangeSensorConfig(noise_m=0.0)).sweep(Pose(0, 0, 0), 0)
+    return ScanFrame.from_packet(packet, at, 0.0)
+
+
+def clear_scan(at: float) -> ScanFrame:
+    return scan_from_ros(
+        angle_min=-math.pi,
+        angle_increment=math.tau / 8,
+        range_min=0.1,
+        range_max=5.0,
+        ranges=[math.inf] * 8,
+        received_at=at,
+        wall_time=0.0,
+    )
+
+
+def test_the_nearest_obstacle_of_every_fresh_source_counts(profile: RobotProfile) -> None:
+    now = [0.0]
+    navigator = Navigator(profile, clock=lambda: now[0], grid=False)
+    # Two publishers alternate: one sees the wall 2 cm ahead, the other nothing. The latest
+    # scan used to win, and every other one let the robot drive into the wall.
+    for _ in range(10):
+        now[0] += 0.05
+        navigator.on_scan(wall_scan(0.02, now[0]), source="/laser in base_link")
+        assert navigator.guard(0.3, 0.0).decision.stopped  # type: ignore[union-attr]
+        now[0] += 0.05
+        navigator.on_scan(clear_scan(now[0]), source="/ghost in base_link")
+        state = navigator.guard(0.3, 0.0)
+        assert state.decision is not None
+        assert state.decision.stopped, state.text
+    assert navigator.scan_sources() == ["/ghost in base_link", "/laser in base_link"]
+    # Backing away from the wall is never held back.
+    backwards = navigator.guard(-0.2, 0.0).decision
+    assert backwards is not None
+    assert (backwards.linear_m_s, backwards.limited) == (-0.2, False)
+
+
+def test_a_silent_source_holds_the_drive_to_the_creep_and_fresh_obstacles_still_stop(
+    profile: RobotProfile,
+) -> None:
+    now = [0.0]
+    navigator = Navigator(profile, clock=lambda: now[0], grid=False)
+    navigator.on_scan(clear_scan(now[0]), source="/front")
+    navigator.on_scan(clear_scan(now[0]), source="/rear")
+    assert navigator.guard(0.3, 0.0).decision.linear_m_s == 0.3  # type: ignore[union-attr]
+    # The rear laser stops; the front one goes on: creep (a source fell silent)...
+    for _ in range(8):
+        now[0] += 0.1
+        navigator.on_scan(clear_scan(now[0]), source="/front")
+    state = navigator.guard(0.3, 0.0)
+    assert state.blind
+    assert state.decision is not None
+    assert state.decision.linear_m_s == pytest.approx(0.2)
+    assert state.text == f"{ZONES_BLIND}: at most 0.20 m/s (/rear silent)"
+    # ...and the front one's wall still stops the robot.
+    navigator.on_scan(wall_scan(0.02, now[0]), source="/front")
+    state = navigator.guard(0.3, 0.0)
+    assert state.decision is not None
+    assert state.decision.stopped
+    assert state.text.startswith("stopped: obstacle")
+
+
+def test_staleness_counts_from_arrival_not_from_the_estimated_capture(
+    profile: RobotProfile,
+) -> None:
+    now = [10.0]
+    navigator = Navigator(profile, clock=lambda: now[0], grid=False)
+    navigator.on_round_trip(0.4)  # a slow link: the scan was taken 0.2 s before it arrived
+    navigator.on_scan(clear_scan(now[0]))
+    now[0] += 0.45  # the old rule (age from capture, 0.65 s) was blind here
+    assert not navigator.guard(0.3, 0.0).blind
+    now[0] += 0.06
+    assert navigator.guard(0.3, 0.0).blind
+
+
+def test_frames_place_scans_on_the_chassis() -> None:
+    frames = FrameTree()
+    assert frames.mount("base_link") == PlanarMount(0.0, 0.0, 0.0)
+    assert frames.mount("/base_link") == PlanarMount(0.0, 0.0, 0.0)
+    with pytest.raises(NavigationError, match="frame 'laser' is unknown"):
+        frames.mount("laser")
+    with pytest.raises(NavigationError, match="no frame_id"):
+        frames.mount("")
+    # A rear laser 0.3 m behind the centre on a 0.1 m high plate, facing backwards.
+    frames.set("base_link", "plate", (-0.3, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0))
+    half_turn = (0.0, 0.0, 1.0, 0.0)
+    frames.set("plate", "rear_laser", (0.0, 0.05, 0.0), half_turn)
+    mount = frames.mount("rear_laser")
+    assert (mount.x_m, mount.y_m, abs(mount.yaw_rad)) == pytest.approx((-0.3, 0.05, math.pi))
+    # Its beam straight ahead (angle 0) points backwards on the chassis.
+    scan = mount.place(clear_scan(0.0))
+    assert abs(scan.angle_min_rad) == pytest.approx(0.0, abs=1e-12)
+    # A frame tilted 90° (a laser looking at the floor) is no planar scan of the floor.
+    tilt = math.radians(90.0) / 2.0
+    frames.set("base_link", "down", (0.5, 0.0, 0.3), (0.0, math.sin(tilt), 0.0, math.cos(tilt)))
+    with pytest.raises(NavigationError, match="tilted 90°"):
+        frames.mount("down")
+    frames.set("a", "b", (0, 0, 0), (0, 0, 0, 1))
+    frames.set("b", "a", (0, 0, 0), (0, 0, 0, 1))
+    with pytest.raises(NavigationError, match="loops"):
+        frames.mount("a")
+    with pytest.raises(NavigationError, match="finite"):
+        frames.set("base_link", "x", (math.nan, 0, 0), (0, 0, 0, 1))
+
+
+def test_a_rear_laser_sees_a_wall_behind(profile: RobotProfile) -> None:
+    now = [0.0]
+    navigator = Navigator(profile, clock=lambda: now[0], grid=False)
+    frames = FrameTree()
+    frames.set("base_link", "rear_laser", (0.0, 0.0, 0.2), (0.0, 0.0, 1.0, 0.0))
+    mount = frames.mount("rear_laser")
+    # The rear laser's own view: the wall 2 cm behind the robot is "ahead" of it.
+    seen = wall_scan(0.02 + 0.36 - 0.62, now[0])
+    navigator.on_scan(mount.place(seen), source="/rear", mount_xy_m=(mount.x_m, mount.y_m))
+    backwards = navigator.guard(-0.2, 0.0).decision
+    assert backwards is not None
+    assert backwards.stopped
+    assert navigator.guard(0.3, 0.0).decision.linear_m_s == 0.3  # type: ignore[union-attr]
+
+
+def test_paths_far_away_are_refused_not_overflowed(profile: RobotProfile) -> None:
+    with pytest.raises(NavigationError, match=r"pose 1 at \(1e\+308, 0\) m is not within"):
+        path_points("odom", [(1.0, 0.0), (1e308, 0.0)])
+    long_frame = "f" * 1_000_000
+    with pytest.raises(NavigationError) as info:
+        path_points(long_frame, [(1.0, 0.0)])
+    assert len(str(info.value)) < 200
 
 
 # ---- the node ----------------------------------------------------------------------------
@@ -185,7 +331,7 @@ def test_the_node_publishes_odom_tf_and_scan_and_follows_a_path(
         sim.stop()
     assert code == 0, process.output()
     assert "follow_path: 2 poses in odom, path mode started" in process.output()
-    assert "path done" in process.output()
+    assert "path done" in process.output(), process.output()
 
 
 @pytest.mark.slow

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
@@ -127,7 +128,7 @@ def test_start_twice_is_refused_and_stop_is_idempotent(
     assert state_of(bridge) is BridgeState.OFF
 
 
-def test_a_failing_bridge_loop_stops_ros_control(
+def test_a_failing_bridge_step_halts_ros_motion_and_the_bridge_goes_on(
     link: UdpLink,
     sim: RobotSimulator,
     ros_client: None,
@@ -142,17 +143,29 @@ def test_a_failing_bridge_loop_stops_ros_control(
     try:
         bridge.core.on_cmd_vel(0.3, 0.0)
         assert sim.wait_until(lambda s: not drive_stopped(s), 5.0)
+        step = bridge.core.step
+        failing = threading.Event()
+        failing.set()
 
         def broken(now: float | None = None) -> list[str]:
-            raise RuntimeError("boom")
+            if failing.is_set():
+                failing.clear()
+                raise RuntimeError("boom")
+            return step(now)
 
         monkeypatch.setattr(bridge.core, "step", broken)
-        assert bridge.failed.wait(5.0)
-        assert sim.wait_until(drive_stopped, 2.0)
-        assert state_of(bridge) is BridgeState.OFF
-        assert "ROS bridge loop failed" in caplog.text
+        assert sim.wait_until(drive_stopped, 2.0)  # halted with the reason...
+        assert not failing.is_set()
+        halted = "ROS motion halted (the bridge's step failed: RuntimeError: boom)"
+        assert wait_for(lambda: halted in caplog.text, 2.0)  # logged just after the zeros
+        # ...and still serving: not failed, in control, the next command drives.
+        assert not bridge.failed.is_set()
+        assert state_of(bridge) is BridgeState.LISTENING
+        bridge.core.on_cmd_vel(0.3, 0.0)
+        assert sim.wait_until(lambda s: not drive_stopped(s), 5.0)
     finally:
         bridge.stop()
+    assert sim.wait_until(drive_stopped, 2.0)
 
 
 def test_hosted_bridge_learns_link_loss_and_recovery_from_the_link(
