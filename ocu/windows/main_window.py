@@ -88,6 +88,11 @@ CALIBRATED_PROFILE_NAME = "calibrated_profile.toml"
 # How far the 3D model's ghost turns the joint the calibration asks about.
 CALIBRATION_GHOST_DEG = 30.0
 EVENT_LOG_LENGTH = 500
+# An event seen this soon again among the last few lines is counted on its line, not added
+# (Space held: an e-stop, and the link's and the panels' word on it, 25 times a second).
+EVENT_REPEAT_S = 1.0
+EVENT_REPEAT_ROWS = 6
+_EVENT_ROLE = Qt.ItemDataRole.UserRole
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
 REPLAY_DISABLED_TIP = "Replay: commands are disabled"
@@ -725,13 +730,24 @@ class MainWindow(QMainWindow):
         return lambda reason: self.model.stop_arm(f"stored pose {name} stopped ({reason})")
 
     def log_event(self, text: str) -> None:
-        """A line in the Events dock and the status bar."""
+        """A line in the Events dock and the status bar (and the log)."""
         stamp = time.strftime("%H:%M:%S")
+        now = time.monotonic()
+        self.statusBar().showMessage(text, 8000)
+        rows = self.event_log.count()
+        for row in range(rows - 1, max(rows - EVENT_REPEAT_ROWS, 0) - 1, -1):
+            item = self.event_log.item(row)
+            seen = item.data(_EVENT_ROLE)  # [text, when, how many times]
+            if seen and seen[0] == text and now - float(seen[1]) < EVENT_REPEAT_S:
+                count = int(seen[2]) + 1
+                item.setData(_EVENT_ROLE, [text, now, count])
+                item.setText(f"{stamp}  {text} (×{count})")
+                return
         self.event_log.addItem(f"{stamp}  {text}")
+        self.event_log.item(rows).setData(_EVENT_ROLE, [text, now, 1])
         while self.event_log.count() > EVENT_LOG_LENGTH:
             self.event_log.takeItem(0)
         self.event_log.scrollToBottom()
-        self.statusBar().showMessage(text, 8000)
         log.info("%s", text)
 
 
