@@ -559,6 +559,8 @@ class MainWindow(QMainWindow):
                 self.log_event(self.model.arm_error)
             return
         assert self.arm_panel is not None
+        for problem in arm.poses.problems:  # also in the Arm dock, which may be out of view
+            self.log_event(f"stored arm poses: {problem}")
         view = self.model_view
         workspace = arm.kinematics.workspace_slice()
         if workspace is not None:
