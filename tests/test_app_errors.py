@@ -15,6 +15,7 @@ import pytest
 
 from ocu.profile import default_profile_path
 from ocu.sim.simulator import RobotSimulator
+from ocu.windows.settings_file import ini_problem
 from tests.windows.console_fixtures import RUN_TIMEOUT_S, run_ocu, sim
 
 __all__ = ["sim"]  # fixtures used below
@@ -109,6 +110,7 @@ def test_an_unreadable_ocu_ini_is_kept_aside_not_overwritten(tmp_path: Path) -> 
         in (result.stderr)
     )
     assert f"[{LAYOUT}]" in (config / "ocu.ini").read_text()  # the new layout was saved
+    assert ini_problem(config / "ocu.ini") is None  # and is read at the next start
 
 
 def run_ocu_unprivileged(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
