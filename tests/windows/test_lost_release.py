@@ -7,6 +7,7 @@ auto-repeat. Space must stop anyway, and any other key must act on that press.
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
@@ -62,7 +63,7 @@ def test_a_key_released_in_another_window_acts_on_its_next_press(
         focus(env, console, log_path, console=True)
         xdotool(env, "keydown", "w")
         assert sim.wait_until(lambda s: s.velocities["drive_linear"] > 0, 5.0), "no drive"
-        assert log_shows(log_path, f"W {REPEAT_SEEN}", 10.0), log_path.read_text()
+        until_qt_flags_a_repeat(program, log_path, "W")
         # ... and released in another window.
         focus(env, window.split()[0], log_path, console=False)
         assert sim.wait_until(lambda s: s.all_stopped, 3.0), "focus loss did not stop"
@@ -92,6 +93,26 @@ def test_a_key_released_in_another_window_acts_on_its_next_press(
             program.kill()
             program.wait()
     assert "Traceback" not in log_path.read_text()
+
+
+def until_qt_flags_a_repeat(program: subprocess.Popen[bytes], log_path: Path, key: str) -> None:
+    """Hold on until Qt has flagged one of X's auto-repeats of the held key.
+
+    Qt flags one only when it reads the repeat's release and press together: a busy GUI
+    thread (the 3D view rendering in software) makes that likely. Where it has not happened
+    after the X repeat delay, the program is frozen for a few repeat periods, as a loaded
+    machine would (the stimulus, not a wait), so that the pairs queue up.
+    """
+    line = f"{key} {REPEAT_SEEN}"
+    for _ in range(10):
+        if log_shows(log_path, line, 1.5):
+            return
+        program.send_signal(signal.SIGSTOP)
+        try:
+            time.sleep(0.15)
+        finally:
+            program.send_signal(signal.SIGCONT)
+    assert log_shows(log_path, line, 1.5), f"Qt flagged no repeat of {key}:\n{log_path.read_text()}"
 
 
 def has_keyboard(log_path: Path) -> bool:
@@ -133,7 +154,7 @@ def test_space_released_in_another_window_still_stops_on_its_next_press(
         xdotool(env, "keydown", "space")
         assert log_shows(log_path, "ocu.link EMERGENCY STOP (Space)", 5.0), log_path.read_text()
         # Space held in the console until Qt sees X auto-repeat it, released elsewhere.
-        assert log_shows(log_path, f"Space {REPEAT_SEEN}", 10.0), log_path.read_text()
+        until_qt_flags_a_repeat(program, log_path, "Space")
         focus(env, window.split()[0], log_path, console=False)
         xdotool(env, "keyup", "space")
         assert other.stdout is not None
