@@ -6,7 +6,8 @@ there; a key's release is always honoured, wherever the focus went meanwhile.
 
 A motion key acts only on a press the console saw happen. Auto-repeat is told apart here,
 not left to Qt: Qt flags a repeat only when it saw the key go down, and under X11 only when
-the repeat's release and press reach it together (Xvfb with Qt 6.11: hardly ever). A key
+the repeat's release and press reach it together (Xvfb with Qt 6.11: only when the GUI
+thread was busy as they came). A key
 held in another window therefore arrives as a stream of ordinary-looking presses when the
 console gets the keyboard; `KeyGuard` ignores such a key until it is released and pressed
 again, asking the X server which keys are down where it can (`ocu.windows.held_keys`).
