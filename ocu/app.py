@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 from ocu.console.poses import CONFIG_DIR_ENV, default_config_dir
 from ocu.profile import ProfileError, RobotProfile, load_profile
+from ocu.windows.settings_file import SETTINGS_FILE
 
 if TYPE_CHECKING:
     from PySide6.QtCore import QSettings
@@ -25,10 +26,10 @@ if TYPE_CHECKING:
     from ocu.gamepad.mapping import PadMapping
     from ocu.hotkeys import KeyMap
     from ocu.windows.main_window import MainWindow
+    from ocu.windows.settings_file import SettingsStatus
 
 log = logging.getLogger("ocu")
 
-SETTINGS_FILE = "ocu.ini"
 SIGNAL_POLL_MS = 100
 
 
@@ -158,6 +159,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     from ocu.hotkeys import USER_KEY_MAP_NAME, KeyMapError, load_key_map
 
     config_dir = args.config_dir if args.config_dir is not None else default_config_dir()
+    from ocu.windows.settings_file import config_dir_problem
+
+    config_problem = config_dir_problem(config_dir)
+    if config_problem is not None:
+        return refuse_file(config_problem)
     override = args.keys if args.keys is not None else config_dir / USER_KEY_MAP_NAME
     if args.keys is not None and not args.keys.exists():
         parser.error(f"--keys: {args.keys} does not exist")
@@ -251,13 +257,14 @@ def run_console(
                 return first_link.pop()
             return UdpLink(profile, robot_address, extension=True, description=address_text)
 
-        settings = open_settings(config_dir)
+        settings, settings_status = open_settings(config_dir)
         window = MainWindow(
             profile,
             make_link,
             address_text,
             settings,
             key_map,
+            settings_status=settings_status,
             recorder=recorder,
             pad_mapping=pad_mapping,
             pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
@@ -295,20 +302,34 @@ def run_replay(
     except (RecordingError, LinkError) as err:
         log.error("%s", err)
         return 1
-    settings = open_settings(config_dir)
+    settings, settings_status = open_settings(config_dir)
     window = MainWindow(
-        source.profile, None, f"replay {path.name}", settings, key_map, replay=source
+        source.profile,
+        None,
+        f"replay {path.name}",
+        settings,
+        key_map,
+        replay=source,
+        settings_status=settings_status,
     )
     source.play()
     return run_window(app, window, quit_after_s)
 
 
-def open_settings(config_dir: Path) -> QSettings:
-    """The window layout file in the config directory (created if needed)."""
+def open_settings(config_dir: Path) -> tuple[QSettings, SettingsStatus]:
+    """The window layout file in the config directory (created if needed), and whether it may
+    be saved: an unreadable one is moved aside first, a read-only folder keeps the layout
+    unsaved (ocu.windows.settings_file; the console says so in its Events dock)."""
     from PySide6.QtCore import QSettings
 
-    config_dir.mkdir(parents=True, exist_ok=True)
-    return QSettings(str(config_dir / SETTINGS_FILE), QSettings.Format.IniFormat)
+    from ocu.windows.settings_file import ConfigDirError, SettingsStatus, prepare_settings
+
+    path = config_dir / SETTINGS_FILE
+    try:
+        status = prepare_settings(config_dir)
+    except ConfigDirError as err:  # checked at start; changed since
+        status = SettingsStatus(path, writable=False, notes=(f"{err}: the layout is not saved",))
+    return QSettings(str(path), QSettings.Format.IniFormat), status
 
 
 def run_window(app: QApplication, window: MainWindow, quit_after_s: float | None) -> int:

@@ -216,7 +216,17 @@ def parse_key_map(
             raise KeyMapError(f"{source}: options.fine_factor must be in (0, 1], got {value}")
         fine_factor = float(value)
 
-    for key, text in _table(data, "hold", source).items():
+    hold_table = _table(data, "hold", source)
+    commands_table = _table(data, "commands", source)
+    for key, text in hold_table.items():
+        other = commands_table.get(key)
+        if text and other:
+            # Which one would win is an accident of the order the tables are read in.
+            raise KeyMapError(
+                f"{source}: {key} is bound twice, in [hold] ({text!r}) and in [commands] "
+                f"({other!r}); keep one"
+            )
+    for key, text in hold_table.items():
         where = f"{source}: hold.{key}"
         _check_key(key, where)
         if not isinstance(text, str):
@@ -234,11 +244,16 @@ def parse_key_map(
             )
         hold[key] = HoldBinding(parts[0], 1 if parts[1] == "+" else -1)
 
-    for key, name in _table(data, "commands", source).items():
+    for key, name in commands_table.items():
         where = f"{source}: commands.{key}"
         _check_key(key, where)
         if not isinstance(name, str):
             raise KeyMapError(f"{where}: must be a command name")
+        if key == ESTOP_KEY and name != "emergency_stop":
+            raise KeyMapError(
+                f"{where}: {ESTOP_KEY} is always the emergency stop; it cannot be "
+                + (f"bound to {name!r}" if name else "freed")
+            )
         hold.pop(key, None)
         if not name:
             commands.pop(key, None)

@@ -1,13 +1,24 @@
-"""`ocu` refuses a bad profile or key map file with one clear line, before any window."""
+"""`ocu` refuses a bad profile, key map or config directory with one clear line, before any
+window; a settings file it cannot read or write costs the layout, never the file."""
 
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from ocu.profile import default_profile_path
-from tests.windows.console_fixtures import run_ocu
+from ocu.sim.simulator import RobotSimulator
+from ocu.windows.settings_file import ini_problem
+from tests.windows.console_fixtures import RUN_TIMEOUT_S, run_ocu, sim
+
+__all__ = ["sim"]  # fixtures used below
 
 NOT_UTF8 = b'[hold]\nK = "waist \xff"\n'
 
@@ -67,3 +78,102 @@ def test_bad_profile(tmp_path: Path, content: bytes, expected: str) -> None:
     assert len(lines) == 1
     assert lines[0].startswith("ocu: error: ")
     assert expected in lines[0]
+
+
+def test_a_config_dir_that_is_a_file_is_refused(tmp_path: Path) -> None:
+    config = tmp_path / "cfg"
+    config.write_text("not a folder")
+    result = run_ocu(tmp_path, "--config-dir", str(config))
+    assert result.returncode == 2
+    _assert_one_line(result.stderr, f"config directory {config} is a file, not a folder")
+    below = config / "ocu"
+    result = run_ocu(tmp_path, "--config-dir", str(below))
+    assert result.returncode == 2
+    _assert_one_line(result.stderr, f"config directory {below} cannot be made: {config} is a file")
+    assert config.read_text() == "not a folder"
+
+
+JUNK_INI = b"\x89PNG\r\n\x1a\n\x00\x00 not the layout \xff\xfe"
+LAYOUT = "main_window"  # the group ocu.ini keeps the window layout in
+
+
+def test_an_unreadable_ocu_ini_is_kept_aside_not_overwritten(tmp_path: Path) -> None:
+    config = tmp_path / "cfg"  # run_ocu's config dir
+    config.mkdir()
+    (config / "ocu.ini").write_bytes(JUNK_INI)
+    result = run_ocu(tmp_path, "--quit-after", "1")
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    assert (config / "ocu.ini.unreadable").read_bytes() == JUNK_INI
+    assert (
+        f"{config / 'ocu.ini'} cannot be read (not text (not UTF-8)): kept as ocu.ini.unreadable"
+        in (result.stderr)
+    )
+    assert f"[{LAYOUT}]" in (config / "ocu.ini").read_text()  # the new layout was saved
+    assert ini_problem(config / "ocu.ini") is None  # and is read at the next start
+
+
+def run_ocu_unprivileged(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """`python -m ocu ARGS` offscreen as a user that cannot write what root owns (as root:
+    nobody, through setpriv; otherwise as the current user, for whom chmod does it)."""
+    env = {
+        **os.environ,
+        "QT_QPA_PLATFORM": "offscreen",
+        "OCU_RECORDINGS_DIR": str(folder / "recordings"),
+        "HOME": str(folder / "home"),
+        "XDG_RUNTIME_DIR": str(folder / "home"),
+    }
+    prefix: list[str] = []
+    if os.geteuid() == 0:
+        setpriv = shutil.which("setpriv")
+        if setpriv is None:
+            pytest.skip("running as root without setpriv: no user to be refused a write")
+        prefix = [setpriv, "--reuid=65534", "--regid=65534", "--clear-groups"]
+    return subprocess.run(
+        [*prefix, sys.executable, "-m", "ocu", *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=RUN_TIMEOUT_S,
+        check=False,
+        cwd=folder,
+    )
+
+
+@pytest.fixture
+def open_folder() -> Iterator[Path]:
+    """A folder everyone may enter and write (pytest's tmp_path is the user's own)."""
+    folder = Path(tempfile.mkdtemp(prefix="ocu-config-test-"))
+    folder.chmod(0o777)
+    for name in ("recordings", "home"):
+        (folder / name).mkdir(mode=0o777)
+        (folder / name).chmod(0o777)
+    yield folder
+    for path in folder.rglob("*"):
+        if path.is_dir():
+            path.chmod(0o755)
+    shutil.rmtree(folder)
+
+
+@pytest.mark.parametrize("ini", [b"[main_window]\nx=1\n", JUNK_INI], ids=["layout", "junk"])
+def test_a_read_only_config_dir_runs_says_so_and_writes_nothing(
+    open_folder: Path, sim: RobotSimulator, ini: bytes
+) -> None:
+    config = open_folder / "cfg"
+    config.mkdir()
+    (config / "ocu.ini").write_bytes(ini)
+    config.chmod(0o555)
+    host, port = sim.address  # the simulator in this process: nothing else to start
+    result = run_ocu_unprivileged(
+        open_folder, "--robot", f"{host}:{port}", "--config-dir", str(config), "--quit-after", "1"
+    )
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    assert sorted(p.name for p in config.iterdir()) == ["ocu.ini"]
+    assert (config / "ocu.ini").read_bytes() == ini
+    if ini == JUNK_INI:
+        assert "cannot be read (not text (not UTF-8)) nor moved aside" in result.stderr
+    else:
+        assert f"config directory {config} cannot be written" in result.stderr
+    assert "the window layout is not saved this session" in result.stderr
+    assert "window layout not saved (" in result.stderr  # said again at exit

@@ -143,6 +143,17 @@ def test_missing_user_file_means_the_default(profile: RobotProfile, tmp_path: Pa
         ('[hold]\nK = "waist up"\n', "must be"),
         ("[hold]\nK = 3\n", "must be a string"),
         ('[hold]\nSpace = "waist +"\n', "emergency stop"),
+        (
+            '[commands]\nSpace = "help"\n',
+            r"toml: commands\.Space: Space is always the emergency stop; it cannot be bound to "
+            r"'help'$",
+        ),
+        ('[commands]\nSpace = ""\n', r"commands\.Space: .* emergency stop; it cannot be freed$"),
+        (
+            '[hold]\nK = "waist +"\n[commands]\nK = "help"\n',
+            r"toml: K is bound twice, in \[hold\] \('waist \+'\) and in \[commands\] \('help'\); "
+            "keep one$",
+        ),
         ('[commands]\nK = "dance"\n', "unknown command 'dance'; known: emergency_stop, help, "),
         (
             '[commands]\nK = "halp"\n',
@@ -166,8 +177,9 @@ def test_bad_user_files_are_refused_with_the_reason(
 ) -> None:
     override = tmp_path / "hotkeys.toml"
     override.write_text(text, encoding="utf-8")
-    with pytest.raises(KeyMapError, match=message):
+    with pytest.raises(KeyMapError, match=message) as raised:
         load_key_map(profile, override)
+    assert str(raised.value).startswith(f"{override}: ")  # the file is named
 
 
 def test_non_utf8_file_is_refused_with_the_reason(profile: RobotProfile, tmp_path: Path) -> None:

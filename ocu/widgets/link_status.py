@@ -1,16 +1,21 @@
 """Status-bar widgets: link state with telemetry age, rates, loss, address and e-stop state.
 
 Other parts of the console (the Record button, the ROS state) sit between the address and
-the e-stop indicator, which stays at the right edge.
+the e-stop indicator, which stays at the right edge. The motion indicator is never cut: it
+is as wide as its longest text, and where the bar is short of room the address, the rates
+and the indicators with long texts give way, shortened with an ellipsis (whole in their
+tooltips).
 """
 
 from __future__ import annotations
 
-from PySide6.QtCore import QTimer
+from PySide6.QtCore import QEvent, QTimer
+from PySide6.QtGui import QResizeEvent
 from PySide6.QtWidgets import QGridLayout, QHBoxLayout, QLabel, QWidget
 
 from ocu.console.model import ConsoleModel
 from ocu.records import LinkState, LinkStats
+from ocu.widgets.elided_label import ElidedLabel
 
 BLOCK = "font-weight:bold;font-size:15pt;padding:3px 12px;border-radius:4px;"
 STATE_STYLES = {
@@ -30,16 +35,31 @@ MOVING_STYLE = "background:#ef6c00;color:white;font-weight:bold;font-size:18pt;p
 READY_STYLE = "background:#37474f;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
 REPLAY_STYLE = "background:#b00020;color:white;font-weight:bold;font-size:18pt;padding:3px 16px;"
 INFO_STYLE = "font-size:12pt;padding:0 8px;"
+# What the motion indicator says: e-stopped, moving, stopped, replaying.
+ESTOP_TEXTS = (
+    ("E-STOP", ESTOP_STYLE),
+    ("MOVING · Space = stop", MOVING_STYLE),
+    ("STOPPED · Space = stop", READY_STYLE),
+    ("REPLAY · nothing sent", REPLAY_STYLE),
+)
 # Two lines of link facts fit the height of the big indicators: the status bar stays one
 # row tall and wide enough for the Record button and the ROS state at 1600 px.
 FACT_STYLE = "font-size:10pt;padding:0 6px;"
 AGE_REFRESH_MS = 250
+NO_CAP = 16777215  # QWIDGETSIZE_MAX
 
 
 def _label(name: str, style: str = INFO_STYLE) -> QLabel:
     label = QLabel()
     label.setObjectName(name)
     label.setStyleSheet(style)
+    return label
+
+
+def _elided(name: str) -> ElidedLabel:
+    label = ElidedLabel()
+    label.setObjectName(name)
+    label.setStyleSheet(FACT_STYLE)
     return label
 
 
@@ -57,12 +77,11 @@ class LinkStatus(QWidget):
         layout.setSpacing(6)
         self.state_label = _label("link_state")
         self.age_label = _label("telemetry_age", FACT_STYLE)
-        self.rates_label = _label("link_rates", FACT_STYLE)
+        self.rates_label = _elided("link_rates")
         self.loss_label = _label("link_loss", FACT_STYLE)
-        self.address_label = _label("link_address", FACT_STYLE)
+        self.address_label = _elided("link_address")  # also in the window's title
         self.address_label.setText(address_text)
         self.estop_label = _label("estop_state")
-        self.estop_label.setMinimumWidth(220)
         facts = QGridLayout()
         facts.setContentsMargins(0, 0, 0, 0)
         facts.setVerticalSpacing(0)
@@ -75,8 +94,11 @@ class LinkStatus(QWidget):
         layout.addWidget(self.address_label)
         layout.addWidget(self.estop_label)
         self._layout = layout
+        # Labels that give way where the bar is short of room, the first first.
+        self._giving_way: list[ElidedLabel] = [self.address_label]
         self.rates_label.setText("RCP — Hz · telemetry — Hz")
         self.loss_label.setText("loss — · delay —")
+        self._fit_estop_label()
         self._show_estop()
         # The age of the last telemetry must tick even when nothing arrives.
         self._age_timer = QTimer(self)
@@ -104,6 +126,46 @@ class LinkStatus(QWidget):
     def add_indicator(self, widget: QWidget) -> None:
         """Show another widget left of the e-stop indicator (Record button, ROS state)."""
         self._layout.insertWidget(self._layout.indexOf(self.estop_label), widget)
+        if isinstance(widget, ElidedLabel):
+            self._giving_way.append(widget)
+
+    def resizeEvent(self, event: QResizeEvent) -> None:
+        """Share the room again."""
+        self._share_room()
+        super().resizeEvent(event)
+
+    def event(self, event: QEvent) -> bool:
+        """A child's size changed (a new text): share the room again."""
+        if event.type() == QEvent.Type.LayoutRequest:
+            self._share_room()
+        return super().event(event)
+
+    def _share_room(self) -> None:
+        """Where the widgets want more room than the bar has, the labels that give way are
+        shortened, the first of them first (a box layout would shorten all of them alike)."""
+        layout = self._layout
+        margins = layout.contentsMargins()
+        want = margins.left() + margins.right()
+        shown = 0
+        for index in range(layout.count()):
+            item = layout.itemAt(index)
+            if item is None or item.isEmpty():
+                continue  # a hidden widget or the stretch: no room, no spacing
+            shown += 1
+            widget = item.widget()
+            want += (widget.sizeHint() if widget is not None else item.sizeHint()).width()
+        want += layout.spacing() * max(shown - 1, 0)
+        short = want - self.width()
+        for label in self._giving_way:
+            cap = NO_CAP
+            if short > 0 and not label.isHidden():
+                hint = label.sizeHint().width()
+                give = min(short, hint - label.minimumSizeHint().width())
+                if give > 0:
+                    cap = hint - give
+                    short -= give
+            if label.maximumWidth() != cap:
+                label.setMaximumWidth(cap)
 
     def set_address(self, address_text: str) -> None:
         """The simulator or robot address shown."""
@@ -145,22 +207,30 @@ class LinkStatus(QWidget):
         """Whether any channel is commanded to move (the model's command)."""
         return self.model.is_moving
 
+    def _fit_estop_label(self) -> None:
+        """The motion indicator's width: that of its widest text, so none is ever cut."""
+        widths = []
+        for text, style in ESTOP_TEXTS:
+            self.estop_label.setText(text)
+            self.estop_label.setStyleSheet(style)
+            self.estop_label.ensurePolished()
+            widths.append(self.estop_label.sizeHint().width())
+        self.estop_label.setMinimumWidth(max(widths))
+
     def _show_estop(self, reason: str | None = None) -> None:
         if reason is not None:
             self.estop_label.setToolTip(reason)
         if self.replay:
-            self.estop_label.setText("REPLAY · nothing sent")
-            self.estop_label.setStyleSheet(REPLAY_STYLE)
+            text, style = ESTOP_TEXTS[3]
             self.estop_label.setToolTip("A recording is replayed: no robot is commanded")
         elif self.estop_active:
-            self.estop_label.setText("E-STOP")
-            self.estop_label.setStyleSheet(ESTOP_STYLE)
+            text, style = ESTOP_TEXTS[0]
         elif self.moving:
-            self.estop_label.setText("MOVING · Space = stop")
-            self.estop_label.setStyleSheet(MOVING_STYLE)
+            text, style = ESTOP_TEXTS[1]
         else:
-            self.estop_label.setText("STOPPED · Space = stop")
-            self.estop_label.setStyleSheet(READY_STYLE)
+            text, style = ESTOP_TEXTS[2]
+        self.estop_label.setText(text)
+        self.estop_label.setStyleSheet(style)
 
     def _refresh_state(self) -> None:
         style = STATE_STYLES[self.state] + BLOCK

@@ -44,6 +44,7 @@ from PySide6.QtWidgets import (
 from ocu.console.model import ConsoleModel
 from ocu.nav.navigator import ZONES_OFF_NO_DATA, ZoneState
 from ocu.records import CommandError
+from ocu.widgets.elided_label import ElidedLabel
 
 REFRESH_MS = 100
 DEFAULT_SCALE_PX_PER_M = 60.0
@@ -567,8 +568,9 @@ class MapPanel(QWidget):
         )
 
 
-class NavStatus(QLabel):
-    """The status bar's word on the safety zones and the assisted mode."""
+class NavStatus(ElidedLabel):
+    """The status bar's word on the safety zones and the assisted mode (shortened, whole in
+    its tooltip, where the status bar is short of room)."""
 
     def __init__(self, model: ConsoleModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)

@@ -379,6 +379,7 @@ class VideoPanel(QWidget):
         self._stats_timer.setInterval(STATS_PERIOD_MS)
         self._stats_timer.timeout.connect(self.refresh_counters)
         self._stats_timer.start()
+        self._grid_offered = False  # the extension's grid was shown once (_on_extension)
         self._on_extension(model.robot.extension_active, "")
         # Settle the minimum size before any window exists: a top-level panel then has
         # nothing to propagate when shown (Qt's offscreen platform warns about that).
@@ -480,8 +481,11 @@ class VideoPanel(QWidget):
             self.view.update()
 
     def _on_extension(self, active: bool, reason: str) -> None:
-        if active and not self.view.grid:
-            self.set_grid(True)  # the point of the extension: every camera at once
+        if active and not self._grid_offered:
+            # The point of the extension: every camera at once. Only the first time: when
+            # it comes back after a lost link, the view stays as the operator left it.
+            self._grid_offered = True
+            self.set_grid(True)
         self.protocol_label.setText("Protocol: <b>extended</b>" if active else "Protocol: vendor")
         self.protocol_label.setToolTip(reason or "")
         self._show_status(self.model.robot.status)

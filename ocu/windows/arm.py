@@ -41,6 +41,8 @@ STATUS_STYLES = {
     STOP: "color:white;background:#c62828;font-weight:bold;padding:2px 4px;",
 }
 NEAREST = "nearest"
+# Space cannot be typed into the name box: it is the e-stop everywhere (docs/console.md).
+NAME_HINT = "Space is the e-stop: join words with _ or - (over_the_box)"
 REACH_MM = 1500.0
 
 
@@ -185,7 +187,8 @@ class ArmPanel(QWidget):
         self.show_button.clicked.connect(self.show_selected)
         self.name_box = QLineEdit()
         self.name_box.setObjectName("arm_pose_name")
-        self.name_box.setPlaceholderText("name")
+        self.name_box.setPlaceholderText("name, e.g. over_the_box")
+        self.name_box.setToolTip(NAME_HINT)
         self.name_box.returnPressed.connect(self.save_pose)
         self.save_button = QPushButton("Save here")
         self.save_button.setObjectName("arm_save_pose")
@@ -201,6 +204,11 @@ class ArmPanel(QWidget):
         poses_layout.addWidget(self.delete_button, 2, 1)
         poses_layout.addWidget(self.name_box, 3, 0)
         poses_layout.addWidget(self.save_button, 3, 1)
+        name_hint = QLabel(NAME_HINT)
+        name_hint.setObjectName("arm_pose_name_hint")
+        name_hint.setWordWrap(True)
+        name_hint.setStyleSheet("color:#666;")
+        poses_layout.addWidget(name_hint, 4, 0, 1, 2)
         layout.addWidget(poses_group)
 
         self.message_label = QLabel(arm.poses.error)

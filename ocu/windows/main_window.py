@@ -29,6 +29,7 @@ from PySide6.QtGui import QAction, QCloseEvent, QHideEvent, QShowEvent
 from PySide6.QtWidgets import (
     QApplication,
     QDockWidget,
+    QLabel,
     QListWidget,
     QMainWindow,
     QSizePolicy,
@@ -74,6 +75,7 @@ from ocu.windows.joint_position import JointPositionPanel
 from ocu.windows.key_filter import KeyFilter
 from ocu.windows.max_velocity import MaxVelocityPanel
 from ocu.windows.ros_control import RosControl
+from ocu.windows.settings_file import SettingsStatus
 from ocu.windows.velocity import VelocityPanel
 
 log = logging.getLogger("ocu.console")
@@ -88,6 +90,11 @@ CALIBRATED_PROFILE_NAME = "calibrated_profile.toml"
 # How far the 3D model's ghost turns the joint the calibration asks about.
 CALIBRATION_GHOST_DEG = 30.0
 EVENT_LOG_LENGTH = 500
+# An event seen this soon again among the last few lines is counted on its line, not added
+# (Space held: an e-stop, and the link's and the panels' word on it, 25 times a second).
+EVENT_REPEAT_S = 1.0
+EVENT_REPEAT_ROWS = 6
+_EVENT_ROLE = Qt.ItemDataRole.UserRole
 DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
 REPLAY_DISABLED_TIP = "Replay: commands are disabled"
@@ -144,6 +151,7 @@ class MainWindow(QMainWindow):
         pad_mapping: PadMapping | None = None,
         pad_calibrations: CalibrationStore | None = None,
         calibration_link: CalibrationLinkFactory | None = None,
+        settings_status: SettingsStatus | None = None,
         parent: QWidget | None = None,
     ) -> None:
         sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_INTERVAL_S))
@@ -158,6 +166,9 @@ class MainWindow(QMainWindow):
         self.replay = replay
         self.recorder = recorder if replay is None else None
         self.settings = settings
+        # Whether the layout may be saved (ocu.windows.settings_file: never over a file that
+        # could not be read, not in a folder that cannot be written).
+        self.settings_status = settings_status or SettingsStatus(Path(settings.fileName()))
         self.key_map = key_map if key_map is not None else hotkeys.load_key_map(profile)
         # The operator's stored arm poses sit beside the hotkey file and the settings.
         if arm_poses_path is None:
@@ -320,6 +331,16 @@ class MainWindow(QMainWindow):
         if self.replay_controller is not None:
             self._build_replay_bar(self.replay_controller)
         self._wire_arm()
+        for note in self.settings_status.notes:
+            self.log_event(note)
+        self.settings_label: QLabel | None = None
+        if not self.settings_status.writable:
+            # For the whole session, not only in the Events dock, which may be out of view.
+            self.settings_label = QLabel("layout not saved")
+            self.settings_label.setObjectName("settings_not_saved")
+            self.settings_label.setStyleSheet("color:#b35c00;")
+            self.settings_label.setToolTip("\n".join(self.settings_status.notes))
+            self.link_status.add_indicator(self.settings_label)
 
         self.model.events.command_changed.connect(self._on_command_changed)
         self._control_timer = QTimer(self)
@@ -423,7 +444,10 @@ class MainWindow(QMainWindow):
         return restored
 
     def save_layout(self) -> None:
-        """Remember window geometry and dock layout."""
+        """Remember window geometry and dock layout (unless the settings cannot be saved)."""
+        if not self.settings_status.writable:
+            log.warning("window layout not saved (%s)", "; ".join(self.settings_status.notes))
+            return
         self.settings.setValue("main_window/geometry", self.saveGeometry())
         self.settings.setValue("main_window/state", self.saveState(LAYOUT_VERSION))
         self.settings.sync()
@@ -443,6 +467,8 @@ class MainWindow(QMainWindow):
 
     def save_streams(self) -> None:
         """Remember each camera's stream request."""
+        if not self.settings_status.writable:
+            return
         self.settings.setValue(
             STREAMS_KEY, [format_stream_setting(r) for r in self.model.stream_request]
         )
@@ -554,6 +580,8 @@ class MainWindow(QMainWindow):
                 self.log_event(self.model.arm_error)
             return
         assert self.arm_panel is not None
+        for problem in arm.poses.problems:  # also in the Arm dock, which may be out of view
+            self.log_event(f"stored arm poses: {problem}")
         view = self.model_view
         workspace = arm.kinematics.workspace_slice()
         if workspace is not None:
@@ -725,13 +753,24 @@ class MainWindow(QMainWindow):
         return lambda reason: self.model.stop_arm(f"stored pose {name} stopped ({reason})")
 
     def log_event(self, text: str) -> None:
-        """A line in the Events dock and the status bar."""
+        """A line in the Events dock and the status bar (and the log)."""
         stamp = time.strftime("%H:%M:%S")
+        now = time.monotonic()
+        self.statusBar().showMessage(text, 8000)
+        rows = self.event_log.count()
+        for row in range(rows - 1, max(rows - EVENT_REPEAT_ROWS, 0) - 1, -1):
+            item = self.event_log.item(row)
+            seen = item.data(_EVENT_ROLE)  # [text, when, how many times]
+            if seen and seen[0] == text and now - float(seen[1]) < EVENT_REPEAT_S:
+                count = int(seen[2]) + 1
+                item.setData(_EVENT_ROLE, [text, now, count])
+                item.setText(f"{stamp}  {text} (×{count})")
+                return
         self.event_log.addItem(f"{stamp}  {text}")
+        self.event_log.item(rows).setData(_EVENT_ROLE, [text, now, 1])
         while self.event_log.count() > EVENT_LOG_LENGTH:
             self.event_log.takeItem(0)
         self.event_log.scrollToBottom()
-        self.statusBar().showMessage(text, 8000)
         log.info("%s", text)
 
 

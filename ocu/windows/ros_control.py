@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QAction
-from PySide6.QtWidgets import QLabel, QWidget
+from PySide6.QtWidgets import QWidget
 
 from ocu.console.model import ConsoleModel
 from ocu.link.base import Link
@@ -29,6 +29,7 @@ from ocu.profile import RobotProfile
 from ocu.records import CommandError
 from ocu.ros.bridge import STATE_TEXT, BridgeState
 from ocu.ros.environment import master_online, master_uri, missing_ros
+from ocu.widgets.elided_label import ElidedLabel
 
 if TYPE_CHECKING:
     from ocu.ros.rosbridge import RosBridge
@@ -99,7 +100,8 @@ class RosControl(QObject):
         self.action.setObjectName("ros_control_action")
         self.action.setCheckable(True)
         self.action.triggered.connect(self._on_triggered)
-        self.label = QLabel()
+        # Shortened where the status bar is short of room (the whole state in its tooltip).
+        self.label = ElidedLabel(floor_text="ROS on")
         self.label.setObjectName("ros_state")
         self.label.hide()
         self.state_changed.connect(self._on_state)

@@ -12,6 +12,7 @@ from pytestqt.qtbot import QtBot
 
 from ocu.control.commands import CommandMapper
 from ocu.profile import RobotProfile
+from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
 from ocu.widgets.video import LIVE
 from ocu.widgets.video_status import NOT_REPORTED
@@ -114,3 +115,26 @@ def test_stream_settings_text_is_checked() -> None:
     for bad in ("", "3:1280x720", "x:1x1@1", "3:0x720@30", "300:640x480@30"):
         with pytest.raises(ValueError, match="CAMERA:WIDTHxHEIGHT@FPS"):
             parse_stream_setting(bad)
+
+
+def test_the_operators_single_view_survives_a_lost_link(
+    make_console: ConsoleFactory, extended_sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    console = make_console(extended_sim, extension=True, link_lost_after_s=1.0)
+    panel = console.video_panel
+    qtbot.waitUntil(lambda: panel.extension_active, timeout=DEADLINE_MS)
+    assert panel.view.grid  # the extension's four cameras at once, to begin with
+    panel.controls.single_button.click()  # the operator wants one camera
+    assert not panel.view.grid
+    changes: list[bool] = []
+    console.model.robot.events.extension_changed.connect(lambda on, _why: changes.append(on))
+    extended_sim.cut_link()
+    qtbot.waitUntil(lambda: console.link_status.state == LinkState.LOST, timeout=DEADLINE_MS)
+    extended_sim.restore_link()
+    qtbot.waitUntil(
+        lambda: console.link_status.state == LinkState.CONNECTED and panel.extension_active,
+        timeout=DEADLINE_MS,
+    )
+    assert changes[-1:] == [True], changes  # the extension came back (the old grid trigger)
+    assert not panel.view.grid
+    assert panel.controls.single_button.isChecked()

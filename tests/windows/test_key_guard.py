@@ -34,3 +34,25 @@ def test_key_guard_uses_the_window_systems_key_state() -> None:
     assert blind.press("E", T0 + 660, qt_repeat=False) is Verdict.RESUME
     assert blind.release("E", T0 + 700, qt_repeat=False, held=False)  # after Space
     assert blind.press("E", T0 + 700, qt_repeat=False) is Verdict.BLOCKED
+
+
+def test_qt_repeat_flag_of_a_key_the_window_system_said_was_up_is_a_press() -> None:
+    # Qt's xcb backend flags the next press of the key it last saw repeating when that key's
+    # release went to another window. The X server said W was up when the console got the
+    # keyboard: W's press is new, whatever Qt says.
+    down: set[str] = set()
+    guard = KeyGuard(lambda: frozenset(down))
+    guard.activated()
+    down.add("W")
+    assert guard.press("W", T0, qt_repeat=True) is Verdict.PRESS
+    assert guard.press("W", T0 + 660, qt_repeat=True) is Verdict.REPEAT  # now it is down
+    down.discard("W")
+    assert guard.release("W", T0 + 700, qt_repeat=False, held=True)
+    # Without the window system's answer, Qt's flag is all there is: a key held elsewhere.
+    blind = KeyGuard(None)
+    blind.activated()
+    assert blind.press("W", T0, qt_repeat=True) is Verdict.BLOCKED
+    # Nor when the server did not answer at activation.
+    silent = KeyGuard(lambda: None)
+    silent.activated()
+    assert silent.press("W", T0, qt_repeat=True) is Verdict.BLOCKED

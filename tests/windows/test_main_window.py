@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 
 from PySide6.QtCore import QSettings, Qt
+from PySide6.QtWidgets import QLabel, QWidget
 from pytestqt.qtbot import QtBot
 
 from ocu.profile import RobotProfile
@@ -93,3 +94,36 @@ def test_a_new_console_starts_disconnected_when_asked(
     assert console.link is None
     assert console.velocity_panel.connect_button.text() == "Connect"
     assert sim.state().rcp_count == 0
+
+
+def fully_shown(label: QLabel, bar: QWidget) -> bool:
+    """Whether a label has the width its text needs and lies inside the bar."""
+    right = label.mapTo(bar, label.rect().topRight()).x()
+    return label.width() >= label.sizeHint().width() and right < bar.width()
+
+
+def test_the_motion_indicator_is_never_cut_at_1600_px(
+    make_console: ConsoleFactory, sim: RobotSimulator, qtbot: QtBot
+) -> None:
+    console = make_console(sim)  # its Record button shows
+    console.resize(1600, 1000)
+    qtbot.waitUntil(lambda: console.width() == 1600, timeout=DEADLINE_MS)
+    assert console.model.arm is not None
+    console.model.arm.toggle_cartesian()
+    console.velocity_panel.sliders["neck"].setValue(300)
+    status, bar = console.link_status, console.statusBar()
+    qtbot.waitUntil(
+        lambda: status.estop_label.text() == "MOVING · Space = stop", timeout=DEADLINE_MS
+    )
+    # Where room is short the address gives way first; the indicators keep their texts.
+    labels = (status.estop_label, console.arm_indicator, console.nav_status, console.pad_indicator)
+    qtbot.waitUntil(lambda: all(fully_shown(x, bar) for x in labels), timeout=DEADLINE_MS)
+    # More to say than there is room for: ROS commanding, an assisted mode stopped.
+    console.ros.label.setText("ROS is commanding the robot")
+    console.ros.label.show()
+    console.nav_status.setText("PATH MODE · stopped: obstacle 0.35 m ahead")
+    qtbot.waitUntil(lambda: not fully_shown(console.ros.label, bar), timeout=DEADLINE_MS)
+    qtbot.waitUntil(lambda: fully_shown(status.estop_label, bar), timeout=DEADLINE_MS)
+    assert fully_shown(console.arm_indicator, bar)
+    assert console.ros.label.toolTip().startswith("ROS is commanding the robot")
+    console.velocity_panel.sliders["neck"].setValue(0)
