@@ -28,7 +28,8 @@ DEADLINE_S = 15.0
 def newest(frames: list[VideoFrame]) -> dict[int, int]:
     latest: dict[int, int] = {}
     for frame in frames:
-        assert frame.camera is not None and frame.sequence is not None
+        assert frame.camera is not None
+        assert frame.sequence is not None
         latest[frame.camera] = frame.sequence
     return latest
 
@@ -83,8 +84,9 @@ def test_a_link_blip_blanks_the_cameras_only_while_it_lasts(profile: RobotProfil
     assert max(gaps.values()) < 1.5, gaps
     # The robot went on counting (docs/protocol.md): nothing restarted, nothing dropped.
     for camera in CAMERAS:
-        assert after[camera].sequence is not None
-        assert after[camera].sequence > before[camera], (camera, before, after[camera].sequence)
+        sequence = after[camera].sequence
+        assert sequence is not None
+        assert sequence > before[camera], (camera, before, sequence)
     stats = link.video_stats()
     assert stats.restarts == 0
     assert stats.out_of_order == 0
