@@ -35,9 +35,11 @@ def test_the_stated_uncertainties_cover_the_true_errors(tmp_path: Path) -> None:
     assert set(stated) == joints, said
     for name in sorted(joints):
         motor, line = truth.motors[name], stated[name]
+        measured = found.motors[name].ticks_per_rad
         assert motor.ticks_per_rad is not None
+        assert measured is not None
         assert motor.channel is not None
-        ticks_error = abs(found.motors[name].ticks_per_rad / motor.ticks_per_rad - 1) * 100
+        ticks_error = abs(measured / motor.ticks_per_rad - 1) * 100
         true_axis = truth.channels[motor.channel].axis_per_unit
         axis_error = abs(found.channels[motor.channel].axis_per_unit / true_axis - 1) * 100
         assert ticks_error <= float(line["ticks_u"]), (name, ticks_error, line[0])
