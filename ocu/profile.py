@@ -185,6 +185,10 @@ COLOUR_MODES = ("off", "gray_world", "fixed")
 DISTORTION_LENGTHS = {"fisheye": (4,), "standard": (4, 5)}
 
 
+# The longest LINK LOST delay a profile may set: a robot unheard for longer must be said.
+LINK_LOST_MAX_S = 30.0
+
+
 class ProfileError(ValueError):
     """The robot profile is missing a value or holds a bad one."""
 
@@ -1031,8 +1035,37 @@ def _parse_arm(reader: _Reader, motors: dict[str, Motor]) -> ArmSettings:
     )
 
 
+def _link_lost_after_s(link: _Reader) -> float:
+    """LINK LOST's delay: longer than one telemetry period (or it would come between any two
+    packets), at most LINK_LOST_MAX_S (or it would never come when it matters)."""
+    period_s = 1.0 / link.number("telemetry_rate_hz", low=0.01)
+    value = link.number("link_lost_after_s", low=0.01)
+    if value > LINK_LOST_MAX_S:
+        raise ProfileError(
+            f"{link.where}.link_lost_after_s: must be <= {LINK_LOST_MAX_S:g} s, got {value:g}: "
+            "the operator must learn within seconds that the robot is no longer heard"
+        )
+    if value <= period_s:
+        raise ProfileError(
+            f"{link.where}.link_lost_after_s: must be longer than one telemetry period "
+            f"({period_s:g} s at telemetry_rate_hz), got {value:g}: LINK LOST would come "
+            "between any two packets"
+        )
+    return value
+
+
 def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfile:
-    """Validate a decoded TOML document and build the profile."""
+    """Validate a decoded TOML document and build the profile.
+
+    Every ProfileError names the file (`source`) and the key: "FILE: profile.link.port: ...".
+    """
+    try:
+        return _parse_profile(data, source)
+    except ProfileError as err:
+        raise ProfileError(f"{source}: {err}") from err
+
+
+def _parse_profile(data: dict[str, Any], source: str) -> RobotProfile:
     root = _Reader(data, "profile", TOP_KEYS)
     link = root.sub("link", LINK_KEYS)
     frame_reader = link.sub("frame_types", FRAME_TYPE_KEYS)
@@ -1059,7 +1092,7 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
         robot_watchdog_s=link.number("robot_watchdog_s", low=0.01),
         telemetry_rate_hz=link.number("telemetry_rate_hz", low=0.01),
         telemetry_tick_hz=link.number("telemetry_tick_hz", low=1.0),
-        link_lost_after_s=link.number("link_lost_after_s", low=0.01),
+        link_lost_after_s=_link_lost_after_s(link),
         gui_alive_timeout_s=link.number("gui_alive_timeout_s", low=0.01),
         estop_repeats=link.integer("estop_repeats", low=1, high=100),
         estop_window_s=link.number("estop_window_s", low=0.0, high=1.0),

@@ -63,6 +63,11 @@ def _edited(path: tuple[str, ...], value: object) -> dict[str, Any]:
     return data
 
 
+def _in_memory(message: str) -> str:
+    """The pattern of an error of parse_profile(data) without a file: its source comes first."""
+    return message.replace("^", "^<profile>: ", 1)
+
+
 def _write(tmp_path: Path, text: str) -> Path:
     path = tmp_path / "robot.toml"
     path.write_text(text, encoding="utf-8")
@@ -204,8 +209,16 @@ _LIMITS = r"must be \[low, high\] with low < high$"
         (("name",), DELETE, r"^profile\.name: missing$"),
         (("link",), DELETE, r"^profile\.link: missing$"),
         (("link", "port"), DELETE, r"^profile\.link\.port: missing$"),
-        (("link", "frame_types", "video"), DELETE, r"^profile\.link\.frame_types\.video: missing$"),
-        (("si", "linear_axis_per_m_s"), DELETE, r"^profile\.si\.linear_axis_per_m_s: missing$"),
+        (
+            ("link", "frame_types", "video"),
+            DELETE,
+            r"^profile\.link\.frame_types\.video: missing$",
+        ),
+        (
+            ("si", "linear_axis_per_m_s"),
+            DELETE,
+            r"^profile\.si\.linear_axis_per_m_s: missing$",
+        ),
         (("chassis",), DELETE, r"^profile\.chassis: missing$"),
         # Channels are the profile's own: without one, the motor that names it is wrong.
         (
@@ -216,7 +229,11 @@ _LIMITS = r"must be \[low, high\] with low < high$"
         (("channels", "waist", "role"), "drive_linear", r"all have role 'drive_linear'"),
         (("channels", "drive_turn", "role"), DELETE, r"needs both roles"),
         (("channels", "flippers", "directions"), ["up"], r"flippers\.directions: two words"),
-        (("channels", "waist", "axis"), DELETE, r"^profile\.channels\.waist\.axis: missing$"),
+        (
+            ("channels", "waist", "axis"),
+            DELETE,
+            r"^profile\.channels\.waist\.axis: missing$",
+        ),
         (
             ("motors", "waist", "zero_offset_ticks"),
             DELETE,
@@ -226,8 +243,16 @@ _LIMITS = r"must be \[low, high\] with low < high$"
         (("motors",), DELETE, r"^profile\.motors: missing$"),
         # wrong types
         (("link",), 5, r"^profile\.link: must be a table$"),
-        (("link", "port"), "10000", r"^profile\.link\.port: must be an integer, got '10000'$"),
-        (("link", "port"), 10000.0, r"^profile\.link\.port: must be an integer, got 10000\.0$"),
+        (
+            ("link", "port"),
+            "10000",
+            r"^profile\.link\.port: must be an integer, got '10000'$",
+        ),
+        (
+            ("link", "port"),
+            10000.0,
+            r"^profile\.link\.port: must be an integer, got 10000\.0$",
+        ),
         (
             ("link", "send_rate_hz"),
             "fast",
@@ -243,15 +268,31 @@ _LIMITS = r"must be \[low, high\] with low < high$"
             True,
             r"^profile\.channels\.drive_linear\.axis: must be an integer, got True$",
         ),
-        (("link", "address"), 192, r"^profile\.link\.address: must be a non-empty string$"),
+        (
+            ("link", "address"),
+            192,
+            r"^profile\.link\.address: must be a non-empty string$",
+        ),
         (
             ("channels", "waist", "unit"),
             "",
             r"^profile\.channels\.waist\.unit: must be a non-empty",
         ),
-        (("link", "camera_names"), [], r"^profile\.link\.camera_names: must be a non-empty list"),
-        (("link", "camera_names"), ["a", 2], r"^profile\.link\.camera_names: must be a non-empty"),
-        (("assumptions",), "link.port", r"^profile\.assumptions: must be a list of key names$"),
+        (
+            ("link", "camera_names"),
+            [],
+            r"^profile\.link\.camera_names: must be a non-empty list",
+        ),
+        (
+            ("link", "camera_names"),
+            ["a", 2],
+            r"^profile\.link\.camera_names: must be a non-empty",
+        ),
+        (
+            ("assumptions",),
+            "link.port",
+            r"^profile\.assumptions: must be a list of key names$",
+        ),
         # non-finite numbers
         (
             ("channels", "drive_linear", "hard_max"),
@@ -318,7 +359,11 @@ _LIMITS = r"must be \[low, high\] with low < high$"
             r"\('linear', 'rotation', 'joint'\), got 'angular'$",
         ),
         (("link", "port"), 0, r"^profile\.link\.port: must be in \[1, 65535\], got 0$"),
-        (("link", "port"), 65536, r"^profile\.link\.port: must be in \[1, 65535\], got 65536$"),
+        (
+            ("link", "port"),
+            65536,
+            r"^profile\.link\.port: must be in \[1, 65535\], got 65536$",
+        ),
         (
             ("link", "send_rate_hz"),
             100.0,
@@ -340,7 +385,11 @@ _LIMITS = r"must be \[low, high\] with low < high$"
             r"^profile\.motors\.left_track\.track: must be 'left' or 'right'$",
         ),
         # duplicates and references
-        (("channels", "waist", "axis"), 3, r"^profile\.channels: two channels share one axis$"),
+        (
+            ("channels", "waist", "axis"),
+            3,
+            r"^profile\.channels: two channels share one axis$",
+        ),
         (
             ("motors", "waist", "device_id"),
             5,
@@ -372,7 +421,11 @@ _LIMITS = r"must be \[low, high\] with low < high$"
         (("motors", "waist", "limits_deg"), [math.nan, 10.0], _LIMITS),
         (("motors", "waist", "limits_deg"), DELETE, _LIMITS),
         # buttons and frame types
-        (("buttons", "torch"), 1, r"^profile\.buttons: torch and camera_select must differ$"),
+        (
+            ("buttons", "torch"),
+            1,
+            r"^profile\.buttons: torch and camera_select must differ$",
+        ),
         (
             ("buttons", "camera_select"),
             16,
@@ -396,7 +449,7 @@ _LIMITS = r"must be \[low, high\] with low < high$"
     ],
 )
 def test_validation_error_names_the_key(path: tuple[str, ...], value: object, message: str) -> None:
-    with pytest.raises(ProfileError, match=message):
+    with pytest.raises(ProfileError, match=_in_memory(message)):
         parse_profile(_edited(path, value))
 
 
@@ -413,7 +466,11 @@ def _renamed(path: tuple[str, ...], new_name: str) -> dict[str, Any]:
 @pytest.mark.parametrize(
     ("path", "misspelt", "message"),
     [
-        (("chassis",), "chasis", r"^profile\.chasis: unknown key; did you mean 'chassis'\?$"),
+        (
+            ("chassis",),
+            "chasis",
+            r"^profile\.chasis: unknown key; did you mean 'chassis'\?$",
+        ),
         (("name",), "Name", r"^profile\.Name: unknown key; did you mean 'name'\?$"),
         (
             ("assumptions",),
@@ -430,7 +487,11 @@ def _renamed(path: tuple[str, ...], new_name: str) -> dict[str, Any]:
             "telemetery",
             r"^profile\.link\.frame_types\.telemetery: unknown key; did you mean 'telemetry'\?$",
         ),
-        (("extension", "probe"), "prob", r"^profile\.extension\.prob: .*did you mean 'probe'\?$"),
+        (
+            ("extension", "probe"),
+            "prob",
+            r"^profile\.extension\.prob: .*did you mean 'probe'\?$",
+        ),
         (
             ("extension", "frame_types", "video_fragment"),
             "video_fragments",
@@ -497,7 +558,7 @@ def _renamed(path: tuple[str, ...], new_name: str) -> dict[str, Any]:
 def test_unknown_key_is_named_with_a_suggestion(
     path: tuple[str, ...], misspelt: str, message: str
 ) -> None:
-    with pytest.raises(ProfileError, match=message):
+    with pytest.raises(ProfileError, match=_in_memory(message)):
         parse_profile(_renamed(path, misspelt))
 
 
@@ -507,7 +568,7 @@ def test_every_unknown_key_of_a_table_is_named() -> None:
     with pytest.raises(ProfileError) as error:
         parse_profile(data)
     assert str(error.value) == (
-        "profile.buttons.torhc: unknown key; did you mean 'torch'?; "
+        "<profile>: profile.buttons.torhc: unknown key; did you mean 'torch'?; "
         "profile.buttons.camera_selcet: unknown key; did you mean 'camera_select'?"
     )
 
@@ -552,7 +613,7 @@ def test_arm_table_is_checked(profile: RobotProfile) -> None:
 def test_position_keys_need_ticks_per_rad(key: str) -> None:
     data = _edited(("motors", "left_track", key), SHIPPED_DATA["motors"]["waist"][key])
     with pytest.raises(
-        ProfileError, match=rf"^profile\.motors\.left_track\.{key}: needs ticks_per_rad "
+        ProfileError, match=rf"^<profile>: profile\.motors\.left_track\.{key}: needs ticks_per_rad "
     ):
         parse_profile(data)
 
@@ -564,13 +625,13 @@ def test_profile_error_is_a_value_error() -> None:
 def test_more_than_ten_motors() -> None:
     data = copy.deepcopy(SHIPPED_DATA)
     data["motors"]["extra"] = {"device_id": 11}
-    with pytest.raises(ProfileError, match=r"^profile\.motors: .* at most 10 motors$"):
+    with pytest.raises(ProfileError, match=r"^<profile>: profile\.motors: .* at most 10 motors$"):
         parse_profile(data)
 
 
 @pytest.mark.parametrize("limits", [[-math.inf, 180.0], [0.0, math.inf]])
 def test_infinite_limits_are_refused(limits: list[float]) -> None:
-    with pytest.raises(ProfileError, match=r"^profile\.motors\.waist\.limits_deg: "):
+    with pytest.raises(ProfileError, match=r"^<profile>: profile\.motors\.waist\.limits_deg: "):
         parse_profile(_edited(("motors", "waist", "limits_deg"), limits))
 
 
@@ -583,28 +644,29 @@ def test_infinite_limits_are_refused(limits: list[float]) -> None:
         (
             "hard_max = 0.45",
             "hard_max = inf",
-            r"^profile\.channels\.drive_linear\.hard_max: must be finite, got inf$",
+            r"profile\.channels\.drive_linear\.hard_max: must be finite, got inf$",
         ),
         (
             "hard_max = 0.45",
             "hard_max = nan",
-            r"^profile\.channels\.drive_linear\.hard_max: must be finite, got nan$",
+            r"profile\.channels\.drive_linear\.hard_max: must be finite, got nan$",
         ),
-        ("port = 10000", 'port = "10000"', r"^profile\.link\.port: must be an integer"),
-        ("torch = 0 ", "torch = 1 ", r"^profile\.buttons: torch and camera_select must differ$"),
-        ("video = 0x03", "video = 0x02", r"^profile\.link\.frame_types: the three IDs must differ"),
-        ("device_id = 8\n", "device_id = 7\n", r"^profile\.motors: two motors share one device_id"),
+        ("port = 10000", 'port = "10000"', r"profile\.link\.port: must be an integer"),
+        ("torch = 0 ", "torch = 1 ", r"profile\.buttons: torch and camera_select must differ$"),
+        ("video = 0x03", "video = 0x02", r"profile\.link\.frame_types: the three IDs must differ"),
+        ("device_id = 8\n", "device_id = 7\n", r"profile\.motors: two motors share one device_id"),
         (
             "send_rate_hz = 5.0",
             "sned_rate_hz = 5.0",
-            r"^profile\.link\.sned_rate_hz: unknown key; did you mean 'send_rate_hz'\?$",
+            r"profile\.link\.sned_rate_hz: unknown key; did you mean 'send_rate_hz'\?$",
         ),
     ],
     ids=["inf", "nan", "port-string", "torch-camera", "frame-types", "device-id", "misspelt"],
 )
 def test_edited_file(tmp_path: Path, old: str, new: str, message: str) -> None:
     path = _write(tmp_path, _replace_once(SHIPPED_TEXT, old, new))
-    with pytest.raises(ProfileError, match=message):
+    # Every error names the file, then the key.
+    with pytest.raises(ProfileError, match=rf"^{re.escape(str(path))}: {message}"):
         load_profile(path)
 
 
@@ -624,6 +686,26 @@ def test_invalid_toml(tmp_path: Path, text: str) -> None:
         ProfileError, match=rf"^{re.escape(str(tmp_path))}/robot\.toml: not valid TOML: "
     ):
         load_profile(path)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("1e9", r"must be <= 30 s, got 1e\+09: the operator must learn within seconds"),
+        ("0.5", r"must be longer than one telemetry period \(1 s at telemetry_rate_hz\)"),
+    ],
+    ids=["never", "between-packets"],
+)
+def test_link_lost_after_s_is_bounded(tmp_path: Path, value: str, message: str) -> None:
+    old = "link_lost_after_s = 3.0"
+    path = _write(tmp_path, _replace_once(SHIPPED_TEXT, old, f"link_lost_after_s = {value}"))
+    with pytest.raises(
+        ProfileError, match=rf"^{re.escape(str(path))}: profile\.link\.link_lost_after_s: {message}"
+    ):
+        load_profile(path)
+    # The bound's ends are accepted.
+    ok = _replace_once(SHIPPED_TEXT, old, "link_lost_after_s = 30.0")
+    assert load_profile(_write(tmp_path, ok)).link.link_lost_after_s == 30.0
 
 
 def test_missing_file(tmp_path: Path) -> None:

@@ -25,7 +25,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TextIO
 
-from ocu.calibrate.guard import Deadman, OnStand, StopSignal
+from ocu.calibrate.guard import CalibrationAbortedError, Deadman, OnStand, StopSignal
 from ocu.calibrate.operator import (
     AnswersError,
     AnswersOperator,
@@ -46,6 +46,8 @@ log = logging.getLogger("ocu.calibrate")
 # Enter held down repeats about 25-30 times a second after a first delay of up to 0.66 s
 # (X11's default): the deadman counts as held this long after the last line.
 TERMINAL_HOLD_S = 0.7
+# How often a question waiting for its answer looks at the stop signal.
+ANSWER_POLL_S = 0.05
 
 
 def _address(text: str, default_port: int) -> tuple[str, int]:
@@ -142,7 +144,21 @@ def calibrate_parser() -> argparse.ArgumentParser:
 def calibrate_main(
     argv: Sequence[str], stdin: TextIO | None = None, stdout: TextIO | None = None
 ) -> int:
-    """`ocu calibrate`."""
+    """`ocu calibrate`.
+
+    Ctrl-C and SIGTERM set the stop signal from the first line to the last (never a
+    KeyboardInterrupt): before the calibration nothing moves and nothing is written; during it
+    the robot stops; after it the file is not written, and a stop that comes while it is being
+    written lets the write finish (atomic, milliseconds): the file is complete or absent.
+    """
+    stop = StopSignal()
+    with _stop_on_signals(stop):
+        return _calibrate(argv, stdin, stdout, stop)
+
+
+def _calibrate(
+    argv: Sequence[str], stdin: TextIO | None, stdout: TextIO | None, stop: StopSignal
+) -> int:
     parser = calibrate_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
@@ -178,12 +194,21 @@ def calibrate_main(
         parser.error(str(err))
     if not args.out.parent.is_dir():
         parser.error(f"--out: no directory {args.out.parent}")
-    stop = StopSignal()
+    if stop.stopped:  # before anything moved
+        link.shutdown()
+        print(f"stopped: {stop.reason}; nothing written", file=out, flush=True)
+        return 1
     deadman: Deadman = OnStand()
-    if not (args.yes or args.on_stand):
-        deadman = TerminalDeadman(stdin or sys.stdin, stop)
+    held_enter = not (args.yes or args.on_stand)
+    if held_enter or isinstance(operator, TerminalOperator):
+        # One reader of the terminal: the held Enter key, and answers that a stop interrupts
+        # (a question waiting on a bare readline would outlast Ctrl-C).
+        terminal = TerminalDeadman(stdin or sys.stdin, stop)
         if isinstance(operator, TerminalOperator):
-            operator = HeldEnterOperator(operator, deadman)
+            operator = HeldEnterOperator(operator, terminal)
+        if held_enter:
+            deadman = terminal
+    if held_enter:
         print(
             "Hold Enter while the robot may move; let go to stop it. Ctrl-C stops everything.",
             file=out,
@@ -191,11 +216,10 @@ def calibrate_main(
         )
     config = CalibrationConfig()
     calibrator = Calibrator(link, profile, operator, deadman=deadman, stop=stop, config=config)
-    with _stop_on_signals(stop):
-        try:
-            result = calibrator.run()
-        finally:
-            link.shutdown()  # zeros last
+    try:
+        result = calibrator.run()
+    finally:
+        link.shutdown()  # zeros last
     for finding in result.findings:
         print(f"{finding.level}: {finding.text}", file=out)
     excursion = max(result.excursion_deg.values(), default=0.0)
@@ -204,8 +228,8 @@ def calibrate_main(
         f"{excursion:.1f}° (as reckoned from the readings)",
         file=out,
     )
-    if result.aborted is not None:
-        print(f"stopped: {result.aborted}; nothing written", file=out, flush=True)
+    if result.aborted is not None or stop.stopped:
+        print(f"stopped: {result.aborted or stop.reason}; nothing written", file=out, flush=True)
         return 1
     try:
         write_calibrated_profile(
@@ -224,6 +248,9 @@ def calibrate_main(
         file=out,
         flush=True,
     )
+    if stop.stopped:
+        print(f"stopped: {stop.reason} while writing; the file is complete", file=out, flush=True)
+        return 1
     return 0 if result.complete else 1
 
 
@@ -279,6 +306,15 @@ class TerminalDeadman:
         with self._lock:
             return time.monotonic() - self._last_line_at < TERMINAL_HOLD_S
 
+    def next_answer(self) -> str | None:
+        """The next line typed (None at the end of input); CalibrationAbortedError on a stop."""
+        while True:
+            try:
+                return self.answers.get(timeout=ANSWER_POLL_S)
+            except queue.Empty:
+                if self._stop.stopped:
+                    raise CalibrationAbortedError(self._stop.reason) from None
+
     def released(self) -> None:
         """Wait until Enter is let go, then forget the repeats it left."""
         while self.held() and not self._stop.stopped:
@@ -298,7 +334,7 @@ class HeldEnterOperator(TerminalOperator):
         self._deadman.released()
         self._stdout.write(f"{question} ")
         self._stdout.flush()
-        answer = self._deadman.answers.get()
+        answer = self._deadman.next_answer()
         if answer is None:
             raise EOFError("no more answers on standard input")
         return answer.strip()

@@ -211,6 +211,8 @@ class Calibrator:
         self.log = TelemetryLog(profile.link.telemetry_tick_hz)
         self.result = CalibrationResult()
         self.speed_scale = profile.telemetry_speed_per_rad_s
+        # The robot reports speeds as integers of this unit: their resolution in rad/s.
+        self.speed_step_rad_s = 1.0 / self.speed_scale
         self._joints: dict[int, _Joint] = {}
         self._devices: frozenset[int] = frozenset()
         self._moving = False
@@ -962,7 +964,7 @@ class Calibrator:
                 self._settle()
                 runs = self._runs(joint, self.log.samples(begin))
                 try:
-                    k_fit = fit_ticks_per_rad([run for run, _ in runs])
+                    k_fit = fit_ticks_per_rad([run for run, _ in runs], self.speed_step_rad_s)
                 except FitError:
                     k_fit = None
                 # Back to the start after every cycle: a lost or late command stretches a
@@ -972,6 +974,7 @@ class Calibrator:
                 estimate = self._rough_ticks(joint)
                 self._return_to(joint, start_sample, speed, value, estimate)
                 good = sum(1 for run, _ in runs if len(run.times_s) >= 2)
+                # Only the statistical part: more cycles do not lower the speed's rounding.
                 error = k_fit.relative_error if k_fit is not None else None
                 if good >= 2 and error is not None and error <= self.config.target_relative_error:
                     break
@@ -1046,7 +1049,9 @@ class Calibrator:
         assert joint.channel is not None
         name = joint.motor.name
         speeds = [abs(speed_raw) / self.speed_scale for _, speed_raw in runs]
-        scale_fit = fit_through_origin(speeds, [float(value)] * len(speeds), "axis")
+        scale_fit = fit_through_origin(
+            speeds, [float(value)] * len(speeds), "axis", x_step=self.speed_step_rad_s
+        )
         self._measure(
             Measured(
                 f"motors.{name}.ticks_per_rad",
@@ -1069,9 +1074,11 @@ class Calibrator:
                 samples=len(runs),
             )
         )
+        slowest = min(abs(speed_raw) for _, speed_raw in runs)
         self.operator.say(
-            f"{name}: {ticks_per_rad:.1f} ticks/rad (±{(k_fit.relative_error or 0) * 100:.2f} %), "
-            f"{scale_fit.value:.0f} axis per rad/s"
+            f"{name}: {ticks_per_rad:.1f} ticks/rad {_stated(k_fit)}, "
+            f"{scale_fit.value:.0f} axis per rad/s {_stated(scale_fit)} (about 95 %; the "
+            f"speed it rests on is reported to 1 part in {slowest})"
         )
 
     def _return_to(
@@ -1334,6 +1341,12 @@ class _RescanError(Exception):
     def __init__(self, margin_s: float) -> None:
         super().__init__(f"round trip needs {margin_s:.2f} s")
         self.margin_s = margin_s
+
+
+def _stated(fit: Fit) -> str:
+    """A fit's expanded uncertainty as the operator reads it."""
+    expanded = fit.expanded_uncertainty
+    return "± unknown" if expanded is None else f"±{expanded * 100:.2f} %"
 
 
 def _unknown_motor(device_id: int) -> Motor:

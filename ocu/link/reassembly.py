@@ -4,8 +4,11 @@ Partial frames are keyed by (camera, sequence) and held in arrival order. Memory
 twice, by a number of partial frames and by the bytes they reserve; past either bound the
 oldest partial frame is evicted. A partial frame older than the timeout expires. Per camera
 only frames newer than the newest frame delivered are kept: an older one can never be shown,
-so it is dropped and counted. Sequence numbers are compared modulo 2**32; a jump far
-backwards is taken as a robot restart rather than as a stale frame.
+so it is dropped and counted. Sequence numbers are compared modulo 2**32. A stream that
+went back is a robot that restarted its counter (it rebooted) rather than a stale frame when
+it jumped far backwards, or when the camera delivered nothing for the timeout before it (a
+frame held up that long in the network is of no use anyway); `reset()` (LINK LOST) forgets
+every camera's newest number at once.
 """
 
 from __future__ import annotations
@@ -101,6 +104,7 @@ class Reassembler:
         self._partials: dict[tuple[int, int], _Partial] = {}
         self._bytes_held = 0
         self._newest: dict[int, int] = {}
+        self._newest_at: dict[int, float] = {}
         self._fragments = 0
         self._completed = 0
         self._duplicates = 0
@@ -138,7 +142,8 @@ class Reassembler:
                 self._duplicates += 1  # a late copy of the frame already delivered
                 return None
             behind = sequence_behind(sequence, newest)
-            if behind > RESTART_GAP:
+            silent_s = now - self._newest_at[camera]
+            if behind > RESTART_GAP or (behind and silent_s > self.timeout_s):
                 self._restart(camera)
             elif behind:
                 self._out_of_order += 1
@@ -184,6 +189,7 @@ class Reassembler:
     ) -> CompleteFrame:
         camera, sequence = fragment.camera, fragment.sequence
         self._newest[camera] = sequence
+        self._newest_at[camera] = now
         # Older partial frames of this camera can no longer be shown: give them up now.
         older = [
             key for key in self._partials if key[0] == camera and sequence_newer(sequence, key[1])
@@ -202,6 +208,13 @@ class Reassembler:
             completed_at=now,
         )
 
+    def reset(self) -> None:
+        """Forget every partial frame and newest sequence: a lost robot may come back rebooted."""
+        for key in list(self._partials):
+            self._drop(key)
+        self._newest.clear()
+        self._newest_at.clear()
+
     def _make_room(self, frame_bytes: int) -> None:
         while self._partials and (
             len(self._partials) >= self.max_frames
@@ -215,6 +228,7 @@ class Reassembler:
     def _restart(self, camera: int) -> None:
         self._restarts += 1
         del self._newest[camera]
+        del self._newest_at[camera]
         for key in [key for key in self._partials if key[0] == camera]:
             self._drop(key)
 

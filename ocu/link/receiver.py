@@ -267,10 +267,11 @@ class Receiver:
             self.emit(ExtensionChanged(False, reason))
 
     def robot_silent(self) -> None:
-        """The link was lost: the robot may restart meanwhile (its ticks, its readings)."""
+        """The link was lost: the robot may restart meanwhile (its ticks, readings, video)."""
         with self._lock:
             self._last_tick = None
             self._plausibility.reset()
+            self._reassembler.reset()
 
     # ---- state (any thread) ----------------------------------------------------------------
 

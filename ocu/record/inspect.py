@@ -5,7 +5,9 @@ and rates, and packet loss per direction as the share of packets sent that never
 Robot -> OCU loss comes from gaps in the telemetry tick counter and from gaps in the
 extension's per-camera video sequence numbers; OCU -> robot loss cannot be seen from the
 OCU's side (the robot acknowledges nothing) and is reported as such. A file cut short is read
-up to its last complete chunk and said to be truncated.
+up to its last complete chunk and said to be truncated; zeros where records should be are
+reported with their byte offset and not read (chunks after them are found through the file's
+chunk index when it has one).
 
 The telemetry period is estimated from the whole recording with the same rule as the live
 link (ocu.link.stats.tick_loss): the median of the tick steps near the shortest quarter.
@@ -85,6 +87,8 @@ class Summary:
     size_bytes: int
     truncated: bool
     corrupt_chunks: int
+    damaged_at: int | None
+    recovered_chunks: int
     profile_name: str
     start_wall_s: float
     duration_s: float
@@ -119,6 +123,8 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
         size_bytes=recording.size_bytes,
         truncated=recording.truncated,
         corrupt_chunks=0,
+        damaged_at=recording.damaged_at,
+        recovered_chunks=recording.recovered_chunks,
         profile_name=recording.metadata.get("profile_name", profile.name),
         start_wall_s=recording.start_ns / 1e9,
         duration_s=recording.duration_s,
@@ -230,6 +236,13 @@ def render(summary: Summary) -> str:
         f"recorded {started} (local), duration {summary.duration_s:.1f} s, "
         f"profile {summary.profile_name}",
     ]
+    if summary.damaged_at is not None:
+        found = (
+            f"{summary.recovered_chunks} later chunk(s) found through the chunk index"
+            if summary.recovered_chunks
+            else f"the {_size(summary.size_bytes - summary.damaged_at)} after it not read"
+        )
+        lines.append(f"WARNING: zeros instead of records at byte {summary.damaged_at}: {found}")
     if summary.corrupt_chunks:
         lines.append(f"WARNING: {summary.corrupt_chunks} damaged chunk(s) skipped")
     lines += ["", f"{'channel':<34} {'messages':>9} {'rate':>10} {'bytes':>10}"]

@@ -5,6 +5,10 @@ somewhere in the middle of a chunk. Both open the same way: the record framing (
 length, MCAP's outer layer) is walked once without reading chunk contents, which indexes the
 complete chunks by time and finds the metadata and the recorded profile; a record that runs
 past the end of the file marks the file as truncated and everything before it stays usable.
+Zeros where a record should start (opcode 0 is no record: a file extended or preallocated, a
+region a crash left unwritten) end the walk at once instead of being stepped through nine
+bytes at a time; chunks after them are still found when the file ends with its footer, through
+the summary's chunk index.
 Chunks are then read one at a time on demand with the mcap package's record readers, so
 memory stays bounded by one chunk whatever the length of the recording.
 """
@@ -24,7 +28,19 @@ from typing import Any, BinaryIO
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    Footer,
+    Header,
+    Message,
+    Metadata,
+    MetadataIndex,
+    Schema,
+)
 from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 
@@ -39,6 +55,9 @@ MAGIC = b"\x89MCAP0\r\n"
 FOREIGN_TOPICS_SHOWN = 8
 _RECORD_HEAD = struct.Struct("<BQ")
 _CHUNK_TIMES = struct.Struct("<QQ")
+# The footer record's body: summary start, summary offset start, summary CRC.
+_FOOTER_BODY_BYTES = 20
+_TAIL_BYTES = _RECORD_HEAD.size + _FOOTER_BODY_BYTES + len(MAGIC)
 
 
 @dataclass(frozen=True)
@@ -79,6 +98,10 @@ class Recording:
             self.profile_toml: bytes | None = None
             self.chunks: list[ChunkInfo] = []
             self.corrupt_chunks = 0
+            # Where bytes that are no record (zeros) begin, if anywhere; chunks after them
+            # that the summary's chunk index located.
+            self.damaged_at: int | None = None
+            self.recovered_chunks = 0
             self.channels: dict[int, Channel] = {}
             self.schemas: dict[int, Schema] = {}
             self._decoders: dict[int, Callable[[bytes], Any]] = {}
@@ -102,6 +125,11 @@ class Recording:
         while offset + _RECORD_HEAD.size <= self.size_bytes:
             f.seek(offset)
             opcode, length = _RECORD_HEAD.unpack(f.read(_RECORD_HEAD.size))
+            if opcode == 0:
+                self.damaged_at = offset
+                log.warning("%s: no MCAP record at byte %d (zeros)", self.path, offset)
+                self._recover_from_summary(offset)
+                break
             body_at = offset + _RECORD_HEAD.size
             end = body_at + length
             if end > self.size_bytes:
@@ -121,6 +149,62 @@ class Recording:
                 self.truncated = False
                 break
             offset = end
+
+    def _recover_from_summary(self, damaged_at: int) -> None:
+        """Index what lies past the damage through the summary, if the file ends with one."""
+        f = self._file
+        footer_at = self.size_bytes - _TAIL_BYTES
+        if footer_at <= damaged_at:
+            return
+        f.seek(footer_at)
+        tail = f.read(_TAIL_BYTES)
+        opcode, length = _RECORD_HEAD.unpack_from(tail)
+        if tail[-len(MAGIC) :] != MAGIC or opcode != Opcode.FOOTER or length != _FOOTER_BODY_BYTES:
+            return
+        footer = Footer.read(ReadDataStream(io.BytesIO(tail[_RECORD_HEAD.size : -len(MAGIC)])))
+        offset = footer.summary_start
+        if not damaged_at < offset < footer_at:
+            return
+        later: list[int] = []  # metadata and attachments past the damage
+        while offset + _RECORD_HEAD.size <= footer_at:
+            f.seek(offset)
+            opcode, length = _RECORD_HEAD.unpack(f.read(_RECORD_HEAD.size))
+            body_at = offset + _RECORD_HEAD.size
+            if opcode == 0 or body_at + length > footer_at:
+                return  # the summary is damaged too
+            try:
+                if opcode == Opcode.CHUNK_INDEX:
+                    self._recover_chunk(ChunkIndex.read(self._body(body_at, length)), damaged_at)
+                elif opcode in (Opcode.CHANNEL, Opcode.SCHEMA):
+                    self._top_level(opcode, self._body(body_at, length))
+                elif opcode == Opcode.METADATA_INDEX:
+                    later.append(MetadataIndex.read(self._body(body_at, length)).offset)
+                elif opcode == Opcode.ATTACHMENT_INDEX:
+                    later.append(AttachmentIndex.read(self._body(body_at, length)).offset)
+            except (McapError, struct.error, UnicodeDecodeError) as err:
+                log.warning("%s: skipped a damaged summary record: %s", self.path, err)
+            offset = body_at + length
+        self.truncated = False
+        for record_at in later:
+            if damaged_at < record_at < footer_at:
+                f.seek(record_at)
+                opcode, length = _RECORD_HEAD.unpack(f.read(_RECORD_HEAD.size))
+                if opcode in (Opcode.METADATA, Opcode.ATTACHMENT):
+                    body_at = record_at + _RECORD_HEAD.size
+                    if body_at + length <= footer_at:
+                        self._top_level(opcode, self._body(body_at, length))
+
+    def _recover_chunk(self, index: ChunkIndex, damaged_at: int) -> None:
+        at, length = index.chunk_start_offset, index.chunk_length - _RECORD_HEAD.size
+        if at < damaged_at:
+            return  # the walk indexed it
+        self._file.seek(at)
+        head = self._file.read(_RECORD_HEAD.size)
+        if len(head) < _RECORD_HEAD.size or _RECORD_HEAD.unpack(head) != (Opcode.CHUNK, length):
+            self.corrupt_chunks += 1  # the index points at zeros or at something else
+            return
+        self.chunks.append(ChunkInfo(at, length, index.message_start_time, index.message_end_time))
+        self.recovered_chunks += 1
 
     def _body(self, at: int, length: int) -> ReadDataStream:
         self._file.seek(at)

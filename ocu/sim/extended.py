@@ -390,7 +390,6 @@ class Battery:
 class _Stream:
     request: CameraRequest
     next_due_s: float
-    sequence: int = 0
     sent: int = 0
 
 
@@ -455,6 +454,9 @@ class ExtendedServer:
         self._last_hello_s = -math.inf
         self._max_datagram = 1472
         self._streams: dict[int, _Stream] = {}
+        # Per camera for the robot's whole run (docs/protocol.md): a stream that stops and
+        # starts again on a fresh hello goes on counting, so the OCU never sees it go back.
+        self._video_sequences = [0] * len(profile.cameras)
         self._next_status_s = math.inf
         self._status_sequence = 0
         self._last_step_s: float | None = None
@@ -594,7 +596,7 @@ class ExtendedServer:
         jpeg = self.cameras.render(
             camera,
             (request.width_px, request.height_px),
-            stream.sequence,
+            self._video_sequences[camera],
             capture_s,
             request.quality or rcp_quality,
             torch=torch,
@@ -616,14 +618,15 @@ class ExtendedServer:
             jpeg = jpeg[:3] + bytes(self._rng.getrandbits(8) for _ in range(64)) + jpeg[-2:]
             self._corrupt_sent += 1
         camera = stream.request.camera
+        sequence = self._video_sequences[camera]
         fragments = fragment_frame(
-            camera, stream.sequence, int(capture_s * 1_000_000), jpeg, self._max_datagram
+            camera, sequence, int(capture_s * 1_000_000), jpeg, self._max_datagram
         )
         for fragment in fragments:
             send(self.codec.encode(fragment))
         self._fragments_sent += len(fragments)
         self._frames_sent[camera] += 1
-        stream.sequence = (stream.sequence + 1) % 2**32
+        self._video_sequences[camera] = (sequence + 1) % 2**32
         stream.sent += 1
 
     def _status(self, torch: bool, pose: tuple[float, float, float]) -> StatusPacket:

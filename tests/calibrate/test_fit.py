@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import math
 import random
 
 import pytest
 
-from ocu.calibrate.fit import FitError, Run, fit_through_origin, fit_ticks_per_rad
+from ocu.calibrate.fit import (
+    FitError,
+    Run,
+    fit_through_origin,
+    fit_ticks_per_rad,
+    rounding_uncertainty,
+)
 
 
 def runs_of(ticks_per_rad: float, noise_ticks: float, seed: int = 1) -> list[Run]:
@@ -63,3 +70,53 @@ def test_through_origin_is_seed_000s_least_squares() -> None:
     assert noisy.std_error is not None
     with pytest.raises(FitError):
         fit_through_origin([0.0], [1.0], "axis")
+
+
+def rounded_runs(rng: random.Random, ticks_per_rad: float, step: float) -> list[Run]:
+    """Three sweeps (out, back twice as long, out) at 20 Hz with noisy readings, the speed
+    reported rounded to `step`, as the simulator reports it."""
+    true_speed = rng.uniform(0.04, 0.11)
+    reported = round(true_speed / step) * step
+    runs = []
+    for index, (samples, sign) in enumerate(((22, 1), (44, -1), (22, 1))):
+        times = tuple(10.0 * index + 0.05 * k for k in range(samples))
+        positions = tuple(
+            sign * ticks_per_rad * true_speed * (t - times[0]) + rng.uniform(-37.0, 37.0)
+            for t in times
+        )
+        runs.append(Run(times, positions, sign * reported))
+    return runs
+
+
+def test_the_stated_uncertainty_covers_the_speeds_rounding() -> None:
+    # The error the residuals cannot show: every run rests on one rounded speed. The
+    # statistical error alone covered the truth in about half the trials (it printed
+    # "±0.05 %" for errors of 0.3-0.8 %); the expanded uncertainty is stated at about 95 %.
+    rng = random.Random(5)
+    trials = 400
+    covered = covered_by_statistics = 0
+    for _ in range(trials):
+        fit = fit_ticks_per_rad(rounded_runs(rng, 14_243.0, 0.001), speed_step_rad_s=0.001)
+        error = abs(fit.value - 14_243.0) / 14_243.0
+        assert fit.relative_error is not None
+        assert fit.expanded_uncertainty is not None
+        covered += error <= fit.expanded_uncertainty
+        covered_by_statistics += error <= fit.relative_error  # what was printed
+    assert covered >= 0.9 * trials
+    assert covered_by_statistics < 0.7 * trials
+
+
+def test_rounding_uncertainty_of_one_speed_and_of_several() -> None:
+    one = fit_ticks_per_rad(runs_of(7000.0, 0.0), speed_step_rad_s=0.001)
+    # 0.1 rad/s reported in steps of 0.001: a uniform error over ±0.5 of 100 steps.
+    assert one.systematic == pytest.approx(1 / math.sqrt(12) / 100)
+    assert one.uncertainty == pytest.approx(one.systematic, rel=1e-6)  # exact runs otherwise
+    assert fit_ticks_per_rad(runs_of(7000.0, 0.0)).systematic == 0.0
+    # Two speeds round independently: their shares add in quadrature.
+    assert rounding_uncertainty([0.1, 0.2], [1.0, 1.0], 0.001) == pytest.approx(
+        math.hypot(0.5 / 100, 0.5 / 200) / math.sqrt(12)
+    )
+    # An axis scale against a rounded speed: the residuals are zero, the rounding is not.
+    scale = fit_through_origin([0.05, 0.05], [1000.0, 1000.0], "axis", x_step=0.001)
+    assert scale.std_error == pytest.approx(0.0, abs=1e-9)
+    assert scale.expanded_uncertainty == pytest.approx(2 / math.sqrt(12) / 50)

@@ -161,6 +161,50 @@ def test_sequence_wraps_and_a_restart_is_accepted() -> None:
     assert reassembler.stats().restarts == 1
 
 
+def complete(reassembler: Reassembler, camera: int, sequence: int, now: float) -> bool:
+    return [reassembler.add(f, now=now) for f in frame(camera, sequence)][-1] is not None
+
+
+def test_a_restarted_stream_after_a_pause_is_accepted() -> None:
+    # A robot that rebooted after 20 s of video: its counter starts again 600 numbers behind
+    # (less than RESTART_GAP), after a silence longer than the timeout.
+    reassembler = make(timeout_s=0.5)
+    for sequence in range(590, 601):
+        assert complete(reassembler, 0, sequence, now=sequence / 30.0)
+    last_s = 600 / 30.0
+    assert complete(reassembler, 0, 0, now=last_s + 2.0)
+    assert complete(reassembler, 0, 1, now=last_s + 2.033)
+    stats = reassembler.stats()
+    assert stats.restarts == 1
+    assert stats.out_of_order == 0
+
+
+def test_a_late_frame_in_a_flowing_stream_is_still_out_of_order() -> None:
+    reassembler = make(timeout_s=0.5)
+    assert complete(reassembler, 0, 10, now=0.0)
+    assert complete(reassembler, 0, 12, now=0.066)
+    assert not complete(reassembler, 0, 11, now=0.1)  # reordered by the network
+    assert complete(reassembler, 0, 13, now=0.1)
+    assert reassembler.stats().out_of_order > 0
+    assert reassembler.stats().restarts == 0
+
+
+def test_reset_forgets_the_newest_sequence_of_every_camera() -> None:
+    reassembler = make(timeout_s=0.5)
+    for camera in (0, 1):
+        assert complete(reassembler, camera, 300, now=0.0)
+    first, *_ = frame(1, 301)
+    reassembler.add(first, now=0.0)
+    assert reassembler.stats().frames_held == 1
+    reassembler.reset()  # LINK LOST
+    assert reassembler.stats().frames_held == 0
+    assert reassembler.stats().bytes_held == 0
+    # The same instant (no silence to go by): the restarted counters are taken at once.
+    assert complete(reassembler, 0, 0, now=0.0)
+    assert complete(reassembler, 1, 5, now=0.0)
+    assert reassembler.stats().out_of_order == 0
+
+
 def test_bad_bounds_are_refused() -> None:
     with pytest.raises(ValueError, match="positive"):
         Reassembler(0, 100, 1.0)

@@ -95,5 +95,6 @@ def test_profile_without_extension_or_cameras_is_vendor_only() -> None:
     ],
 )
 def test_video_keys_are_validated(path: tuple[str, ...], value: object, message: str) -> None:
-    with pytest.raises(ProfileError, match=message):
+    # Without a file, the profile's source comes first: "<profile>: profile.cameras...".
+    with pytest.raises(ProfileError, match=message.replace("^", "^<profile>: ", 1)):
         parse_profile(edited(path, value))
