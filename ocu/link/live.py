@@ -133,6 +133,11 @@ class LiveLink(Link):
         self._estop_latched = False
         self._gui_alive_at = clock()
         self._gui_tripped = False
+        # The loop steps at least every MAX_WAIT_S (ocu.net.loop); a longer gap than this
+        # means the process was stopped (SIGSTOP, suspend, swapping) or starved: whatever
+        # it commanded before is stale, and the robot may have stopped on its own watchdog.
+        self.freeze_limit_s = settings.gui_alive_timeout_s
+        self._last_step_at: float | None = None
         self._silenced: str | None = None
         # The thread that calls heartbeat() owns the commands; until one does, whoever sets
         # commands counts as alive by doing so.
@@ -203,6 +208,12 @@ class LiveLink(Link):
                     f"control thread silent for {stalled_s:.2f} s: motion commands zeroed"
                 )
             command = command.stopped()
+        frozen_s = self._loop_frozen_s()
+        if frozen_s is not None and command.is_motion:
+            # The loop has not run its watchdogs for that long (the process just woke up):
+            # no motion goes out before they have.
+            self._silenced = f"link loop frozen for {frozen_s:.2f} s: motion commands zeroed"
+            command = command.stopped()
         if self._state is LinkState.LOST:
             # A robot the OCU cannot hear may still hear the OCU: it would drive blind.
             command = command.stopped()
@@ -226,6 +237,14 @@ class LiveLink(Link):
         self._send_current()
         self.loop.wake()
         self._notify_safety(f"EMERGENCY STOP ({reason})")
+
+    def _loop_frozen_s(self) -> float | None:
+        """How long the running loop has gone without a step, if over the limit (lock held)."""
+        last = self._last_step_at
+        if last is None or self._closed:
+            return None
+        gap = self.clock() - last
+        return gap if gap > self.freeze_limit_s else None
 
     def _owner_silent(self) -> bool:
         timeout = self.gui_alive_timeout_s
@@ -289,16 +308,25 @@ class LiveLink(Link):
 
     def start(self) -> None:
         """Run the loop in its named daemon thread ("ocu-link")."""
-        with self._lock:
-            self._next_tick = self.clock()
-            self._next_stats = self._next_tick + STATS_PERIOD_S
+        self._begin_loop()
         self.loop.start(self._step)
 
     def run(self) -> None:
         """Run the loop in the calling thread until shutdown()."""
+        self._begin_loop()
         self.loop.run(self._step)
 
+    def _begin_loop(self) -> None:
+        with self._lock:
+            self._next_tick = self.clock()
+            self._next_stats = self._next_tick + STATS_PERIOD_S
+            self._last_step_at = self._next_tick
+
     def _step(self, now: float) -> float:
+        # The watchdogs first: after a freeze the periodic tick is due at once, and what it
+        # would send is the command from before the freeze (the robot may have stopped on its
+        # own watchdog meanwhile and would be restarted by it).
+        self._check_watchdogs(now)
         with self._lock:
             tick_due = now >= self._next_tick
             if tick_due:
@@ -311,7 +339,6 @@ class LiveLink(Link):
             self._send_hello()
         if stats_due:
             self.emit(self.stats())
-        self._check_watchdogs(now)
         self.receiver.expire(now)
         due = self._send_due_estops(now)
         with self._lock:
@@ -335,6 +362,11 @@ class LiveLink(Link):
     def _check_watchdogs(self, now: float) -> None:
         message = None
         with self._lock:
+            last_step, self._last_step_at = self._last_step_at, now
+            frozen_s = None if last_step is None else now - last_step
+            if frozen_s is not None and frozen_s > self.freeze_limit_s and self._command.is_motion:
+                self._command = self._command.stopped()
+                message = f"link loop frozen for {frozen_s:.2f} s: motion commands zeroed"
             timeout = self.gui_alive_timeout_s
             stalled_s = now - self._gui_alive_at
             if (
