@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+import weakref
 from collections.abc import Callable, Sequence
 from typing import TypedDict, Unpack
 
@@ -55,6 +56,16 @@ log = logging.getLogger("ocu.link")
 RECV_BUFFER_BYTES = 65536
 MAX_DATAGRAMS_PER_WAKE = 256
 STATS_PERIOD_S = 0.5
+
+# Every live link not yet shut down, for the process's last-chance hooks (ocu.link.guard).
+_LIVE: weakref.WeakSet[LiveLink] = weakref.WeakSet()
+_LIVE_LOCK = threading.Lock()
+
+
+def live_links() -> list[LiveLink]:
+    """The live links not yet shut down."""
+    with _LIVE_LOCK:
+        return list(_LIVE)
 
 
 class LiveLink(Link):
@@ -133,10 +144,11 @@ class LiveLink(Link):
         self._estop_latched = False
         self._gui_alive_at = clock()
         self._gui_tripped = False
-        # The loop steps at least every MAX_WAIT_S (ocu.net.loop); a longer gap than this
-        # means the process was stopped (SIGSTOP, suspend, swapping) or starved: whatever
-        # it commanded before is stale, and the robot may have stopped on its own watchdog.
-        self.freeze_limit_s = settings.gui_alive_timeout_s
+        # The loop steps at least every MAX_WAIT_S (ocu.net.loop). A gap longer than the
+        # robot's own watchdog means the process was stopped (SIGSTOP, suspend, swapping) or
+        # starved long enough for the robot to stop by itself: the command from before the
+        # gap is stale and would restart it.
+        self.freeze_limit_s = settings.robot_watchdog_s
         self._last_step_at: float | None = None
         self._silenced: str | None = None
         # The thread that calls heartbeat() owns the commands; until one does, whoever sets
@@ -154,6 +166,8 @@ class LiveLink(Link):
         self._buffer = bytearray(RECV_BUFFER_BYTES)
         self.loop = SelectLoop("ocu-link", clock=clock, on_error=self._loop_failed)
         self.loop.add_reader(transport.socket, self._receive_all)
+        with _LIVE_LOCK:
+            _LIVE.add(self)
 
     # ---- commands (any thread) -------------------------------------------------------------
 
@@ -513,6 +527,8 @@ class LiveLink(Link):
         with self._send_lock:
             if self._closed:
                 return
+        with _LIVE_LOCK:
+            _LIVE.discard(self)
         self.loop.stop(timeout_s)
         with self._lock:
             self._command = self._command.stopped()
