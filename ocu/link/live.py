@@ -190,6 +190,8 @@ class LiveLink(Link):
             silenced = self._take_silenced()
         if changed and self.send_on_change:
             self._send_current()
+        if changed:
+            self.loop.wake()  # the zero burst's repeats, if this stopped motion
         if silenced:
             self._notify_safety(silenced)
 
@@ -200,6 +202,8 @@ class LiveLink(Link):
             silenced = self._take_silenced()
         if changed and self.send_on_change:
             self._send_current()
+        if changed:
+            self.loop.wake()  # the zero burst's repeats, if this stopped motion
         if silenced:
             self._notify_safety(silenced)
 
@@ -235,8 +239,26 @@ class LiveLink(Link):
             self._estop_latched = False
         if command == self._command:
             return False
+        if self._command.is_motion and not command.is_motion:
+            self._schedule_zero_repeats()
         self._command = command
         return True
+
+    def _schedule_zero_repeats(self) -> None:
+        """Motion just became zero (lock held): repeat the zeros as the e-stop does.
+
+        One zero can be lost, and with jitter an older motion RCP can arrive after it and
+        drive on until the next tick; the repeats (the same count and window as the e-stop's)
+        make both unlikely. Each repeat sends the command current at its time.
+        """
+        settings = self.profile.link
+        repeats = settings.estop_repeats - 1
+        if repeats <= 0:
+            return
+        now = self.clock()
+        step = settings.estop_window_s / repeats
+        due = (now + step * (k + 1) for k in range(repeats))
+        self._estop_due = sorted({*self._estop_due, *due})
 
     def emergency_stop(self, reason: str = "operator") -> None:
         """Zero every velocity now and repeat the zero command within the e-stop window."""
@@ -379,6 +401,7 @@ class LiveLink(Link):
             last_step, self._last_step_at = self._last_step_at, now
             frozen_s = None if last_step is None else now - last_step
             if frozen_s is not None and frozen_s > self.freeze_limit_s and self._command.is_motion:
+                self._schedule_zero_repeats()
                 self._command = self._command.stopped()
                 message = f"link loop frozen for {frozen_s:.2f} s: motion commands zeroed"
             timeout = self.gui_alive_timeout_s
@@ -390,6 +413,7 @@ class LiveLink(Link):
                 and stalled_s > timeout
             ):
                 self._gui_tripped = True
+                self._schedule_zero_repeats()
                 self._command = self._command.stopped()
                 message = f"control thread silent for {stalled_s:.2f} s: motion commands zeroed"
             last = self.receiver.last_valid_at
@@ -404,6 +428,8 @@ class LiveLink(Link):
             reason = f"no valid packet from the robot for {now - last:.1f} s"
             with self._lock:
                 had_motion = self._command.is_motion
+                if had_motion:
+                    self._schedule_zero_repeats()
                 self._command = self._command.stopped()
             self.receiver.robot_silent()
             self._set_state(LinkState.LOST, reason)
