@@ -13,6 +13,7 @@ by the channels' hard maxima only; the operator's current maxima are the console
 from __future__ import annotations
 
 import logging
+import random
 import threading
 import time
 import weakref
@@ -35,8 +36,14 @@ from ocu.net.transport import (
     resolve,
 )
 from ocu.profile import ExtensionSettings, RobotProfile
-from ocu.protocol.extended import MIN_DATAGRAM, CameraRequest, HelloPacket
-from ocu.protocol.packets import MAX_DATAGRAM
+from ocu.protocol.extended import (
+    MIN_DATAGRAM,
+    SEQUENCE_MODULUS,
+    CameraRequest,
+    HelloPacket,
+    SequencedRcp,
+)
+from ocu.protocol.packets import MAX_DATAGRAM, RemoteControlPacket
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import (
     HELLO,
@@ -111,7 +118,10 @@ class LiveLink(Link):
         # profile defines it (and does not switch probing off).
         ext = profile.extension
         self.extension_enabled = extension and ext is not None and ext.probe
-        self._ext_codec = make_extension_codec(profile)
+        self._ext_codec = make_extension_codec(profile) if self.extension_enabled else None
+        # The next sequenced RCP's number: from a random start, so that a restarted OCU is not
+        # taken for a late copy of its former self (the robot also starts over after a pause).
+        self._rcp_sequence = random.randrange(SEQUENCE_MODULUS)
         self.receiver = Receiver(
             profile,
             self.emit,
@@ -465,7 +475,7 @@ class LiveLink(Link):
     # ---- send ------------------------------------------------------------------------------
 
     def current_packet_bytes(self) -> bytes:
-        """The RCP for the current command on the wire (bounded by the hard maxima)."""
+        """The vendor RCP for the current command (bounded by the hard maxima)."""
         with self._lock:
             return self._codec.encode(self._mapper.to_packet(self._command))
 
@@ -473,15 +483,28 @@ class LiveLink(Link):
         # Built and sent under one lock: a tick that read the command just before the
         # operator stopped must not put its stale motion on the wire after the stop.
         with self._send_lock:
-            self._send_rcp(self.current_packet_bytes())
+            with self._lock:
+                packet = self._mapper.to_packet(self._command)
+            self._send_rcp(packet)
 
     def _send_zeros(self) -> None:
         with self._lock:
-            zero = self._codec.encode(self._mapper.to_packet(self._command.stopped()))
+            zero = self._mapper.to_packet(self._command.stopped())
         self._send_rcp(zero)
 
-    def _send_rcp(self, data: bytes) -> None:
+    def _rcp_datagram(self, packet: RemoteControlPacket) -> bytes:
+        """The RCP as sent (send lock held): sequenced to a robot speaking the extension (it
+        drops one older than the newest it applied), the vendor's to any other."""
+        ext = self._ext_codec
+        if ext is None or ext.rcp_type is None or not self.receiver.extension_active:
+            return self._codec.encode(packet)
+        sequence = self._rcp_sequence
+        self._rcp_sequence = (sequence + 1) % SEQUENCE_MODULUS
+        return ext.encode(SequencedRcp(sequence, packet))
+
+    def _send_rcp(self, packet: RemoteControlPacket) -> None:
         with self._send_lock:
+            data = self._rcp_datagram(packet)
             sent_at = self._send_datagram(data, RCP)
             if sent_at is None:
                 return

@@ -28,7 +28,13 @@ from ocu.link.reassembly import Reassembler, ReassemblyStats
 from ocu.link.stats import LossEstimator, RateMeter
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket, VideoFramePacket
-from ocu.protocol.extended import HelloPacket, ScanPacket, StatusPacket, VideoFragment
+from ocu.protocol.extended import (
+    HelloPacket,
+    ScanPacket,
+    SequencedRcp,
+    StatusPacket,
+    VideoFragment,
+)
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import (
     OTHER,
@@ -88,6 +94,8 @@ class Receiver:
         self._codec = make_codec(profile)
         ext_codec = make_extension_codec(profile)
         self._ext_codec = ext_codec if extension else None
+        # What the OCU sent is decoded whatever it receives (a replay of an extended session).
+        self._rcp_ext_codec = ext_codec if ext_codec is not None and ext_codec.rcp_type else None
         self._mapper = CommandMapper(profile)
         self.extension_timeout_s = (
             profile.link.link_lost_after_s if link_lost_after_s is None else link_lost_after_s
@@ -123,15 +131,22 @@ class Receiver:
     # ---- what the OCU sent (any thread) -----------------------------------------------------
 
     def sent(self, data: bytes, at: float) -> Command | None:
-        """A datagram the OCU put on the wire: the command it carried, if an RCP.
+        """A datagram the OCU put on the wire: the command it carried, if an RCP (vendor or
+        sequenced).
 
         The camera it selected is where vendor video is shown; the motor speeds it asks for
         are what the robot will echo (the delay measurement).
         """
-        if not data or data[0] != self._codec.rcp_type:
+        if not data:
             return None
+        rcp_ext = self._rcp_ext_codec
         try:
-            packet = RemoteControlPacket.decode(data, data[0])
+            if data[0] == self._codec.rcp_type:
+                packet = RemoteControlPacket.decode(data, data[0])
+            elif rcp_ext is not None and data[0] == rcp_ext.rcp_type:
+                packet = SequencedRcp.decode(data, data[0]).rcp
+            else:
+                return None
         except ProtocolError:
             return None
         command = self._mapper.to_command(packet)
@@ -261,9 +276,9 @@ class Receiver:
                 self.ext_malformed += 1
             log.debug("malformed extension datagram (%d bytes): %s", len(data), err)
             return False
-        if isinstance(packet, HelloPacket):
+        if isinstance(packet, HelloPacket | SequencedRcp):
             self.emit(DatagramReceived(data, at, OTHER))
-            self.foreign()  # a hello never comes from the robot
+            self.foreign()  # a hello or an RCP never comes from the robot
             return False
         if isinstance(packet, VideoFragment):
             self.emit(DatagramReceived(data, at, VIDEO_FRAGMENT, packet.capture_time_us / 1e6))
