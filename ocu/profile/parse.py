@@ -1,563 +1,72 @@
-"""Robot profile: load and validate the TOML file that holds every robot fact."""
+"""Reading and validating a profile's TOML document into a RobotProfile; errors name the file
+and the key."""
 
 from __future__ import annotations
 
 import datetime as dt
-import difflib
 import itertools
-import json
 import math
-import re
 import tomllib
-from collections.abc import Collection, Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Collection
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from ocu.files import write_text_atomically
-
-AXIS_COUNT = 16
-BUTTON_COUNT = 16
-AXIS_MAX = 32767
-SCALE_NAMES = ("linear", "rotation", "joint")
-# Roles a channel may play. The chassis is driven by one `drive_linear` channel (m/s) and one
-# `drive_turn` channel (rad/s), bounded and lifted as a pair (ocu.control.drive).
-DRIVE_LINEAR_ROLE = "drive_linear"
-DRIVE_TURN_ROLE = "drive_turn"
-CHANNEL_ROLES = (DRIVE_LINEAR_ROLE, DRIVE_TURN_ROLE)
-
-
-# The keys each table of the profile may hold; any other key is refused by name, so a
-# misspelt optional key is not silently ignored and a misspelt required one is named as
-# what it is rather than reported as its correct spelling "missing".
-TOP_KEYS = (
-    "name",
-    "assumptions",
-    "link",
-    "extension",
-    "video",
-    "cameras",
-    "si",
-    "chassis",
-    "buttons",
-    "channels",
-    "motors",
-    "arm",
-    "navigation",
-    "measured",
+from ocu.profile.description import (
+    ArmSettings,
+    AssistSettings,
+    CameraCalibration,
+    CameraMount,
+    CameraSettings,
+    Footprint,
+    Measurement,
+    Motor,
+    NavigationSettings,
+    OdometrySettings,
+    RobotProfile,
+    ZoneSettings,
 )
-LINK_KEYS = (
-    "address",
-    "port",
-    "send_rate_hz",
-    "send_rate_min_hz",
-    "send_rate_max_hz",
-    "robot_watchdog_s",
-    "telemetry_rate_hz",
-    "telemetry_tick_hz",
-    "link_lost_after_s",
-    "gui_alive_timeout_s",
-    "estop_repeats",
-    "estop_window_s",
-    "default_video_bitrate",
-    "camera_names",
-    "frame_types",
+from ocu.profile.hardware import (
+    Channel,
+    ExtensionFrameTypes,
+    ExtensionSettings,
+    FrameTypes,
+    LinkSettings,
+    VideoSettings,
 )
-FRAME_TYPE_KEYS = ("rcp", "telemetry", "video")
-EXTENSION_KEYS = (
-    "probe",
-    "frame_types",
-    "max_datagram_bytes",
-    "fit_datagrams_to_path",
-    "stream_width_px",
-    "stream_height_px",
-    "stream_fps",
+from ocu.profile.keys import (
+    ARM_KEYS,
+    ASSIST_KEYS,
+    AXIS_COUNT,
+    AXIS_MAX,
+    BUTTON_COUNT,
+    BUTTON_KEYS,
+    CAMERA_KEYS,
+    CAMERA_MODELS,
+    CHANNEL_KEYS,
+    CHANNEL_ROLES,
+    CHASSIS_KEYS,
+    COLOUR_MODES,
+    DISTORTION_LENGTHS,
+    EXTENSION_FRAME_TYPE_KEYS,
+    EXTENSION_KEYS,
+    FRAME_TYPE_KEYS,
+    LINK_KEYS,
+    LINK_LOST_MAX_S,
+    MEASUREMENT_KEYS,
+    MOTOR_KEYS,
+    MOTOR_POSITION_KEYS,
+    NAVIGATION_KEYS,
+    ODOMETRY_KEYS,
+    OPTIONAL_EXTENSION_FRAME_TYPE_KEYS,
+    SCALE_NAMES,
+    SI_KEYS,
+    TOP_KEYS,
+    VIDEO_KEYS,
+    ZONE_KEYS,
+    ProfileError,
+    did_you_mean,
 )
-EXTENSION_FRAME_TYPE_KEYS = ("hello", "video_fragment", "status")
-# Frame types an older profile may leave out; the extension then lacks that packet.
-OPTIONAL_EXTENSION_FRAME_TYPE_KEYS = ("scan", "rcp")
-VIDEO_KEYS = (
-    "no_signal_after_s",
-    "battery_warning_percent",
-    "reassembly_max_frames",
-    "reassembly_max_bytes",
-    "reassembly_timeout_s",
-    "decode_at_display_size",
-    "opencv_threads",
-)
-CAMERA_KEYS = (
-    "model",
-    "calibration_size_px",
-    "focal_px",
-    "centre_px",
-    "distortion",
-    "balance",
-    "undistort",
-    "colour",
-    "fixed_gains_rgb",
-    *("mount_xyz_m", "mount_yaw_deg", "mount_pitch_deg", "mount_link"),
-)
-SI_KEYS = (
-    "linear_axis_per_m_s",
-    "rotation_axis_per_rad_s",
-    "joint_axis_per_rad_s",
-    "telemetry_speed_per_rad_s",
-    "telemetry_current_per_amp",
-)
-CHASSIS_KEYS = ("track_width_m",)
-NAVIGATION_KEYS = (
-    "footprint_front_m",
-    "footprint_rear_m",
-    "footprint_half_width_m",
-    "scan_mount_xy_m",
-    "scan_stale_after_s",
-    "odometry",
-    "zones",
-    "assist",
-)
-ODOMETRY_KEYS = (
-    "stale_after_s",
-    "linear_noise_m2_per_m",
-    "heading_noise_rad2_per_rad",
-    "heading_drift_rad2_per_m",
-    "commanded_noise_factor",
-    "imu_heading_sigma_deg",
-)
-ZONE_KEYS = ("stop_m", "within_m", "max_linear_m_s", "max_angular_rad_s")
-ASSIST_KEYS = (
-    "linear_gain_m_per_s2",
-    "samson_b",
-    "samson_xi",
-    "cruise_m_s",
-    "goal_tolerance_m",
-    "max_lag_m",
-)
-BUTTON_KEYS = ("torch", "camera_select")
-CHANNEL_KEYS = (
-    "axis",
-    "scale",
-    "unit",
-    "min_speed",
-    "default_max",
-    "hard_max",
-    "role",
-    "switch",
-    "directions",
-    "locked_while_driving",
-    "axis_sign",
-    "axis_per_unit",
-)
-# A motor's position keys only mean something with ticks_per_rad.
-MOTOR_POSITION_KEYS = ("zero_offset_ticks", "limits_deg")
-MOTOR_KEYS = ("device_id", "channel", "track", "ticks_per_rad", *MOTOR_POSITION_KEYS)
-
-ARM_KEYS = (
-    "base_link",
-    "tool_link",
-    "camera_link",
-    "joints",
-    "linear_speed_m_s",
-    "max_linear_speed_m_s",
-    "pitch_speed_deg_s",
-    "max_pitch_speed_deg_s",
-    "acceleration_deg_s2",
-    "joint_limit_margin_deg",
-    "singularity_slow",
-    "singularity_stop",
-    "clearance_m",
-    "slow_distance_m",
-    "ground_z_m",
-    "twist_timeout_s",
-    "poses",
-)
-# What a `[measured."some.key"]` entry may say about how that key was measured on a robot.
-MEASUREMENT_KEYS = ("how", "when", "residual", "residual_unit", "samples")
-# Table names are TOML bare keys; the dotted names in `measured` and `assumptions` join them.
-_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
-# Arrays longer than this are written one item per line.
-TOML_LINE_LENGTH = 96
-
-CAMERA_MODELS = ("fisheye", "standard")
-COLOUR_MODES = ("off", "gray_world", "fixed")
-# Distortion coefficients per model: cv2.fisheye takes k1..k4; the standard (Brown-Conrady)
-# model k1, k2, p1, p2 and optionally k3.
-DISTORTION_LENGTHS = {"fisheye": (4,), "standard": (4, 5)}
-
-
-# The longest LINK LOST delay a profile may set: a robot unheard for longer must be said.
-LINK_LOST_MAX_S = 30.0
-
-
-class ProfileError(ValueError):
-    """The robot profile is missing a value or holds a bad one."""
-
-
-def did_you_mean(word: str, choices: Iterable[str]) -> str:
-    """A "did you mean 'x'?" hint for a misspelt word, else the list of choices."""
-    names = list(choices)
-    # Case-blind: "space" is a misspelling of "Space", not an unrelated word.
-    by_folded = {name.casefold(): name for name in names}
-    close = difflib.get_close_matches(word.casefold(), by_folded, n=1)
-    if close:
-        return f"did you mean {by_folded[close[0]]!r}?"
-    return f"known: {', '.join(names)}" if names else "nothing is expected here"
-
-
-@dataclass(frozen=True)
-class FrameTypes:
-    """Wire IDs of the vendor packet types."""
-
-    rcp: int
-    telemetry: int
-    video: int
-
-
-@dataclass(frozen=True)
-class LinkSettings:
-    """Network and timing facts of the link."""
-
-    address: str
-    port: int
-    send_rate_hz: float
-    send_rate_min_hz: float
-    send_rate_max_hz: float
-    robot_watchdog_s: float
-    telemetry_rate_hz: float
-    telemetry_tick_hz: float
-    link_lost_after_s: float
-    gui_alive_timeout_s: float
-    estop_repeats: int
-    estop_window_s: float
-    default_video_bitrate: float
-    camera_names: tuple[str, ...]
-    frame_types: FrameTypes
-
-
-@dataclass(frozen=True)
-class ExtensionFrameTypes:
-    """Wire IDs of our protocol extension's packet types (not vendor facts)."""
-
-    hello: int
-    video_fragment: int
-    status: int
-    # The planar range scan (robot -> OCU); None: this extension has no range sensor.
-    scan: int | None = None
-    # The sequenced RCP (OCU -> robot); None: the OCU sends vendor RCPs to any robot.
-    rcp: int | None = None
-
-
-@dataclass(frozen=True)
-class ExtensionSettings:
-    """The open protocol extension: its IDs and what the OCU asks of an extended robot."""
-
-    probe: bool
-    frame_types: ExtensionFrameTypes
-    max_datagram_bytes: int
-    stream_width_px: int
-    stream_height_px: int
-    stream_fps: int
-    # Ask for datagrams as large as the route's MTU carries unfragmented (65507 bytes on the
-    # loopback, 1472 on a 1500-byte link); max_datagram_bytes where the MTU is unknown.
-    fit_datagrams_to_path: bool = True
-
-
-@dataclass(frozen=True)
-class VideoSettings:
-    """OCU-side video settings: no-signal time, battery warning, reassembly bounds."""
-
-    no_signal_after_s: float = 1.0
-    battery_warning_percent: float = 20.0
-    reassembly_max_frames: int = 16
-    reassembly_max_bytes: int = 8 * 1024 * 1024
-    reassembly_timeout_s: float = 0.5
-    # Decode each JPEG at the size its cell shows it (libjpeg DCT scaling, 1/2 to 1/8).
-    decode_at_display_size: bool = True
-    # OpenCV's worker threads for decoding and correction; 0: OpenCV's own choice.
-    opencv_threads: int = 1
-
-
-@dataclass(frozen=True)
-class CameraCalibration:
-    """Intrinsics of one camera at the resolution it was calibrated at."""
-
-    model: str
-    size_px: tuple[int, int]
-    focal_px: tuple[float, float]
-    centre_px: tuple[float, float]
-    distortion: tuple[float, ...]
-    balance: float
-
-
-@dataclass(frozen=True)
-class CameraMount:
-    """Where a camera sits on the chassis (base_link: x forward, y left, z up) and looks.
-
-    Yaw turns the view left of straight ahead; pitch tilts it down. The simulator draws its
-    world from here (ocu.sim.scene). With `link` (a URDF link, e.g. the arm's camera link)
-    the offset is in that link's frame and the camera moves with the joints above it.
-    """
-
-    xyz_m: tuple[float, float, float]
-    yaw_rad: float = 0.0
-    pitch_rad: float = 0.0
-    link: str | None = None
-
-
-@dataclass(frozen=True)
-class CameraSettings:
-    """One camera: its name, calibration (None = not calibrated) and correction defaults."""
-
-    name: str
-    index: int
-    calibration: CameraCalibration | None = None
-    undistort: bool = False
-    colour: str = "off"
-    fixed_gains_rgb: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    mount: CameraMount | None = None
-
-
-@dataclass(frozen=True)
-class Footprint:
-    """The chassis outline seen from above, about the turn centre (x forward, y left)."""
-
-    front_m: float
-    rear_m: float
-    half_width_m: float
-
-    @property
-    def corners_m(self) -> tuple[tuple[float, float], ...]:
-        """Front-left, rear-left, rear-right, front-right."""
-        front, rear, half = self.front_m, -self.rear_m, self.half_width_m
-        return ((front, half), (rear, half), (rear, -half), (front, -half))
-
-    @property
-    def swing_radius_m(self) -> float:
-        """How far the farthest corner is from the turn centre (the circle a turn sweeps)."""
-        return math.hypot(max(self.front_m, self.rear_m), self.half_width_m)
-
-
-@dataclass(frozen=True)
-class OdometrySettings:
-    """Dead reckoning: when it is stale, and how its uncertainty grows (variance rates)."""
-
-    stale_after_s: float = 2.5
-    linear_noise_m2_per_m: float = 0.0004
-    heading_noise_rad2_per_rad: float = 0.0025
-    heading_drift_rad2_per_m: float = 0.0001
-    commanded_noise_factor: float = 4.0
-    imu_heading_sigma_rad: float = math.radians(0.5)
-
-
-@dataclass(frozen=True)
-class ZoneSettings:
-    """Seed 002's safety zones (Algorithm 5.1), as travel to contact along the motion.
-
-    Inside `stop_m` nothing moves toward the obstacle; inside `within_m[k]` the speeds are
-    capped at `max_linear_m_s[k]` and `max_angular_rad_s[k]` with their ratio kept.
-    """
-
-    stop_m: float = 0.10
-    within_m: tuple[float, ...] = (0.333, 0.633, 0.933)
-    max_linear_m_s: tuple[float, ...] = (0.2, 0.25, 0.35)
-    max_angular_rad_s: tuple[float, ...] = (0.3, 0.5, 0.8)
-
-
-@dataclass(frozen=True)
-class AssistSettings:
-    """Seed 002's assisted modes: linear shuttle gain (eq. 5.5) and Samson's gains (eq. 3.18)."""
-
-    linear_gain_m_per_s2: float = 0.05
-    samson_b: float = 40.0
-    samson_xi: float = 0.8
-    cruise_m_s: float = 0.25
-    goal_tolerance_m: float = 0.10
-    max_lag_m: float = 0.4
-
-
-@dataclass(frozen=True)
-class NavigationSettings:
-    """Driving with a map: footprint, range sensor, odometry, safety zones, assisted modes.
-
-    `footprint` is None for a profile without a [navigation] table: the zones are then off.
-    """
-
-    footprint: Footprint | None = None
-    scan_mount_xy_m: tuple[float, float] = (0.0, 0.0)
-    scan_stale_after_s: float = 0.5
-    odometry: OdometrySettings = OdometrySettings()
-    zones: ZoneSettings = ZoneSettings()
-    assist: AssistSettings = AssistSettings()
-
-
-@dataclass(frozen=True)
-class Channel:
-    """One velocity channel: which RCP axis carries it, how SI maps to axis units, its role.
-
-    `directions` are the words for + and − ("up", "down"); `switch` gives the channel a
-    three-way switch in the console; `locked_while_driving` says the robot refuses to move it
-    while the chassis moves (the Engineer's waist). `axis_sign` is -1 when the robot moves the
-    channel the negative way for a positive axis value (the OCU then sends the axis negated).
-    `axis_per_unit` is the channel's own scale when the profile gives one, else the SI
-    constant its `scale` names.
-    """
-
-    name: str
-    axis: int
-    axis_per_unit: float
-    unit: str
-    min_speed: float
-    default_max: float
-    hard_max: float
-    role: str | None = None
-    switch: bool = False
-    directions: tuple[str, str] = ("+", "-")
-    locked_while_driving: bool = False
-    axis_sign: int = 1
-
-
-@dataclass(frozen=True)
-class Measurement:
-    """How one profile key was measured on a robot (`[measured."key"]`, by ocu calibrate)."""
-
-    key: str
-    how: str
-    when: dt.datetime
-    residual: float | None = None
-    residual_unit: str | None = None
-    samples: int | None = None
-
-
-@dataclass(frozen=True)
-class Motor:
-    """One telemetry motor record: its device ID and how to read its position."""
-
-    name: str
-    device_id: int
-    channel: str | None
-    track: str | None
-    ticks_per_rad: float | None
-    zero_offset_ticks: int
-    limits_rad: tuple[float, float] | None
-    # The limits as the profile writes them: an operator types degrees, and 120° must be
-    # compared with 120, not with degrees(radians(120)) = 119.99999999999999.
-    limits_deg: tuple[float, float] | None = None
-
-    @property
-    def has_position(self) -> bool:
-        """Whether this motor reports a shaft position (the tracks do not)."""
-        return self.ticks_per_rad is not None
-
-
-@dataclass(frozen=True)
-class ArmSettings:
-    """The arm in Cartesian space (docs/arm.md): its frames, jog speeds, safety margins.
-
-    The links are the URDF's; `joints` are the motors that move the arm, from the base to the
-    tool. `poses` are the stored poses every robot of this kind has (joint name -> rad).
-    """
-
-    base_link: str
-    tool_link: str
-    camera_link: str | None
-    joints: tuple[str, ...]
-    linear_speed_m_s: float
-    max_linear_speed_m_s: float
-    pitch_speed_rad_s: float
-    max_pitch_speed_rad_s: float
-    acceleration_rad_s2: float
-    joint_limit_margin_rad: float
-    singularity_slow: float
-    singularity_stop: float
-    clearance_m: float
-    slow_distance_m: float
-    ground_z_m: float | None
-    twist_timeout_s: float
-    poses: dict[str, dict[str, float]]
-
-
-@dataclass(frozen=True)
-class RobotProfile:
-    """Everything the OCU knows about one robot model."""
-
-    name: str
-    source: str
-    link: LinkSettings
-    channels: dict[str, Channel]
-    motors: dict[str, Motor]
-    torch_button: int
-    camera_button: int
-    track_width_m: float
-    telemetry_speed_per_rad_s: float
-    telemetry_current_per_amp: float
-    linear_axis_per_m_s: float
-    rotation_axis_per_rad_s: float
-    assumptions: tuple[str, ...]
-    extension: ExtensionSettings | None = None
-    video: VideoSettings = VideoSettings()
-    cameras: tuple[CameraSettings, ...] = ()
-    arm: ArmSettings | None = None
-    navigation: NavigationSettings = NavigationSettings()
-    # Keys measured on a robot, by dotted name ("channels.shoulder.axis").
-    measured: Mapping[str, Measurement] = field(default_factory=dict)
-
-    def provenance(self, key: str) -> str:
-        """Where a dotted key's value comes from: "measured", "assumption" or "documents"."""
-        if key in self.measured:
-            return "measured"
-        if any(assumption_covers(pattern, key) for pattern in self.assumptions):
-            return "assumption"
-        return "documents"
-
-    def channel_with_role(self, role: str) -> str | None:
-        """The channel that plays a role (e.g. "drive_linear"), or None."""
-        for channel in self.channels.values():
-            if channel.role == role:
-                return channel.name
-        return None
-
-    @property
-    def drive_channels(self) -> tuple[str, str] | None:
-        """The chassis' (linear, turn) channels, or None for a robot without a chassis."""
-        linear = self.channel_with_role(DRIVE_LINEAR_ROLE)
-        turn = self.channel_with_role(DRIVE_TURN_ROLE)
-        return (linear, turn) if linear is not None and turn is not None else None
-
-    @property
-    def switch_channels(self) -> list[str]:
-        """Channels that have a three-way switch in the console."""
-        return [c.name for c in self.channels.values() if c.switch]
-
-    def motor_by_device(self, device_id: int) -> Motor | None:
-        """The motor with this telemetry device ID, or None."""
-        for motor in self.motors.values():
-            if motor.device_id == device_id:
-                return motor
-        return None
-
-    def motor_for_channel(self, channel: str) -> Motor | None:
-        """The positioned motor driven by a velocity channel, or None."""
-        for motor in self.motors.values():
-            if motor.channel == channel:
-                return motor
-        return None
-
-    @property
-    def positioned_motors(self) -> list[Motor]:
-        """Motors that report a position and are driven by a channel."""
-        return [m for m in self.motors.values() if m.has_position and m.channel]
-
-
-def assumption_covers(pattern: str, key: str) -> bool:
-    """Whether an `assumptions` entry covers a dotted key.
-
-    `*` stands for one table name ("channels.*.axis" covers "channels.waist.axis") and an
-    entry naming a table covers every key in it ("buttons" covers "buttons.torch").
-    """
-    parts, wanted = pattern.split("."), key.split(".")
-    if len(parts) > len(wanted):
-        return False
-    return all(p in ("*", k) for p, k in zip(parts, wanted, strict=False))
 
 
 def default_profile_path() -> Path:
@@ -1229,69 +738,3 @@ def _parse_measured(
 
 
 # ---- writing -----------------------------------------------------------------------------
-
-
-def _toml_key(key: str) -> str:
-    return key if _BARE_KEY.match(key) else _toml_string(key)
-
-
-def _toml_string(text: str) -> str:
-    # A JSON string is a TOML basic string; TOML also wants DEL (U+007F) escaped.
-    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
-
-
-def _toml_value(value: Any, where: str) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise ProfileError(f"{where}: cannot write {value!r}")
-        return repr(value)
-    if isinstance(value, str):
-        return _toml_string(value)
-    if isinstance(value, dt.datetime):
-        if value.tzinfo is None:
-            raise ProfileError(f"{where}: a date and time needs its offset")
-        return value.isoformat()
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v, where) for v in value) + "]"
-    raise ProfileError(f"{where}: cannot write a {type(value).__name__}")
-
-
-def _toml_table(lines: list[str], path: list[str], table: Mapping[str, Any]) -> None:
-    values = {k: v for k, v in table.items() if not isinstance(v, dict)}
-    tables = {k: v for k, v in table.items() if isinstance(v, dict)}
-    if path and (values or not tables):
-        lines.append("")
-        lines.append("[" + ".".join(_toml_key(part) for part in path) + "]")
-    for key, value in values.items():
-        where = ".".join([*path, key])
-        line = f"{_toml_key(key)} = {_toml_value(value, where)}"
-        if isinstance(value, (list, tuple)) and len(line) > TOML_LINE_LENGTH:
-            items = [f"    {_toml_value(item, where)}," for item in value]
-            line = "\n".join([f"{_toml_key(key)} = [", *items, "]"])
-        lines.append(line)
-    for key, sub in tables.items():
-        _toml_table(lines, [*path, key], sub)
-
-
-def profile_to_toml(data: Mapping[str, Any], header: str = "") -> str:
-    """A profile document as TOML text (comments: the header's lines), which tomllib reads
-    back to the same document."""
-    lines = [f"# {line}".rstrip() for line in header.splitlines()]
-    _toml_table(lines, [], data)
-    return "\n".join(lines).lstrip("\n") + "\n"
-
-
-def write_profile_data(path: str | Path, data: Mapping[str, Any], header: str = "") -> None:
-    """Validate a profile document and write it atomically (a temp file renamed over path).
-
-    A profile that does not load is refused before anything is written; a writer killed
-    half-way leaves the old file (or none), never half of the new one.
-    """
-    target = Path(path)
-    text = profile_to_toml(data, header)
-    parse_profile(tomllib.loads(text), source=str(target))
-    write_text_atomically(target, text)
