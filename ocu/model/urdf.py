@@ -19,11 +19,9 @@ hint to run xacro first.
 from __future__ import annotations
 
 import dataclasses
-import io
 import math
 import re
 import sys
-import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -33,9 +31,13 @@ from xml.parsers import expat
 import numpy as np
 import trimesh
 
-from ocu.model.collada import prepare_collada
 from ocu.model.mesh import MeshData, Rgba, empty_mesh, merge_meshes, mesh_from_trimesh
-from ocu.model.packages import package_folders, package_roots
+from ocu.model.mesh_files import (
+    XACRO_HINT,
+    MeshSkippedError,
+    find_mesh_file,
+    read_mesh_file,
+)
 from ocu.model.tree import JOINT_TYPES, Joint, KinematicTree, Matrix, Mimic, TreeError, transform
 
 # Joint types a display model draws fixed at their rest pose: urdfdom reads floating and
@@ -45,10 +47,6 @@ _AT_REST_TYPES = {
     "planar": "urdfdom reads it; robot_state_publisher publishes no motion for it",
     "spherical": "pybullet reads it as a ball joint; urdfdom refuses it",
 }
-XACRO_HINT = (
-    "this looks like an unprocessed xacro file: expand it first, e.g. "
-    "`xacro robot.urdf.xacro > robot.urdf` (ROS's xacro package)"
-)
 COLLISION_ONLY_NOTE = "no link has visual geometry: the collision geometry is drawn instead"
 COLLISION_FALLBACK_NOTE = (
     "none of the visual geometry could be drawn: the collision geometry is drawn instead"
@@ -365,10 +363,6 @@ def _cycle_through_joints(joints: list[Joint]) -> list[str]:
     return [*cycle, cycle[0]] if cycle else path
 
 
-class _MeshSkippedError(Exception):
-    """A mesh file that cannot be found or read: its part of the robot is left out."""
-
-
 class _Reader:
     """Element parsers whose errors and warnings name the file, the element and its line."""
 
@@ -571,7 +565,7 @@ class _Reader:
                 continue
             try:
                 placed = self.geometry(geometry[0], where)
-            except _MeshSkippedError as err:
+            except MeshSkippedError as err:
                 self.warn(f"{err}; the rest of the robot is drawn", geometry[0])
                 continue
             for mesh, placement in placed:
@@ -591,7 +585,7 @@ class _Reader:
             shape = geometry[0]
             try:
                 size = self.primitive_size(shape, where)
-            except _MeshSkippedError as err:
+            except MeshSkippedError as err:
                 self.warn(f"{err}; no collision shape for it", shape)
                 continue
             if size is not None:
@@ -600,7 +594,7 @@ class _Reader:
             elif shape.tag == "mesh":
                 try:
                     placed = self.geometry(shape, where)
-                except _MeshSkippedError as err:
+                except MeshSkippedError as err:
                     self.warn(f"{err}; no collision shape for it", shape)
                     continue
                 points = np.vstack(
@@ -624,7 +618,7 @@ class _Reader:
 
     def primitive_size(self, element: ET.Element, where: str) -> tuple[float, float, float] | None:
         """A primitive's size as CollisionShape keeps it; None for a mesh. Degenerate sizes
-        (zero or negative) and shapes that cannot be drawn raise _MeshSkippedError."""
+        (zero or negative) and shapes that cannot be drawn raise MeshSkippedError."""
         tag = element.tag
         if tag == "box":
             size = self.floats(element, "size", 3, f"{where} box")
@@ -639,12 +633,12 @@ class _Reader:
         elif tag == "mesh":
             return None
         elif tag == "plane":
-            raise _MeshSkippedError(f"{where}: <plane> (pybullet's infinite plane) is not drawn")
+            raise MeshSkippedError(f"{where}: <plane> (pybullet's infinite plane) is not drawn")
         else:
-            raise _MeshSkippedError(f"{where}: unknown geometry <{tag}>, left out")
+            raise MeshSkippedError(f"{where}: unknown geometry <{tag}>, left out")
         usable = result[0] > 0.0 and result[2] >= 0.0 if tag == "capsule" else min(result) > 0.0
         if not usable:
-            raise _MeshSkippedError(
+            raise MeshSkippedError(
                 f"{where}: degenerate <{tag}> ({_describe_size(element)}): dropped"
             )
         return result
@@ -665,130 +659,23 @@ class _Reader:
         filename = self.required(element, "filename", f"{where} <mesh>")
         scale = self.floats(element, "scale", 3, f"{where} mesh", default=1.0)
         if not all(abs(v) > 0.0 for v in scale):
-            raise _MeshSkippedError(f"{where}: mesh scale {element.get('scale')!r}: dropped")
+            raise MeshSkippedError(f"{where}: mesh scale {element.get('scale')!r}: dropped")
         path = self.resolve(filename, where, element)
         scaling = np.diag([*scale, 1.0])
         return [(mesh, placement @ scaling) for mesh, placement in self.read_mesh(path, where)]
 
     def resolve(self, filename: str, where: str, element: ET.Element | None = None) -> Path:
-        candidates = _mesh_candidates(filename, self.base_dir, self.package_paths)
-        for candidate in candidates:
-            if candidate.is_file():
-                return candidate
-        # A path relative to a data folder's root rather than to the URDF (pybullet finds it
-        # through setAdditionalSearchPath): look under the folders above the URDF.
-        if not filename.startswith(("package://", "model://", "file://", "/")):
-            roots = [Path(r) for r in package_roots(self.package_paths)]
-            for folder in (*self.base_dir.resolve().parents, *roots):
-                candidate = folder / filename
-                if candidate.is_file():
-                    self.warn(
-                        f"{where}: mesh {filename} is not next to the URDF; found as "
-                        f"{candidate}, under {folder} (as pybullet finds it through its "
-                        "additional search path)",
-                        element,
-                    )
-                    return candidate
-        shown = [str(c) for c in candidates[:8]]
-        if len(candidates) > 8:
-            shown.append(f"and {len(candidates) - 8} more")
-        hint = f"; {XACRO_HINT}" if "$(" in filename or "${" in filename else ""
-        extra = (
-            "; name the folder holding the package with --package-path or OCU_PACKAGE_PATH"
-            if filename.startswith(("package://", "model://"))
-            else ""
-        )
-        raise _MeshSkippedError(
-            f"{where}: mesh file not found: {filename} (looked in: {', '.join(shown)}){extra}{hint}"
+        return find_mesh_file(
+            filename,
+            where,
+            self.base_dir,
+            self.package_paths,
+            lambda message: self.warn(message, element),
         )
 
     def read_mesh(self, path: Path, where: str) -> list[tuple[trimesh.Trimesh, Matrix]]:
-        unit = np.eye(4)
-        declared = 0
-        try:
-            if path.suffix.lower() == ".dae":
-                prepared = prepare_collada(path.read_bytes())
-                unit = np.diag([prepared.scale] * 3 + [1.0])
-                declared = prepared.declared_triangles
-                for note in prepared.notes:
-                    self.warn(f"{where}: mesh {path}: {note}")
-                with warnings.catch_warnings():
-                    # pycollada 0.9.3 (the newest) reshapes its arrays by setting
-                    # ndarray.shape, which numpy 2.5 deprecates: harmless until numpy removes
-                    # it, and nothing this program can change. Only that warning from pycollada.
-                    warnings.filterwarnings(
-                        "ignore",
-                        message="Setting the shape on a NumPy array has been deprecated",
-                        category=DeprecationWarning,
-                        module=r"collada(\.|$)",
-                    )
-                    loaded = trimesh.load(io.BytesIO(prepared.data), file_type="dae")
-            else:
-                loaded = trimesh.load(str(path))
-        except Exception as err:  # trimesh raises many types for unreadable files
-            hint = (
-                " (reading .dae needs the pycollada package: pip install pycollada)"
-                if path.suffix.lower() == ".dae" and "collada" in str(err).lower()
-                else ""
-            )
-            raise _MeshSkippedError(f"{where}: cannot read mesh {path}: {err}{hint}") from err
-        if isinstance(loaded, trimesh.Trimesh):
-            meshes = [loaded]
-        elif isinstance(loaded, trimesh.Scene):
-            meshes = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
-        else:
-            meshes = []
-        meshes = [m for m in meshes if len(m.faces) > 0]
-        if not meshes:
-            if declared:
-                raise _MeshSkippedError(
-                    f"{where}: mesh {path} declares {declared} triangles, but pycollada "
-                    "could read none of them"
-                )
-            raise _MeshSkippedError(f"{where}: mesh {path} holds no triangles")
-        finite = [_finite_part(mesh) for mesh in meshes]
-        dropped = sum(len(m.faces) - len(f.faces) for m, f in zip(meshes, finite, strict=True))
-        if dropped:
-            self.warn(f"{where}: mesh {path}: {dropped} triangles with non-finite corners dropped")
-        meshes = [m for m in finite if len(m.faces) > 0]
-        if not meshes:
-            raise _MeshSkippedError(f"{where}: mesh {path} holds no finite triangles")
-        return [(mesh, unit) for mesh in meshes]
+        return read_mesh_file(path, where, self.warn)
 
 
 def _describe_size(element: ET.Element) -> str:
     return " ".join(f"{name}={value!r}" for name, value in element.attrib.items()) or "no size"
-
-
-def _finite_part(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """The mesh without faces that touch a NaN or infinite vertex."""
-    vertices = np.asarray(mesh.vertices)
-    bad = ~np.isfinite(vertices).all(axis=1)
-    if not bad.any():
-        return mesh
-    keep = ~bad[np.asarray(mesh.faces)].any(axis=1)
-    part = mesh.copy()
-    part.update_faces(keep)
-    return part
-
-
-def _mesh_candidates(
-    filename: str, base_dir: Path, package_paths: Sequence[str | Path] = ()
-) -> list[Path]:
-    """Where a URDF mesh reference may point, most likely first."""
-    if filename.startswith("file://"):
-        return [Path(filename.removeprefix("file://"))]
-    for scheme in ("package://", "model://"):
-        if filename.startswith(scheme):
-            package, _, rest = filename.removeprefix(scheme).partition("/")
-            folders = (base_dir.resolve(), *base_dir.resolve().parents)
-            if not package:
-                # `package:///path`: no package name; the path is absolute, or relative to
-                # the URDF's folder or one of its parents.
-                rest = rest.lstrip("/")
-                return list(dict.fromkeys([Path("/") / rest, *(f / rest for f in folders)]))
-            candidates = [f / rest for f in package_folders(package, base_dir, package_paths)]
-            candidates.append(base_dir / rest)
-            return list(dict.fromkeys(candidates))
-    path = Path(filename)
-    return [path if path.is_absolute() else base_dir / path]
