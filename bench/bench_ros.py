@@ -84,7 +84,7 @@ def through_ros(
         import rospy
         from geometry_msgs.msg import Twist
 
-        from ocu.ros.rosbridge import init_node
+        from ocu.ros.topics import init_node
 
         init_node("ocu_bench", anonymous=True)
         node_log = (work_dir / "node.log").open("wb")

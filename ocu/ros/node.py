@@ -397,7 +397,7 @@ def _wait_for_master(stop: threading.Event) -> bool:
 def _run(args: list[str], stop: threading.Event) -> int:
     import rospy
 
-    from ocu.ros.rosbridge import init_node
+    from ocu.ros.topics import init_node
 
     if not _wait_for_master(stop):
         return 0

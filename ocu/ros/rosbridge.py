@@ -65,7 +65,6 @@ from ocu.ros.bridge import (
     BridgeError,
     BridgeSettings,
     BridgeState,
-    DiagnosticReport,
     StateCallback,
     Throttle,
     VelocitySink,
@@ -86,11 +85,30 @@ from ocu.ros.navigation import (
     path_points,
     scan_from_ros,
 )
+from ocu.ros.topics import (
+    CMD_VEL_TOPIC,
+    DIAGNOSTICS_PERIOD_S,
+    FOLLOW_PATH_TOPIC,
+    JOINT_GOALS_TOPIC,
+    NAMED_POSE_TOPIC,
+    ODOM_PERIOD_S,
+    POSE_GOAL_TOPIC,
+    SCAN_TOPIC,
+    STOP_JOIN_TIMEOUT_S,
+    TF_STATIC_TOPIC,
+    TF_TOPIC,
+    TWIST_CMD_TOPIC,
+    Publishers,
+    Schedule,
+    diagnostic_status,
+    publisher_of,
+    ros_time,
+)
 
 ensure_ros_path()
 
 import rospy  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, KeyValue  # noqa: E402
 from geometry_msgs.msg import (  # noqa: E402
     PoseStamped,
     TransformStamped,
@@ -103,125 +121,6 @@ from std_msgs.msg import String  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
 log = logging.getLogger("ocu.ros")
-
-CMD_VEL_TOPIC = "cmd_vel"
-JOINT_GOALS_TOPIC = "joint_goals"
-JOINT_STATES_TOPIC = "joint_states"
-CAMERA_TOPIC = "camera/compressed"
-CAMERA_TOPIC_PER_CAMERA = "camera/{name}/image/compressed"
-DIAGNOSTICS_TOPIC = "/diagnostics"
-POSE_GOAL_TOPIC = "arm/pose_goal"
-TWIST_CMD_TOPIC = "arm/twist_cmd"
-NAMED_POSE_TOPIC = "arm/named_pose"
-TOOL_POSE_TOPIC = "arm/tool_pose"
-TF_TOPIC = "/tf"
-TF_STATIC_TOPIC = "/tf_static"
-ODOM_TOPIC = "odom"
-SCAN_TOPIC = "scan"
-FOLLOW_PATH_TOPIC = "follow_path"
-ODOM_PERIOD_S = 0.05
-DIAGNOSTICS_PERIOD_S = 1.0
-STOP_JOIN_TIMEOUT_S = 5.0
-
-
-def init_node(
-    name: str, *, anonymous: bool = False, argv: list[str] | None = None, keep_logging: bool = True
-) -> None:
-    """rospy.init_node without rospy's signal handlers; blocks until the master answers.
-
-    rospy reconfigures the root logger (handlers, level); `keep_logging` puts it back, so a
-    host application (the console, pytest) keeps its own logging. Call once per process.
-    """
-    root = logging.getLogger()
-    handlers, level = list(root.handlers), root.level
-    rospy.init_node(name, argv=argv, anonymous=anonymous, disable_signals=True)
-    if keep_logging:
-        for handler in root.handlers:
-            if handler not in handlers:
-                handler.close()
-        root.handlers[:] = handlers
-        root.setLevel(level)
-
-
-class Schedule:
-    """A periodic task on a faster loop: due once per period on average. Moving the next
-    time from the last one (not from `now`) keeps the rate when the loop's tick does not
-    divide the period (a 20 Hz topic on a 50 Hz loop was 16.7 Hz: every third tick)."""
-
-    def __init__(self, period_s: float, start: float) -> None:
-        self.period_s = period_s
-        self._next = start
-
-    def due(self, now: float) -> bool:
-        if now < self._next:
-            return False
-        # After a stall, start again from now rather than firing a burst to catch up.
-        self._next = max(self._next + self.period_s, now - self.period_s / 2.0)
-        return True
-
-
-def _caller(message: Any) -> str:
-    """The node that published a message (its connection header's callerid)."""
-    header = getattr(message, "_connection_header", None) or {}
-    return str(header.get("callerid", ""))
-
-
-def _stamp(wall_time: float) -> Any:
-    return rospy.Time.from_sec(wall_time)
-
-
-def _diagnostic_status(report: DiagnosticReport) -> Any:
-    status = DiagnosticStatus()
-    status.level = int(report.level)
-    status.name = report.name
-    status.message = report.message
-    status.hardware_id = report.hardware_id
-    status.values = [KeyValue(key=key, value=value) for key, value in report.values]
-    return status
-
-
-class _Publishers:
-    """The bridge's publishers; replaced as a whole on start and stop."""
-
-    def __init__(self, profile: RobotProfile) -> None:
-        self.joint_states = rospy.Publisher(JOINT_STATES_TOPIC, JointState, queue_size=10)
-        self.camera = rospy.Publisher(CAMERA_TOPIC, CompressedImage, queue_size=2)
-        self.cameras = {
-            name: rospy.Publisher(
-                CAMERA_TOPIC_PER_CAMERA.format(name=name), CompressedImage, queue_size=2
-            )
-            for name in profile.link.camera_names
-        }
-        self.diagnostics = rospy.Publisher(DIAGNOSTICS_TOPIC, DiagnosticArray, queue_size=2)
-        self.tool_pose: Any = None
-        # /tf carries base_link -> tool0 (the arm) and odom -> base_link (navigation).
-        self.tf: Any = None
-        if profile.arm is not None:
-            self.tool_pose = rospy.Publisher(TOOL_POSE_TOPIC, PoseStamped, queue_size=10)
-            self.tf = rospy.Publisher(TF_TOPIC, TFMessage, queue_size=10)
-        self.navigation: list[Any] = []
-        self.odom: Any = None
-        self.scan: Any = None
-
-    def add_navigation(self) -> None:
-        self.odom = rospy.Publisher(ODOM_TOPIC, Odometry, queue_size=10)
-        if self.tf is None:
-            self.tf = rospy.Publisher(TF_TOPIC, TFMessage, queue_size=10)
-        self.scan = rospy.Publisher(SCAN_TOPIC, LaserScan, queue_size=2)
-        self.navigation = [self.odom, self.scan]
-
-    def unregister(self) -> None:
-        for publisher in (
-            self.joint_states,
-            self.camera,
-            self.diagnostics,
-            *self.cameras.values(),
-            *self.navigation,
-        ):
-            publisher.unregister()
-        for publisher in (self.tool_pose, self.tf):
-            if publisher is not None:
-                publisher.unregister()
 
 
 class RosBridge:
@@ -267,7 +166,7 @@ class RosBridge:
         self._life_lock = threading.Lock()
         self._link: Link | None = None
         self._subscribers: list[Any] = []
-        self._publishers: _Publishers | None = None
+        self._publishers: Publishers | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         # Set when the bridge thread died; the node then exits (the console shows "off").
@@ -288,7 +187,7 @@ class RosBridge:
             if self._link is not None:
                 raise RuntimeError("the ROS bridge is already started")
             self._link = link
-            self._publishers = _Publishers(self.profile)
+            self._publishers = Publishers(self.profile)
             target: VelocitySink = sink if sink is not None else link
             navigator = self.navigator
             if navigator is not None:
@@ -413,7 +312,7 @@ class RosBridge:
             return
         data = laser_scan_data(scan)
         message = LaserScan()
-        message.header.stamp = _stamp(scan.wall_time)
+        message.header.stamp = ros_time(scan.wall_time)
         message.header.frame_id = data.frame_id
         message.angle_min = data.angle_min
         message.angle_max = data.angle_max
@@ -430,7 +329,7 @@ class RosBridge:
         navigator = self.navigator
         if navigator is None:
             return
-        caller = _caller(message)
+        caller = publisher_of(message)
         if caller == rospy.get_name():
             return  # our own robot's scan coming back
         frame = str(message.header.frame_id)
@@ -454,7 +353,7 @@ class RosBridge:
 
     def _on_tf(self, message: Any) -> None:
         """Other nodes' transforms (our own odom and tool0 are not needed to place scans)."""
-        if _caller(message) == rospy.get_name():
+        if publisher_of(message) == rospy.get_name():
             return
         for transform in message.transforms:
             t, r = transform.transform.translation, transform.transform.rotation
@@ -467,7 +366,7 @@ class RosBridge:
                 )
             except NavigationError as err:
                 if self._throttle.allow("tf"):
-                    log.warning("transform from %s ignored: %s", quoted(_caller(message)), err)
+                    log.warning("transform from %s ignored: %s", quoted(publisher_of(message)), err)
 
     def _on_follow_path(self, message: Any) -> None:
         try:
@@ -562,7 +461,7 @@ class RosBridge:
         self.core.on_telemetry(frame.readings, frame.received_at, frame.delay_s)
         data = joint_state(self.profile, frame.readings)
         message = JointState()
-        message.header.stamp = _stamp(frame.wall_time)
+        message.header.stamp = ros_time(frame.wall_time)
         message.name = list(data.names)
         message.position = list(data.positions_rad)
         message.velocity = list(data.velocities_rad_s)
@@ -570,7 +469,7 @@ class RosBridge:
         self._publish(publishers.joint_states, message)
         self._publish_tool(publishers, frame)
 
-    def _publish_tool(self, publishers: _Publishers, frame: TelemetryFrame) -> None:
+    def _publish_tool(self, publishers: Publishers, frame: TelemetryFrame) -> None:
         """tool0 on arm/tool_pose and on /tf, from the packet's readings."""
         arm = self.profile.arm
         if arm is None or publishers.tool_pose is None:
@@ -578,7 +477,7 @@ class RosBridge:
         pose = self.core.arm_tool_matrix(frame.readings)
         if pose is None:
             return
-        stamp = _stamp(frame.wall_time)
+        stamp = ros_time(frame.wall_time)
         x, y, z, w = quaternion_xyzw(pose)
         message = PoseStamped()
         message.header.stamp = stamp
@@ -613,7 +512,7 @@ class RosBridge:
         if not targets:
             return
         message = CompressedImage()
-        message.header.stamp = _stamp(frame.wall_time)
+        message.header.stamp = ros_time(frame.wall_time)
         message.header.frame_id = name
         message.format = "jpeg"
         message.data = frame.jpeg
@@ -631,14 +530,14 @@ class RosBridge:
             return
         message = DiagnosticArray()
         message.header.stamp = rospy.Time.now()
-        bridge = _diagnostic_status(bridge_report(self.core.status(), self.hardware_id))
+        bridge = diagnostic_status(bridge_report(self.core.status(), self.hardware_id))
         if self.navigator is not None:
             # What the safety zones do now ("zones off: no range data", "slowed: ...").
             bridge.values.append(KeyValue(key="safety zones", value=self.navigator.zones.text))
             sources = ", ".join(self.navigator.scan_sources()) or "none"
             bridge.values.append(KeyValue(key="scan sources", value=sources))
         message.status = [
-            _diagnostic_status(link_report(link.state, link.stats(), self.hardware_id)),
+            diagnostic_status(link_report(link.state, link.stats(), self.hardware_id)),
             bridge,
         ]
         self._publish(publishers.diagnostics, message)

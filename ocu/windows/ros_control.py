@@ -232,7 +232,8 @@ class RosControl(QObject):
     def _make_bridge(self) -> RosBridge:
         import rospy
 
-        from ocu.ros.rosbridge import RosBridge, init_node
+        from ocu.ros.rosbridge import RosBridge
+        from ocu.ros.topics import init_node
 
         if rospy.core.is_shutdown():
             raise RuntimeError("rospy was shut down in this process")

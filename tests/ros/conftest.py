@@ -68,7 +68,7 @@ def ros_client(ros_master: RosMaster) -> Iterator[None]:
     """This test process as an anonymous ROS node (rospy allows one per process)."""
     import rospy
 
-    from ocu.ros.rosbridge import init_node
+    from ocu.ros.topics import init_node
 
     init_node("ocu_tests", anonymous=True)
     yield
