@@ -270,6 +270,13 @@ class LinkStats:
     # nothing measured yet. Telemetry packets dropped for coming late or twice.
     delay_s: float | None = None
     stale_telemetry: int = 0
+    # How much the measured round trip varies: the standard deviation of the per-packet
+    # round trips of the last seconds (None: too few measured). Range scans received per
+    # second. Per camera (profile order): seconds since its newest frame arrived, None
+    # before its first frame.
+    jitter_s: float | None = None
+    scan_rate_hz: float = 0.0
+    frame_age_s: tuple[float | None, ...] = ()
 
     @classmethod
     def empty(cls, send_rate_hz: float = 0.0) -> LinkStats:

@@ -24,7 +24,7 @@ from ocu.control.commands import CommandMapper, commanded_motor_speeds, read_tel
 from ocu.control.plausibility import PlausibilityChecker
 from ocu.link.delay import DelayEstimator
 from ocu.link.reassembly import Reassembler, ReassemblyStats
-from ocu.link.stats import LossEstimator, RateMeter
+from ocu.link.stats import JitterMeter, LossEstimator, RateMeter
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket, VideoFramePacket
 from ocu.protocol.extended import HelloPacket, ScanPacket, StatusPacket, VideoFragment
@@ -93,6 +93,10 @@ class Receiver:
         self._video_rate = RateMeter(window_s=1.0)
         self._loss = LossEstimator()
         self._delay = DelayEstimator()
+        self._jitter = JitterMeter()
+        self._scan_rate = RateMeter()
+        # When each camera's newest frame arrived (profile order).
+        self._frame_at: list[float | None] = [None] * len(profile.link.camera_names)
         self._plausibility = PlausibilityChecker(profile)
         self._last_tick: int | None = None
         self._stale_telemetry = 0
@@ -171,6 +175,7 @@ class Receiver:
                 self._video += 1
                 self._video_rate.add(at)
                 frame = VideoFrame(packet.jpeg, self._camera, at, wall)
+                self._frame_arrived(self._camera, at)
         if frame is not None:
             self.emit(frame)
         return True
@@ -197,7 +202,11 @@ class Receiver:
         for name, fault in self._plausibility.check(packet, readings).items():
             readings[name] = replace(readings[name], fault=fault)
         echoes = {record.device_id: record.speed_command for record in packet.motors}
-        return TelemetryFrame(packet, readings, at, wall, self._delay.on_telemetry(at, echoes))
+        measured = self._delay.samples
+        delay_s = self._delay.on_telemetry(at, echoes)
+        if delay_s is not None and self._delay.samples > measured:
+            self._jitter.add(delay_s, at)  # only packets whose echo told their own delay
+        return TelemetryFrame(packet, readings, at, wall, delay_s)
 
     def _extended(self, data: bytes, at: float, wall: float) -> bool:
         assert self._ext_codec is not None
@@ -241,10 +250,12 @@ class Receiver:
                         sequence=complete.sequence,
                         capture_time_us=complete.capture_time_us,
                     )
+                    self._frame_arrived(complete.camera, at)
             elif isinstance(packet, StatusPacket):
                 event = StatusFrame(packet, at, wall)
             elif isinstance(packet, ScanPacket):
                 self.scans += 1
+                self._scan_rate.add(at)
                 event = ScanFrame.from_packet(packet, at, wall)
         if became_active:
             log.info("robot speaks the protocol extension")
@@ -252,6 +263,11 @@ class Receiver:
         if event is not None:
             self.emit(event)
         return True
+
+    def _frame_arrived(self, camera: int | None, at: float) -> None:
+        """Note a camera's frame for its age (lock held); unknown cameras are not aged."""
+        if camera is not None and 0 <= camera < len(self._frame_at):
+            self._frame_at[camera] = at
 
     def expire(self, now: float) -> None:
         """Drop stale partial frames; notice an extension that went silent."""
@@ -271,6 +287,9 @@ class Receiver:
         with self._lock:
             self._last_tick = None
             self._plausibility.reset()
+            # What the robot echoes after the silence says nothing of the commands before it.
+            self._delay.reset()
+            self._jitter.reset()
 
     # ---- state (any thread) ----------------------------------------------------------------
 
@@ -317,6 +336,9 @@ class Receiver:
                 estop_latched=estop_latched,
                 delay_s=self._delay.estimate_s,
                 stale_telemetry=self._stale_telemetry,
+                jitter_s=self._jitter.jitter(now),
+                scan_rate_hz=self._scan_rate.rate(now),
+                frame_age_s=tuple(None if at is None else now - at for at in self._frame_at),
             )
 
     def video_stats(self) -> ReassemblyStats:

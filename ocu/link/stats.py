@@ -1,4 +1,5 @@
-"""Packet counters, sliding-window rates and a telemetry loss estimate (no Qt, no sockets)."""
+"""Packet counters, sliding-window rates, a telemetry loss estimate and the round trip's
+jitter (no Qt, no sockets)."""
 
 from __future__ import annotations
 
@@ -111,3 +112,42 @@ class LossEstimator:
         limit = now - self.window_s
         while self._events and self._events[0][0] < limit:
             self._events.popleft()
+
+
+# The round trip's jitter looks at the per-packet round trips of this many seconds...
+JITTER_WINDOW_S = 10.0
+# ...and says nothing with fewer than this many of them.
+JITTER_MIN_SAMPLES = 3
+
+
+class JitterMeter:
+    """How much the round trip varies: the standard deviation of the per-packet round trips
+    measured in a sliding time window (ocu.link.delay gives each packet its own)."""
+
+    def __init__(
+        self, window_s: float = JITTER_WINDOW_S, min_samples: int = JITTER_MIN_SAMPLES
+    ) -> None:
+        self.window_s = window_s
+        self.min_samples = min_samples
+        self._samples: deque[tuple[float, float]] = deque()
+
+    def add(self, delay_s: float, now: float) -> None:
+        """One packet's round trip (s)."""
+        self._samples.append((now, delay_s))
+        self._trim(now)
+
+    def reset(self) -> None:
+        """Forget every round trip (the link was lost)."""
+        self._samples.clear()
+
+    def jitter(self, now: float) -> float | None:
+        """The standard deviation of the window's round trips (s), None with too few."""
+        self._trim(now)
+        if len(self._samples) < self.min_samples:
+            return None
+        return statistics.pstdev(delay for _, delay in self._samples)
+
+    def _trim(self, now: float) -> None:
+        limit = now - self.window_s
+        while self._samples and self._samples[0][0] < limit:
+            self._samples.popleft()
