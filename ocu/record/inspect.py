@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import statistics
 import sys
 import time
 from collections import defaultdict
@@ -104,6 +106,10 @@ class Summary:
     estops: int = 0
     malformed: int | None = None
     recorder_dropped: int | None = None
+    # From the link statistics channel: the measured round trip and its jitter (ms).
+    round_trip_median_ms: float | None = None
+    round_trip_max_ms: float | None = None
+    jitter_median_ms: float | None = None
 
     @property
     def telemetry_loss(self) -> float | None:
@@ -147,6 +153,8 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
     # The live link's own receiver decodes the recorded datagrams, on the recording's clock.
     receiver = Receiver(profile, count, extension=True)
     last_stats = None
+    round_trips: list[float] = []
+    jitters: list[float] = []
     start_ns = recording.start_ns
     for message in recording.messages():
         topic = message.topic
@@ -161,6 +169,8 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
                 receiver.received(bytes(raw.data), at, at)
         elif topic == s.LINK_STATS:
             last_stats = recording.decode(message)
+            round_trips.append(float(getattr(last_stats, "delay_s", math.nan)) * 1e3)
+            jitters.append(float(getattr(last_stats, "jitter_s", math.nan)) * 1e3)
         elif topic == s.EVENTS:
             event = recording.decode(message)
             offset_s = (message.log_time_ns - start_ns) / 1e9
@@ -203,6 +213,13 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
     if last_stats is not None:
         summary.malformed = int(last_stats.malformed)
         summary.recorder_dropped = int(last_stats.recorder_dropped)
+    known = [value for value in round_trips if math.isfinite(value)]
+    if known:
+        summary.round_trip_median_ms = statistics.median(known)
+        summary.round_trip_max_ms = max(known)
+    known = [value for value in jitters if math.isfinite(value)]
+    if known:
+        summary.jitter_median_ms = statistics.median(known)
     return summary
 
 
@@ -263,6 +280,13 @@ def render(summary: Summary) -> str:
         lines.append(
             f"  malformed datagrams {summary.malformed}, "
             f"recorder dropped {summary.recorder_dropped} message(s)"
+        )
+    if summary.round_trip_median_ms is not None:
+        jitter = summary.jitter_median_ms
+        lines.append(
+            f"  round trip    median {summary.round_trip_median_ms:.0f} ms, "
+            f"max {summary.round_trip_max_ms:.0f} ms; jitter median "
+            f"{'n/a' if jitter is None else f'{jitter:.0f} ms'} (link statistics)"
         )
     lines += ["", f"events ({summary.estops} emergency stop(s))"]
     for offset_s, kind, event_state, message in summary.events:
