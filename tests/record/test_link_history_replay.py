@@ -102,5 +102,6 @@ def test_inspect_states_the_round_trip_and_its_jitter(
     measured = [s.delay_s * 1e3 for s in live_stats if s.delay_s is not None]
     assert summary.round_trip_median_ms == pytest.approx(statistics.median(measured))
     assert summary.round_trip_max_ms == pytest.approx(max(measured))
-    assert summary.jitter_median_ms is not None and summary.jitter_median_ms > 0.0
+    assert summary.jitter_median_ms is not None
+    assert summary.jitter_median_ms > 0.0
     assert "round trip    median" in render(summary)

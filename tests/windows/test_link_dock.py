@@ -70,7 +70,8 @@ def test_the_graphs_hold_the_lossy_links_figures_and_mark_an_emergency_stop(
     assert panel.redraws > 0
     # Telemetry at 10 Hz through 20 % loss: something arrives, not everything.
     stats = panel.history.latest()
-    assert stats is not None and 0.0 < stats.telemetry_rate_hz < 10.0
+    assert stats is not None
+    assert 0.0 < stats.telemetry_rate_hz < 10.0
     assert "not measurable" in panel.figures.text()
     QTest.keyClick(window, Qt.Key.Key_Space)
     qtbot.waitUntil(lambda: "E-STOP" in panel.mark_labels(), timeout=DEADLINE_MS)
@@ -103,5 +104,6 @@ def test_the_command_rate_and_window_are_remembered_across_a_restart(
     panel = show_link_dock(second)
     assert panel.rate_box.value() == 12
     assert panel.window_box.value() == 7
-    assert second.link is not None and second.link.link.rate_hz == 12.0
+    assert second.link is not None
+    assert second.link.link.rate_hz == 12.0
     assert 9.5 <= rcp_rate_on_the_wire(qtbot, sim) <= 14.5
