@@ -270,10 +270,10 @@ class LinkStats:
     # nothing measured yet. Telemetry packets dropped for coming late or twice.
     delay_s: float | None = None
     stale_telemetry: int = 0
-    # How much the measured round trip varies: the standard deviation of the per-packet
-    # round trips of the last seconds (None: too few measured). Range scans received per
-    # second. Per camera (profile order): seconds since its newest frame arrived, None
-    # before its first frame.
+    # How much the link's delay varies: the standard deviation over the last 10 s of each
+    # telemetry packet's arrival less its tick, the robot's clock (None: too few packets).
+    # Range scans received per second. Per camera (profile order): seconds since its newest
+    # frame arrived, None before its first frame.
     jitter_s: float | None = None
     scan_rate_hz: float = 0.0
     frame_age_s: tuple[float | None, ...] = ()

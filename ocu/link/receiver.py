@@ -171,6 +171,9 @@ class Receiver:
                 self._telemetry_rate.add(at)
                 self._loss.add(packet.tick, at)
                 frame = self._telemetry_frame(packet, at, wall)
+                # The delay's variation: arrival against the robot's own clock (its tick).
+                # The clocks' offset cancels in the spread; late packets count too.
+                self._jitter.add(at - packet.tick / self.profile.link.telemetry_tick_hz, at)
             elif isinstance(packet, VideoFramePacket):
                 self._video += 1
                 self._video_rate.add(at)
@@ -197,16 +200,13 @@ class Receiver:
         if last is not None and packet.tick < last:
             log.info("telemetry tick went back from %d to %d: robot restarted", last, packet.tick)
             self._plausibility.reset()
+            self._jitter.reset()  # its clock started over
         self._last_tick = packet.tick
         readings = read_telemetry(self.profile, packet)
         for name, fault in self._plausibility.check(packet, readings).items():
             readings[name] = replace(readings[name], fault=fault)
         echoes = {record.device_id: record.speed_command for record in packet.motors}
-        measured = self._delay.samples
-        delay_s = self._delay.on_telemetry(at, echoes)
-        if delay_s is not None and self._delay.samples > measured:
-            self._jitter.add(delay_s, at)  # only packets whose echo told their own delay
-        return TelemetryFrame(packet, readings, at, wall, delay_s)
+        return TelemetryFrame(packet, readings, at, wall, self._delay.on_telemetry(at, echoes))
 
     def _extended(self, data: bytes, at: float, wall: float) -> bool:
         assert self._ext_codec is not None

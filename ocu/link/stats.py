@@ -114,15 +114,16 @@ class LossEstimator:
             self._events.popleft()
 
 
-# The round trip's jitter looks at the per-packet round trips of this many seconds...
+# The jitter looks at the packets of this many seconds...
 JITTER_WINDOW_S = 10.0
 # ...and says nothing with fewer than this many of them.
 JITTER_MIN_SAMPLES = 3
 
 
 class JitterMeter:
-    """How much the round trip varies: the standard deviation of the per-packet round trips
-    measured in a sliding time window (ocu.link.delay gives each packet its own)."""
+    """How much the link's delay varies: the standard deviation of per-packet delays in a
+    sliding time window. The receiver feeds it each telemetry packet's arrival time less its
+    tick (the robot's clock): the clocks' offset is the same for every packet and cancels."""
 
     def __init__(
         self, window_s: float = JITTER_WINDOW_S, min_samples: int = JITTER_MIN_SAMPLES
@@ -132,16 +133,16 @@ class JitterMeter:
         self._samples: deque[tuple[float, float]] = deque()
 
     def add(self, delay_s: float, now: float) -> None:
-        """One packet's round trip (s)."""
+        """One packet's delay (s), or its arrival less its send time on another clock."""
         self._samples.append((now, delay_s))
         self._trim(now)
 
     def reset(self) -> None:
-        """Forget every round trip (the link was lost)."""
+        """Forget every delay (the link was lost, the robot's clock started over)."""
         self._samples.clear()
 
     def jitter(self, now: float) -> float | None:
-        """The standard deviation of the window's round trips (s), None with too few."""
+        """The standard deviation of the window's delays (s), None with too few."""
         self._trim(now)
         if len(self._samples) < self.min_samples:
             return None

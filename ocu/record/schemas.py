@@ -150,7 +150,8 @@ LINK_STATS_TYPE = MessageType(
         "# Round trip measured from the robot's echoed speed commands (s); late or repeated\n"
         "# telemetry packets dropped.\n"
         "float64 delay_s\nuint64 stale_telemetry\n"
-        "# The round trip's jitter (standard deviation of the per-packet round trips, s),\n"
+        "# The delay's jitter (standard deviation over 10 s of each telemetry packet's\n"
+        "# arrival less its tick, s),\n"
         "# range scans per second, and per camera (profile order) the seconds since its\n"
         "# newest frame arrived (NaN before its first).\n"
         "float64 jitter_s\nfloat64 scan_rate_hz\nfloat64[] frame_age_s\n",

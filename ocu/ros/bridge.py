@@ -315,7 +315,7 @@ def link_report(state: LinkState, stats: LinkStats, hardware_id: str) -> Diagnos
         ("send rate setting (Hz)", f"{stats.send_rate_hz:g}"),
         ("emergency stop latched", str(stats.estop_latched).lower()),
         ("round trip (ms)", _optional(_ms(stats.delay_s), ".0f")),
-        ("round trip jitter (ms)", _optional(_ms(stats.jitter_s), ".0f")),
+        ("delay jitter (ms)", _optional(_ms(stats.jitter_s), ".0f")),
         ("scan rate (Hz)", f"{stats.scan_rate_hz:.1f}"),
         ("command loss", UPLINK_LOSS_UNMEASURABLE),
         *(

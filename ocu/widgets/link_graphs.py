@@ -2,7 +2,7 @@
 
 Four plots share one time axis (seconds before now) over a chosen window of 1-10 minutes:
 the rates (commands sent, telemetry, video and scans received), the loss each way, the
-measured round trip and its jitter, and the age of each camera's newest frame. LINK LOST,
+measured round trip and the delay's jitter, and the age of each camera's newest frame. LINK LOST,
 the link's return and emergency stops are vertical lines through all four. The figures come
 from a `LinkHistory` (ocu.link.history) subscribed to the console's link, a replay's too.
 
@@ -63,7 +63,7 @@ VIDEO_CURVES = (("video_rate_hz", "frames received, all cameras", "#6a1b9a", Fal
 LOSS_CURVES = (("downlink_loss", "telemetry lost (robot → OCU)", "#c62828", False),)
 DELAY_CURVES = (
     ("round_trip_s", "round trip", "#00838f", False),
-    ("jitter_s", "jitter", "#f9a825", False),
+    ("jitter_s", "jitter (robot → OCU delay)", "#f9a825", False),
 )
 # Figures shown in other units than the history's.
 SCALES = {"downlink_loss": 100.0, "round_trip_s": 1000.0, "jitter_s": 1000.0}
@@ -359,7 +359,7 @@ class LinkGraphsPanel(QWidget):
             f"sent {stats.rcp_rate_hz:.1f} Hz (set {stats.send_rate_hz:g}) · received: "
             f"telemetry {stats.telemetry_rate_hz:.1f} Hz, video {stats.video_rate_hz:.1f} fps, "
             f"scans {stats.scan_rate_hz:.1f} Hz · telemetry lost {loss} · commands lost: "
-            f"not measurable · round trip {ms(stats.delay_s)} ± {ms(stats.jitter_s)}"
+            f"not measurable · round trip {ms(stats.delay_s)}, jitter {ms(stats.jitter_s)}"
         )
 
     def curve_points(self, name: str) -> int:

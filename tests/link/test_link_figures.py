@@ -21,7 +21,7 @@ DEADLINE_S = 10.0
 
 @pytest.fixture
 def jittery_sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
-    """An extended robot behind a jittery radio: 40 ms +- 20 ms each way."""
+    """An extended robot behind a jittery radio: 40 ms plus 0-20 ms each way."""
     sim = RobotSimulator(
         profile,
         telemetry_hz=20.0,
@@ -80,9 +80,11 @@ def test_jitter_scans_and_frame_ages_then_nothing_known_after_link_lost(
         stats = latest()
         assert stats.delay_s is not None
         assert stats.jitter_s is not None
-        # 40 ms each way: about 80 ms; the jitter is a few ten ms, not the round trip.
-        assert 0.04 < stats.delay_s < 0.3
-        assert 0.0 < stats.jitter_s < 0.1
+        # 40-60 ms each way: a round trip of about 100 ms.
+        assert 0.06 < stats.delay_s < 0.3
+        # The way back adds 0-20 ms, uniformly: a standard deviation of 20 / sqrt(12) = 5.8 ms
+        # (plus the machine's own scheduling).
+        assert 0.003 < stats.jitter_s < 0.025
         assert stats.scan_rate_hz <= 15.0
         # Every camera streams: its newest frame is fresh.
         assert all(age is not None and 0.0 <= age < 1.5 for age in stats.frame_age_s)

@@ -598,7 +598,7 @@ def test_link_report_has_the_link_docks_figures() -> None:
     figures = stats(delay_s=0.184, jitter_s=0.021, scan_rate_hz=9.5, frame_age_s=(0.12, None))
     values = dict(link_report(LinkState.CONNECTED, figures, "x").values)
     assert values["round trip (ms)"] == "184"
-    assert values["round trip jitter (ms)"] == "21"
+    assert values["delay jitter (ms)"] == "21"
     assert values["scan rate (Hz)"] == "9.5"
     assert values["frame age camera 0 (s)"] == "0.12"
     assert values["frame age camera 1 (s)"] == "n/a"
