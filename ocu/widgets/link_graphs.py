@@ -42,6 +42,8 @@ AXIS_WIDTH_PX = 44
 # A value axis starts at zero and ends this far above the data's top (and at least at the
 # minimum), stepping only when the data leaves it or falls below a third of it.
 Y_HEADROOM = 1.35
+DELAY_TOP_PERCENTILE = 95.0
+UPLINK_TITLE = "commands lost (OCU → robot): not measurable"
 Y_MIN_TOPS = {"rates": 10.0, "video": 10.0, "delay": 50.0, "frame_age": 1.0}
 RATE_KEY = "link/command_rate_hz"
 WINDOW_KEY = "link/window_min"
@@ -169,6 +171,8 @@ class LinkGraphsPanel(QWidget):
                 f"{label}</span>"
                 for _, label, colour, dashed in curves
             )
+            if key == "loss":
+                keys += f" · <span style='color:#555555'>{UPLINK_TITLE}</span>"
             plot.setTitle(f"{title}: {keys}", size="9pt")
             for axis in ("left", "bottom"):
                 plot.getAxis(axis).enableAutoSIPrefix(False)
@@ -195,13 +199,9 @@ class LinkGraphsPanel(QWidget):
             plot.enableAutoRange(y=False)
         self.plots["loss"].setYRange(0.0, 100.0, padding=0.05)
         self._y_tops: dict[str, float] = {}
-        self.uplink_label = pg.TextItem(
-            f"commands lost (OCU → robot): {self.history.uplink_loss_text}",
-            color="#555555",
-            anchor=(0.0, 0.0),
+        self.figures.setToolTip(
+            f"Commands lost on their way to the robot: {self.history.uplink_loss_text}."
         )
-        self.uplink_label.setParentItem(self.plots["loss"].getViewBox())
-        self.uplink_label.setPos(4.0, 2.0)
 
         layout = QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
@@ -311,7 +311,14 @@ class LinkGraphsPanel(QWidget):
             curve.setData(times, values, connect="finite")
             if np.isfinite(values).any():
                 plot = self._plot_of[name]
-                tops[plot] = max(tops.get(plot, 0.0), float(np.nanmax(values)))
+                # The round trip's first estimate is its largest (the safe side): a spike
+                # may leave the axis rather than flatten everything else.
+                top = (
+                    float(np.nanpercentile(values, DELAY_TOP_PERCENTILE))
+                    if plot == "delay"
+                    else float(np.nanmax(values))
+                )
+                tops[plot] = max(tops.get(plot, 0.0), top)
         for plot, minimum in Y_MIN_TOPS.items():
             self._step_top(plot, max(tops.get(plot, 0.0), minimum))
 
