@@ -23,9 +23,11 @@ import pyqtgraph as pg
 from PySide6.QtCore import QSettings, Qt, QTimer
 from PySide6.QtGui import QShowEvent
 from PySide6.QtWidgets import (
+    QFrame,
     QHBoxLayout,
     QLabel,
     QPushButton,
+    QScrollArea,
     QSpinBox,
     QVBoxLayout,
     QWidget,
@@ -39,6 +41,7 @@ log = logging.getLogger("ocu.widgets")
 
 REDRAW_PERIOD_MS = 500
 AXIS_WIDTH_PX = 44
+MIN_PLOT_HEIGHT_PX = 95
 # A value axis starts at zero and ends this far above the data's top (and at least at the
 # minimum), stepping only when the data leaves it or falls below a third of it.
 Y_HEADROOM = 1.35
@@ -186,6 +189,10 @@ class LinkGraphsPanel(QWidget):
                 plot.setXLink(first)
             if row == len(layout_rows) - 1:
                 plot.setLabel("bottom", "seconds before now")
+            else:
+                # One time axis for all: the upper plots keep its grid, not its numbers.
+                plot.getAxis("bottom").setStyle(showValues=False)
+                plot.getAxis("bottom").setHeight(4)
             for name, _label, colour, dashed in curves:
                 style = Qt.PenStyle.DashLine if dashed else Qt.PenStyle.SolidLine
                 pen = pg.mkPen(colour, width=1 if dashed else 2, style=style)
@@ -207,7 +214,13 @@ class LinkGraphsPanel(QWidget):
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addLayout(controls)
         layout.addWidget(self.figures)
-        layout.addWidget(self.graphics, 1)
+        # Every plot keeps a readable height; a short dock scrolls (float it to see all).
+        self.graphics.setMinimumHeight(MIN_PLOT_HEIGHT_PX * len(layout_rows))
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QFrame.Shape.NoFrame)
+        scroll.setWidget(self.graphics)
+        layout.addWidget(scroll, 1)
         self._set_x_range()
 
         self._timer = QTimer(self)
