@@ -8,10 +8,13 @@ Also `ocu --record FILE`, `ocu --replay FILE`, `ocu inspect FILE` (docs/recordin
 from __future__ import annotations
 
 import argparse
+import contextlib
+import ctypes
+import ctypes.util
 import logging
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,6 +33,9 @@ log = logging.getLogger("ocu")
 
 SETTINGS_FILE = "ocu.ini"
 SIGNAL_POLL_MS = 100
+# Each quits the console in order, zeros last: Ctrl-C, kill, a closed terminal or a dropped
+# SSH session, Ctrl-\\.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
 
 
 def parse_robot(text: str, default_port: int) -> tuple[str, int]:
@@ -265,7 +271,8 @@ def run_console(
                 raw, robot_address, extension=False, description=address_text
             ),
         )
-        return run_window(app, window, quit_after_s)
+        with last_zeros_guard():
+            return run_window(app, window, quit_after_s)
     finally:
         recorder.stop()  # after the window's shutdown: the link's closing zeros are in it
         if simulator is not None:
@@ -303,6 +310,62 @@ def run_replay(
     return run_window(app, window, quit_after_s)
 
 
+@contextlib.contextmanager
+def last_zeros_guard() -> Iterator[None]:
+    """The live links send zeros last however the process ends (ocu.link.guard), including
+    an X server that dies: Xlib ends the process from its fatal I/O error handler."""
+    from ocu.link.guard import ExitGuard, shutdown_live_links
+
+    with ExitGuard(), on_x_server_loss(lambda: shutdown_live_links("X server connection lost")):
+        yield
+
+
+XIOErrorHandler = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p)
+
+
+@contextlib.contextmanager
+def on_x_server_loss(action: Callable[[], None]) -> Iterator[None]:
+    """Run `action` when Xlib reports the X connection lost, before it exits the process.
+
+    Xlib calls its I/O error handler and then C's exit(), which skips Python's atexit hooks
+    and Qt's teardown; this handler runs first, then the one it replaced (Xlib's default
+    prints the "XIO: fatal IO error" line). Nothing to do on other platforms (offscreen).
+    """
+    from PySide6.QtGui import QGuiApplication
+
+    xlib = _xlib() if QGuiApplication.platformName() == "xcb" else None
+    if xlib is None:
+        yield
+        return
+    previous: list[int | None] = [None]
+
+    def handler(display: int | None) -> int:
+        try:
+            action()
+        except Exception:
+            log.exception("X connection lost: the last-chance action failed")
+        chained = previous[0]
+        return XIOErrorHandler(chained)(display) if chained else 0
+
+    callback = XIOErrorHandler(handler)
+    previous[0] = xlib.XSetIOErrorHandler(callback)
+    try:
+        yield
+    finally:
+        xlib.XSetIOErrorHandler(XIOErrorHandler(previous[0] or 0))
+
+
+def _xlib() -> ctypes.CDLL | None:
+    """libX11 as loaded by Qt's xcb plugin (the same library instance), or None."""
+    try:
+        xlib = ctypes.CDLL(ctypes.util.find_library("X11") or "libX11.so.6")
+    except OSError:
+        return None
+    xlib.XSetIOErrorHandler.restype = ctypes.c_void_p
+    xlib.XSetIOErrorHandler.argtypes = [XIOErrorHandler]
+    return xlib
+
+
 def open_settings(config_dir: Path) -> QSettings:
     """The window layout file in the config directory (created if needed)."""
     from PySide6.QtCore import QSettings
@@ -321,7 +384,7 @@ def run_window(app: QApplication, window: MainWindow, quit_after_s: float | None
     # a short timer (which also lets Python see the signal at all) quits Qt from the
     # event loop, so shutdown sends zeros before the process ends.
     stop_signals: list[int] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in STOP_SIGNALS:
         signal.signal(sig, lambda signum, _frame: stop_signals.append(signum))
 
     def quit_on_signal() -> None:

@@ -76,7 +76,7 @@ EXTENSION_KEYS = (
 )
 EXTENSION_FRAME_TYPE_KEYS = ("hello", "video_fragment", "status")
 # Frame types an older profile may leave out; the extension then lacks that packet.
-OPTIONAL_EXTENSION_FRAME_TYPE_KEYS = ("scan",)
+OPTIONAL_EXTENSION_FRAME_TYPE_KEYS = ("scan", "rcp")
 VIDEO_KEYS = (
     "no_signal_after_s",
     "battery_warning_percent",
@@ -239,6 +239,8 @@ class ExtensionFrameTypes:
     status: int
     # The planar range scan (robot -> OCU); None: this extension has no range sensor.
     scan: int | None = None
+    # The sequenced RCP (OCU -> robot); None: the OCU sends vendor RCPs to any robot.
+    rcp: int | None = None
 
 
 @dataclass(frozen=True)
@@ -798,11 +800,11 @@ def _parse_extension(reader: _Reader, vendor: FrameTypes) -> ExtensionSettings:
         scan=(
             types_reader.integer("scan", low=0, high=255) if types_reader.optional("scan") else None
         ),
+        rcp=types_reader.integer("rcp", low=0, high=255) if types_reader.optional("rcp") else None,
     )
     ids = [types.hello, types.video_fragment, types.status, vendor.rcp, vendor.telemetry]
     ids.append(vendor.video)
-    if types.scan is not None:
-        ids.append(types.scan)
+    ids.extend(extra for extra in (types.scan, types.rcp) if extra is not None)
     if len(set(ids)) != len(ids):
         raise ProfileError(
             f"{types_reader.where}: the IDs must differ from each other and from link.frame_types"

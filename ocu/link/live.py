@@ -13,8 +13,10 @@ by the channels' hard maxima only; the operator's current maxima are the console
 from __future__ import annotations
 
 import logging
+import random
 import threading
 import time
+import weakref
 from collections.abc import Callable, Sequence
 from typing import TypedDict, Unpack
 
@@ -34,8 +36,14 @@ from ocu.net.transport import (
     resolve,
 )
 from ocu.profile import ExtensionSettings, RobotProfile
-from ocu.protocol.extended import MIN_DATAGRAM, CameraRequest, HelloPacket
-from ocu.protocol.packets import MAX_DATAGRAM
+from ocu.protocol.extended import (
+    MIN_DATAGRAM,
+    SEQUENCE_MODULUS,
+    CameraRequest,
+    HelloPacket,
+    SequencedRcp,
+)
+from ocu.protocol.packets import MAX_DATAGRAM, RemoteControlPacket
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import (
     HELLO,
@@ -55,6 +63,16 @@ log = logging.getLogger("ocu.link")
 RECV_BUFFER_BYTES = 65536
 MAX_DATAGRAMS_PER_WAKE = 256
 STATS_PERIOD_S = 0.5
+
+# Every live link not yet shut down, for the process's last-chance hooks (ocu.link.guard).
+_LIVE: weakref.WeakSet[LiveLink] = weakref.WeakSet()
+_LIVE_LOCK = threading.Lock()
+
+
+def live_links() -> list[LiveLink]:
+    """The live links not yet shut down."""
+    with _LIVE_LOCK:
+        return list(_LIVE)
 
 
 class LiveLink(Link):
@@ -100,7 +118,10 @@ class LiveLink(Link):
         # profile defines it (and does not switch probing off).
         ext = profile.extension
         self.extension_enabled = extension and ext is not None and ext.probe
-        self._ext_codec = make_extension_codec(profile)
+        self._ext_codec = make_extension_codec(profile) if self.extension_enabled else None
+        # The next sequenced RCP's number: from a random start, so that a restarted OCU is not
+        # taken for a late copy of its former self (the robot also starts over after a pause).
+        self._rcp_sequence = random.randrange(SEQUENCE_MODULUS)
         self.receiver = Receiver(
             profile,
             self.emit,
@@ -133,6 +154,12 @@ class LiveLink(Link):
         self._estop_latched = False
         self._gui_alive_at = clock()
         self._gui_tripped = False
+        # The loop steps at least every MAX_WAIT_S (ocu.net.loop). A gap longer than the
+        # robot's own watchdog means the process was stopped (SIGSTOP, suspend, swapping) or
+        # starved long enough for the robot to stop by itself: the command from before the
+        # gap is stale and would restart it.
+        self.freeze_limit_s = settings.robot_watchdog_s
+        self._last_step_at: float | None = None
         self._silenced: str | None = None
         # The thread that calls heartbeat() owns the commands; until one does, whoever sets
         # commands counts as alive by doing so.
@@ -149,6 +176,8 @@ class LiveLink(Link):
         self._buffer = bytearray(RECV_BUFFER_BYTES)
         self.loop = SelectLoop("ocu-link", clock=clock, on_error=self._loop_failed)
         self.loop.add_reader(transport.socket, self._receive_all)
+        with _LIVE_LOCK:
+            _LIVE.add(self)
 
     # ---- commands (any thread) -------------------------------------------------------------
 
@@ -171,6 +200,8 @@ class LiveLink(Link):
             silenced = self._take_silenced()
         if changed and self.send_on_change:
             self._send_current()
+        if changed:
+            self.loop.wake()  # the zero burst's repeats, if this stopped motion
         if silenced:
             self._notify_safety(silenced)
 
@@ -181,6 +212,8 @@ class LiveLink(Link):
             silenced = self._take_silenced()
         if changed and self.send_on_change:
             self._send_current()
+        if changed:
+            self.loop.wake()  # the zero burst's repeats, if this stopped motion
         if silenced:
             self._notify_safety(silenced)
 
@@ -203,6 +236,12 @@ class LiveLink(Link):
                     f"control thread silent for {stalled_s:.2f} s: motion commands zeroed"
                 )
             command = command.stopped()
+        frozen_s = self._loop_frozen_s()
+        if frozen_s is not None and command.is_motion:
+            # The loop has not run its watchdogs for that long (the process just woke up):
+            # no motion goes out before they have.
+            self._silenced = f"link loop frozen for {frozen_s:.2f} s: motion commands zeroed"
+            command = command.stopped()
         if self._state is LinkState.LOST:
             # A robot the OCU cannot hear may still hear the OCU: it would drive blind.
             command = command.stopped()
@@ -210,8 +249,26 @@ class LiveLink(Link):
             self._estop_latched = False
         if command == self._command:
             return False
+        if self._command.is_motion and not command.is_motion:
+            self._schedule_zero_repeats()
         self._command = command
         return True
+
+    def _schedule_zero_repeats(self) -> None:
+        """Motion just became zero (lock held): repeat the zeros as the e-stop does.
+
+        One zero can be lost, and with jitter an older motion RCP can arrive after it and
+        drive on until the next tick; the repeats (the same count and window as the e-stop's)
+        make both unlikely. Each repeat sends the command current at its time.
+        """
+        settings = self.profile.link
+        repeats = settings.estop_repeats - 1
+        if repeats <= 0:
+            return
+        now = self.clock()
+        step = settings.estop_window_s / repeats
+        due = (now + step * (k + 1) for k in range(repeats))
+        self._estop_due = sorted({*self._estop_due, *due})
 
     def emergency_stop(self, reason: str = "operator") -> None:
         """Zero every velocity now and repeat the zero command within the e-stop window."""
@@ -226,6 +283,14 @@ class LiveLink(Link):
         self._send_current()
         self.loop.wake()
         self._notify_safety(f"EMERGENCY STOP ({reason})")
+
+    def _loop_frozen_s(self) -> float | None:
+        """How long the running loop has gone without a step, if over the limit (lock held)."""
+        last = self._last_step_at
+        if last is None or self._closed:
+            return None
+        gap = self.clock() - last
+        return gap if gap > self.freeze_limit_s else None
 
     def _owner_silent(self) -> bool:
         timeout = self.gui_alive_timeout_s
@@ -289,16 +354,25 @@ class LiveLink(Link):
 
     def start(self) -> None:
         """Run the loop in its named daemon thread ("ocu-link")."""
-        with self._lock:
-            self._next_tick = self.clock()
-            self._next_stats = self._next_tick + STATS_PERIOD_S
+        self._begin_loop()
         self.loop.start(self._step)
 
     def run(self) -> None:
         """Run the loop in the calling thread until shutdown()."""
+        self._begin_loop()
         self.loop.run(self._step)
 
+    def _begin_loop(self) -> None:
+        with self._lock:
+            self._next_tick = self.clock()
+            self._next_stats = self._next_tick + STATS_PERIOD_S
+            self._last_step_at = self._next_tick
+
     def _step(self, now: float) -> float:
+        # The watchdogs first: after a freeze the periodic tick is due at once, and what it
+        # would send is the command from before the freeze (the robot may have stopped on its
+        # own watchdog meanwhile and would be restarted by it).
+        self._check_watchdogs(now)
         with self._lock:
             tick_due = now >= self._next_tick
             if tick_due:
@@ -311,7 +385,6 @@ class LiveLink(Link):
             self._send_hello()
         if stats_due:
             self.emit(self.stats())
-        self._check_watchdogs(now)
         self.receiver.expire(now)
         due = self._send_due_estops(now)
         with self._lock:
@@ -335,6 +408,12 @@ class LiveLink(Link):
     def _check_watchdogs(self, now: float) -> None:
         message = None
         with self._lock:
+            last_step, self._last_step_at = self._last_step_at, now
+            frozen_s = None if last_step is None else now - last_step
+            if frozen_s is not None and frozen_s > self.freeze_limit_s and self._command.is_motion:
+                self._schedule_zero_repeats()
+                self._command = self._command.stopped()
+                message = f"link loop frozen for {frozen_s:.2f} s: motion commands zeroed"
             timeout = self.gui_alive_timeout_s
             stalled_s = now - self._gui_alive_at
             if (
@@ -344,6 +423,7 @@ class LiveLink(Link):
                 and stalled_s > timeout
             ):
                 self._gui_tripped = True
+                self._schedule_zero_repeats()
                 self._command = self._command.stopped()
                 message = f"control thread silent for {stalled_s:.2f} s: motion commands zeroed"
             last = self.receiver.last_valid_at
@@ -358,6 +438,8 @@ class LiveLink(Link):
             reason = f"no valid packet from the robot for {now - last:.1f} s"
             with self._lock:
                 had_motion = self._command.is_motion
+                if had_motion:
+                    self._schedule_zero_repeats()
                 self._command = self._command.stopped()
             self.receiver.robot_silent()
             self._set_state(LinkState.LOST, reason)
@@ -393,7 +475,7 @@ class LiveLink(Link):
     # ---- send ------------------------------------------------------------------------------
 
     def current_packet_bytes(self) -> bytes:
-        """The RCP for the current command on the wire (bounded by the hard maxima)."""
+        """The vendor RCP for the current command (bounded by the hard maxima)."""
         with self._lock:
             return self._codec.encode(self._mapper.to_packet(self._command))
 
@@ -401,15 +483,28 @@ class LiveLink(Link):
         # Built and sent under one lock: a tick that read the command just before the
         # operator stopped must not put its stale motion on the wire after the stop.
         with self._send_lock:
-            self._send_rcp(self.current_packet_bytes())
+            with self._lock:
+                packet = self._mapper.to_packet(self._command)
+            self._send_rcp(packet)
 
     def _send_zeros(self) -> None:
         with self._lock:
-            zero = self._codec.encode(self._mapper.to_packet(self._command.stopped()))
+            zero = self._mapper.to_packet(self._command.stopped())
         self._send_rcp(zero)
 
-    def _send_rcp(self, data: bytes) -> None:
+    def _rcp_datagram(self, packet: RemoteControlPacket) -> bytes:
+        """The RCP as sent (send lock held): sequenced to a robot speaking the extension (it
+        drops one older than the newest it applied), the vendor's to any other."""
+        ext = self._ext_codec
+        if ext is None or ext.rcp_type is None or not self.receiver.extension_active:
+            return self._codec.encode(packet)
+        sequence = self._rcp_sequence
+        self._rcp_sequence = (sequence + 1) % SEQUENCE_MODULUS
+        return ext.encode(SequencedRcp(sequence, packet))
+
+    def _send_rcp(self, packet: RemoteControlPacket) -> None:
         with self._send_lock:
+            data = self._rcp_datagram(packet)
             sent_at = self._send_datagram(data, RCP)
             if sent_at is None:
                 return
@@ -481,6 +576,8 @@ class LiveLink(Link):
         with self._send_lock:
             if self._closed:
                 return
+        with _LIVE_LOCK:
+            _LIVE.discard(self)
         self.loop.stop(timeout_s)
         with self._lock:
             self._command = self._command.stopped()

@@ -19,6 +19,7 @@ import logging
 import threading
 from collections.abc import Callable
 from dataclasses import replace
+from enum import Enum
 
 from ocu.control.commands import CommandMapper, commanded_motor_speeds, read_telemetry
 from ocu.control.plausibility import PlausibilityChecker
@@ -27,7 +28,13 @@ from ocu.link.reassembly import Reassembler, ReassemblyStats
 from ocu.link.stats import JitterMeter, LossEstimator, RateMeter
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket, VideoFramePacket
-from ocu.protocol.extended import HelloPacket, ScanPacket, StatusPacket, VideoFragment
+from ocu.protocol.extended import (
+    HelloPacket,
+    ScanPacket,
+    SequencedRcp,
+    StatusPacket,
+    VideoFragment,
+)
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import (
     OTHER,
@@ -52,6 +59,18 @@ log = logging.getLogger("ocu.link")
 # A telemetry tick this far (in seconds of ticks) below the newest one is a robot that
 # restarted, not a late packet.
 TICK_RESTART_S = 10.0
+# A tick further ahead of the newest one than the time between their arrivals plus this is
+# not the robot's clock (a corrupted or forged datagram): it needs a second packet to agree.
+TICK_AHEAD_S = 2.0
+
+
+class _Tick(Enum):
+    """What a telemetry packet's tick says about the packet."""
+
+    NEW = "new"  # newer than any so far: its readings are the latest
+    STALE = "stale"  # a duplicate or a late one: older than what the OCU knows
+    RESTART = "restart"  # the second of two agreeing on a new clock: the robot restarted
+    JUNK = "junk"  # fits neither the robot's clock nor a pending restart
 
 
 class Receiver:
@@ -75,6 +94,8 @@ class Receiver:
         self._codec = make_codec(profile)
         ext_codec = make_extension_codec(profile)
         self._ext_codec = ext_codec if extension else None
+        # What the OCU sent is decoded whatever it receives (a replay of an extended session).
+        self._rcp_ext_codec = ext_codec if ext_codec is not None and ext_codec.rcp_type else None
         self._mapper = CommandMapper(profile)
         self.extension_timeout_s = (
             profile.link.link_lost_after_s if link_lost_after_s is None else link_lost_after_s
@@ -99,6 +120,9 @@ class Receiver:
         self._frame_at: list[float | None] = [None] * len(profile.link.camera_names)
         self._plausibility = PlausibilityChecker(profile)
         self._last_tick: int | None = None
+        self._last_tick_at = 0.0
+        # A tick that fit no clock, held until the next packet says whether it was a restart.
+        self._new_clock: tuple[int, float] | None = None
         self._stale_telemetry = 0
         self._last_valid_at: float | None = None
         self._camera: int | None = None
@@ -111,15 +135,22 @@ class Receiver:
     # ---- what the OCU sent (any thread) -----------------------------------------------------
 
     def sent(self, data: bytes, at: float) -> Command | None:
-        """A datagram the OCU put on the wire: the command it carried, if an RCP.
+        """A datagram the OCU put on the wire: the command it carried, if an RCP (vendor or
+        sequenced).
 
         The camera it selected is where vendor video is shown; the motor speeds it asks for
         are what the robot will echo (the delay measurement).
         """
-        if not data or data[0] != self._codec.rcp_type:
+        if not data:
             return None
+        rcp_ext = self._rcp_ext_codec
         try:
-            packet = RemoteControlPacket.decode(data, data[0])
+            if data[0] == self._codec.rcp_type:
+                packet = RemoteControlPacket.decode(data, data[0])
+            elif rcp_ext is not None and data[0] == rcp_ext.rcp_type:
+                packet = SequencedRcp.decode(data, data[0]).rcp
+            else:
+                return None
         except ProtocolError:
             return None
         command = self._mapper.to_command(packet)
@@ -157,7 +188,16 @@ class Receiver:
             self.emit(DatagramReceived(data, at))
             self.foreign()  # an RCP never comes from the robot
             return False
+        verdict = None
         if isinstance(packet, TelemetryPacket):
+            with self._lock:
+                verdict = self._judge_tick(packet.tick, at)
+            if verdict is _Tick.JUNK:
+                # Counted (malformed) and dropped: it neither keeps the link alive nor enters
+                # the loss figure, whose window it would poison for its whole length.
+                self.emit(DatagramReceived(data, at))
+                log.debug("telemetry tick %d fits no clock of the robot: dropped", packet.tick)
+                return False
             robot_time_s = packet.tick / self.profile.link.telemetry_tick_hz
             self.emit(DatagramReceived(data, at, TELEMETRY, robot_time_s))
         else:
@@ -169,8 +209,16 @@ class Receiver:
             if isinstance(packet, TelemetryPacket):
                 self._telemetry += 1
                 self._telemetry_rate.add(at)
-                self._loss.add(packet.tick, at)
-                frame = self._telemetry_frame(packet, at, wall)
+                if verdict is _Tick.RESTART:
+                    log.info("telemetry ticks restarted at %d: robot restarted", packet.tick)
+                    self._plausibility.reset()
+                    self._loss.restart()
+                    self._jitter.reset()  # its clock started over
+                if verdict is _Tick.STALE:
+                    self._stale_telemetry += 1
+                else:
+                    self._loss.add(packet.tick, at)
+                    frame = self._telemetry_frame(packet, at, wall)
                 # The delay's variation: arrival against the robot's own clock (its tick).
                 # The clocks' offset cancels in the spread; late packets count too.
                 self._jitter.add(at - packet.tick / self.profile.link.telemetry_tick_hz, at)
@@ -183,25 +231,43 @@ class Receiver:
             self.emit(frame)
         return True
 
-    def _telemetry_frame(
-        self, packet: TelemetryPacket, at: float, wall: float
-    ) -> TelemetryFrame | None:
-        """Readings judged and the delay measured; None for an old packet (lock held).
+    def _judge_tick(self, tick: int, at: float) -> _Tick:
+        """What a telemetry tick arriving at `at` is (lock held); a NEW or RESTART one is kept.
 
-        A packet whose tick is not newer than the newest seen is a duplicate or came late
-        (reordered): its readings are older than what the OCU already knows, so it is counted
-        and goes no further.
+        A tick not newer than the newest is a duplicate or came late (reordered), unless it is
+        so far back that the robot restarted. One further ahead than the robot's clock can have
+        run since the newest, or far back, is either a restart or junk (a corrupted or forged
+        datagram, whose tick would hold back every real packet and poison the loss window):
+        held, it becomes the new clock only when the next packet agrees with it.
         """
+        hz = self.profile.link.telemetry_tick_hz
         last = self._last_tick
-        restart = self.profile.link.telemetry_tick_hz * TICK_RESTART_S
-        if last is not None and packet.tick <= last and last - packet.tick < restart:
+        if last is None:
+            self._keep_tick(tick, at)
+            return _Tick.NEW
+        if tick <= last and last - tick < hz * TICK_RESTART_S:
+            return _Tick.STALE
+        if last < tick <= last + (at - self._last_tick_at + TICK_AHEAD_S) * hz:
+            self._new_clock = None  # whatever was held did not agree: it was junk
+            self._keep_tick(tick, at)
+            return _Tick.NEW
+        held = self._new_clock
+        if held is not None and held[0] < tick <= held[0] + (at - held[1] + TICK_AHEAD_S) * hz:
+            self._malformed -= 1  # the held one was the robot's after all: a late one now
             self._stale_telemetry += 1
-            return None
-        if last is not None and packet.tick < last:
-            log.info("telemetry tick went back from %d to %d: robot restarted", last, packet.tick)
-            self._plausibility.reset()
-            self._jitter.reset()  # its clock started over
-        self._last_tick = packet.tick
+            self._keep_tick(tick, at)
+            return _Tick.RESTART
+        self._new_clock = (tick, at)
+        self._malformed += 1
+        return _Tick.JUNK
+
+    def _keep_tick(self, tick: int, at: float) -> None:
+        self._last_tick = tick
+        self._last_tick_at = at
+        self._new_clock = None
+
+    def _telemetry_frame(self, packet: TelemetryPacket, at: float, wall: float) -> TelemetryFrame:
+        """Readings judged and the delay measured (lock held)."""
         readings = read_telemetry(self.profile, packet)
         for name, fault in self._plausibility.check(packet, readings).items():
             readings[name] = replace(readings[name], fault=fault)
@@ -219,9 +285,9 @@ class Receiver:
                 self.ext_malformed += 1
             log.debug("malformed extension datagram (%d bytes): %s", len(data), err)
             return False
-        if isinstance(packet, HelloPacket):
+        if isinstance(packet, HelloPacket | SequencedRcp):
             self.emit(DatagramReceived(data, at, OTHER))
-            self.foreign()  # a hello never comes from the robot
+            self.foreign()  # a hello or an RCP never comes from the robot
             return False
         if isinstance(packet, VideoFragment):
             self.emit(DatagramReceived(data, at, VIDEO_FRAGMENT, packet.capture_time_us / 1e6))
@@ -286,6 +352,7 @@ class Receiver:
         """The link was lost: the robot may restart meanwhile (its ticks, its readings)."""
         with self._lock:
             self._last_tick = None
+            self._new_clock = None
             self._plausibility.reset()
             # What the robot echoes after the silence says nothing of the commands before it.
             self._delay.reset()

@@ -99,6 +99,10 @@ class LossEstimator:
             self.reordered += 1
         self._events.append((now, tick))
 
+    def restart(self) -> None:
+        """The robot restarted its tick counter: the old ticks say nothing of the new ones."""
+        self._events.clear()
+
     def window(self, now: float) -> TickLoss:
         """Loss figures over the window ending now."""
         self._trim(now)

@@ -1,6 +1,6 @@
 """Codecs of ocu's open protocol extension (docs/protocol.md, "Extended protocol").
 
-Four packet types beside the vendor's, each one UDP datagram, little-endian, no padding:
+Five packet types beside the vendor's, each one UDP datagram, little-endian, no padding:
 
 - hello (OCU -> robot): the extension probe, repeated alongside the RCPs, carrying the
   per-camera stream request (resolution, frame rate, JPEG quality) and the largest datagram
@@ -10,7 +10,10 @@ Four packet types beside the vendor's, each one UDP datagram, little-endian, no 
 - status (robot -> OCU): battery voltage and charge, headlight state, roll and pitch, each
   with a "not measured" value so the robot never has to invent one; version 2 adds the
   heading (yaw) of the robot's IMU;
-- scan (robot -> OCU): one sweep of a planar range sensor, ranges in millimetres.
+- scan (robot -> OCU): one sweep of a planar range sensor, ranges in millimetres;
+- sequenced RCP (OCU -> robot): the vendor RCP's fields behind a sequence number, sent instead
+  of the vendor RCP to a robot that speaks the extension, so that it can drop an RCP older
+  than the newest it applied (one that jitter or a duplicate delivered late).
 
 The vendor packets are unchanged. Pure code: no Qt, no sockets; ProtocolError for bad data.
 """
@@ -21,7 +24,7 @@ import struct
 from dataclasses import dataclass
 
 from ocu.protocol.errors import ProtocolError
-from ocu.protocol.packets import JPEG_EOI, JPEG_SOI, MAX_DATAGRAM
+from ocu.protocol.packets import JPEG_EOI, JPEG_SOI, MAX_DATAGRAM, RCP_SIZE, RemoteControlPacket
 
 MAGIC = b"OCUX"
 VERSION = 1
@@ -33,6 +36,8 @@ STATUS_STRUCT = struct.Struct("<B4sBIHHBhhB")
 # Version 2 of the status packet appends the IMU heading (i16 mrad) to version 1's fields.
 STATUS_YAW_STRUCT = struct.Struct("<h")
 SCAN_HEADER_STRUCT = struct.Struct("<B4sBIQiiHHH")
+# Frame type, magic, version, sequence; then the vendor RCP without its frame type byte.
+SEQUENCED_RCP_HEADER_STRUCT = struct.Struct("<B4sBI")
 
 HELLO_HEADER_SIZE = HELLO_HEADER_STRUCT.size
 CAMERA_REQUEST_SIZE = CAMERA_REQUEST_STRUCT.size
@@ -40,6 +45,7 @@ FRAGMENT_HEADER_SIZE = FRAGMENT_HEADER_STRUCT.size
 STATUS_SIZE = STATUS_STRUCT.size
 STATUS_V2_SIZE = STATUS_SIZE + STATUS_YAW_STRUCT.size
 SCAN_HEADER_SIZE = SCAN_HEADER_STRUCT.size
+SEQUENCED_RCP_SIZE = SEQUENCED_RCP_HEADER_STRUCT.size + RCP_SIZE - 1
 
 assert HELLO_HEADER_SIZE == 9
 assert CAMERA_REQUEST_SIZE == 7
@@ -47,6 +53,7 @@ assert FRAGMENT_HEADER_SIZE == 26
 assert STATUS_SIZE == 20
 assert STATUS_V2_SIZE == 22
 assert SCAN_HEADER_SIZE == 32
+assert SEQUENCED_RCP_SIZE == 66
 
 MAX_CAMERAS = 255
 # Below this a datagram could not carry the fragment header plus a useful payload.
@@ -65,6 +72,7 @@ STATUS_VERSION_YAW = 2
 SCAN_NO_RETURN = 0
 SCAN_INVALID = 0xFFFF
 MAX_SCAN_BEAMS = 8192
+SEQUENCE_MODULUS = 2**32
 
 _U8 = (0, 255)
 _U32 = (0, 2**32 - 1)
@@ -424,7 +432,39 @@ class ScanPacket:
         return packet
 
 
-ExtendedPacket = HelloPacket | VideoFragment | StatusPacket | ScanPacket
+@dataclass(frozen=True)
+class SequencedRcp:
+    """OCU -> robot: a vendor RCP behind a sequence number (u32, +1 per RCP, wrapping)."""
+
+    sequence: int
+    rcp: RemoteControlPacket
+
+    def encode(self, frame_type: int) -> bytes:
+        """66 bytes: the extension header, the sequence, the RCP's 56 bytes after its type."""
+        _check("sequence", self.sequence, _U32)
+        body = self.rcp.encode(0)[1:]
+        return SEQUENCED_RCP_HEADER_STRUCT.pack(frame_type, MAGIC, VERSION, self.sequence) + body
+
+    @classmethod
+    def decode(cls, data: bytes, frame_type: int) -> SequencedRcp:
+        """Parse a 66-byte sequenced RCP; ProtocolError on a wrong length, type or header."""
+        if len(data) != SEQUENCED_RCP_SIZE:
+            raise ProtocolError(
+                f"sequenced RCP must be {SEQUENCED_RCP_SIZE} bytes, got {len(data)}"
+            )
+        kind, magic, version, sequence = SEQUENCED_RCP_HEADER_STRUCT.unpack_from(data)
+        _expect_type(kind, frame_type, "a sequenced RCP")
+        _check_header(magic, version, "sequenced RCP")
+        body = bytes(data[SEQUENCED_RCP_HEADER_STRUCT.size :])
+        return cls(sequence, RemoteControlPacket.decode(b"\0" + body, 0))
+
+
+def sequence_newer(sequence: int, than: int) -> bool:
+    """Whether `sequence` comes after `than` (serial number arithmetic: it wraps at 2**32)."""
+    return 0 < (sequence - than) % SEQUENCE_MODULUS < SEQUENCE_MODULUS // 2
+
+
+ExtendedPacket = HelloPacket | VideoFragment | StatusPacket | ScanPacket | SequencedRcp
 
 
 @dataclass(frozen=True)
@@ -436,6 +476,8 @@ class ExtendedCodec:
     status_type: int = 0x12
     # None: no range scans in this extension (an older profile).
     scan_type: int | None = 0x13
+    # None: no sequenced RCPs (an older profile): the OCU sends vendor RCPs only.
+    rcp_type: int | None = 0x14
 
     def handles(self, frame_type: int) -> bool:
         """Whether a datagram's first byte names one of the extension's packets."""
@@ -444,6 +486,7 @@ class ExtendedCodec:
             self.fragment_type,
             self.status_type,
             self.scan_type,
+            self.rcp_type,
         )
 
     def encode(self, packet: ExtendedPacket) -> bytes:
@@ -456,6 +499,10 @@ class ExtendedCodec:
             if self.scan_type is None:
                 raise ProtocolError("this extension has no scan packet type")
             return packet.encode(self.scan_type)
+        if isinstance(packet, SequencedRcp):
+            if self.rcp_type is None:
+                raise ProtocolError("this extension has no sequenced RCP type")
+            return packet.encode(self.rcp_type)
         return packet.encode(self.status_type)
 
     def decode(self, data: bytes) -> ExtendedPacket:
@@ -471,6 +518,8 @@ class ExtendedCodec:
             return HelloPacket.decode(data, frame_type)
         if frame_type == self.scan_type:
             return ScanPacket.decode(data, frame_type)
+        if frame_type == self.rcp_type:
+            return SequencedRcp.decode(data, frame_type)
         raise ProtocolError(f"frame type 0x{frame_type:02x} is not an extension packet")
 
 

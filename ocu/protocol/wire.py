@@ -19,4 +19,4 @@ def make_extension_codec(profile: RobotProfile) -> ExtendedCodec | None:
     if extension is None:
         return None
     types = extension.frame_types
-    return ExtendedCodec(types.hello, types.video_fragment, types.status, types.scan)
+    return ExtendedCodec(types.hello, types.video_fragment, types.status, types.scan, types.rcp)

@@ -42,7 +42,7 @@ from ocu.protocol import (
     TelemetryPacket,
     VideoFramePacket,
 )
-from ocu.protocol.extended import HelloPacket
+from ocu.protocol.extended import HelloPacket, SequencedRcp, sequence_newer
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.sim.extended import ExtendedServer
 from ocu.sim.physics import MotorReading, RobotPhysics
@@ -74,6 +74,9 @@ class RobotCounters:
     video_sent: int = 0
     malformed: int = 0
     foreign: int = 0
+    # RCPs dropped as older than the newest applied (sequenced), or sent before the client's
+    # sequenced ones (vendor RCPs while sequenced ones arrive).
+    stale_rcp: int = 0
 
 
 class RobotServer:
@@ -114,6 +117,9 @@ class RobotServer:
         self.video_quality = DEFAULT_QUALITY
         self._bad_camera: int | None = None
         self._frame_number = 0
+        # The newest sequenced RCP applied: its client, number and arrival time.
+        self._sequenced: tuple[Address, int, float] | None = None
+        self.applied_sequence: int | None = None
 
     # ---- reading faults (any thread) --------------------------------------------------------
 
@@ -143,8 +149,7 @@ class RobotServer:
     def receive(self, data: bytes, address: Address, now_s: float) -> RemoteControlPacket | None:
         """Take one datagram; returns the RCP it carried once applied, None for anything else."""
         if data and self._ext_codec is not None and self._ext_codec.handles(data[0]):
-            self._receive_extended(data, address, now_s)
-            return None
+            return self._receive_extended(data, address, now_s)
         try:
             packet = self._codec.decode(data)
         except ProtocolError as err:
@@ -155,26 +160,64 @@ class RobotServer:
             self.counters.foreign += 1
             log.debug("dropped %s from %s:%d", type(packet).__name__, address[0], address[1])
             return None
+        if self._sequencing(address, now_s):
+            # Sent before the client's first sequenced RCP and delivered after it: stale.
+            self.counters.stale_rcp += 1
+            return None
+        self.applied_sequence = None
         self._apply(packet, address, now_s)
         return packet
 
-    def _receive_extended(self, data: bytes, address: Address, now_s: float) -> None:
+    def _sequencing(self, address: Address, now_s: float) -> bool:
+        """Whether this client's sequenced RCPs are current (within the robot's watchdog)."""
+        last = self._sequenced
+        return (
+            last is not None
+            and last[0] == address
+            and now_s - last[2] <= self.profile.link.robot_watchdog_s
+        )
+
+    def _receive_sequenced(
+        self, packet: SequencedRcp, address: Address, now_s: float
+    ) -> RemoteControlPacket | None:
+        """Apply a sequenced RCP unless it is older than the newest applied from its client.
+
+        A new client, or one silent for the watchdog time (the robot stopped meanwhile),
+        starts a new sequence: an OCU that restarted begins wherever it likes.
+        """
+        last = self._sequenced
+        current = self._sequencing(address, now_s) and last is not None
+        if current and last is not None and not sequence_newer(packet.sequence, last[1]):
+            self.counters.stale_rcp += 1
+            log.debug("dropped RCP #%d: #%d already applied", packet.sequence, last[1])
+            return None
+        self._sequenced = (address, packet.sequence, now_s)
+        self.applied_sequence = packet.sequence
+        self._apply(packet.rcp, address, now_s)
+        return packet.rcp
+
+    def _receive_extended(
+        self, data: bytes, address: Address, now_s: float
+    ) -> RemoteControlPacket | None:
         if self.extension is None or self._ext_codec is None:
             # A vendor robot does not speak the extension: dropped like any foreign packet.
             self.counters.foreign += 1
-            return
+            return None
         try:
             packet = self._ext_codec.decode(data)
         except ProtocolError as err:
             self.counters.malformed += 1
             log.debug("dropped malformed extension datagram: %s", err)
-            return
+            return None
+        if isinstance(packet, SequencedRcp):
+            return self._receive_sequenced(packet, address, now_s)
         if not isinstance(packet, HelloPacket):
             self.counters.foreign += 1
-            return
+            return None
         if not self.extension.active(now_s):
             log.info("extension hello from %s:%d", *address)
         self.extension.on_hello(packet, address, now_s)
+        return None
 
     def _apply(self, packet: RemoteControlPacket, address: Address, now_s: float) -> None:
         command = self._mapper.to_command(packet)

@@ -53,11 +53,13 @@ MAX_DATAGRAMS_PER_WAKE = 256
 
 
 class ReceivedRcp(NamedTuple):
-    """One RCP that got through the faults: monotonic receive time, packet and sender."""
+    """One RCP applied after the faults: monotonic receive time, packet and sender, and its
+    sequence number if it came sequenced (the extension)."""
 
     time_s: float
     packet: RemoteControlPacket
     address: Address
+    sequence: int | None = None
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,8 @@ class SimState:
     video_sent: int
     malformed_count: int
     foreign_count: int
+    # RCPs dropped as older than the newest applied (the extension's sequence numbers).
+    stale_rcp_count: int
     datagrams_received: int
     datagrams_sent: int
     dropped_to_robot: int
@@ -472,7 +476,8 @@ class RobotSimulator:
             packet = self._robot.receive(data, address, now_s)
             if packet is not None:
                 with self._received_lock:
-                    self._received.append(ReceivedRcp(now_s, packet, address))
+                    sequence = self._robot.applied_sequence
+                    self._received.append(ReceivedRcp(now_s, packet, address, sequence))
                 self._publish()
             return
         try:
@@ -508,6 +513,7 @@ class RobotSimulator:
             video_sent=robot.counters.video_sent,
             malformed_count=robot.counters.malformed,
             foreign_count=robot.counters.foreign,
+            stale_rcp_count=robot.counters.stale_rcp,
             datagrams_received=self._counters.datagrams_received,
             datagrams_sent=self._counters.datagrams_sent,
             dropped_to_robot=faults.dropped_to_robot,

@@ -415,7 +415,9 @@ def test_stats_report_loss_from_tick_gaps(profile: RobotProfile, peer: RobotPeer
     link, recorder = make_link(profile, peer)
     link.start()
     try:
-        for step in [1000, 1000, 3000, 1000, 1000]:  # one gap of two missing packets
+        # One gap of two missing packets; sent at once, so the ticks stay within what the
+        # robot's clock can run between arrivals (a jump further ahead is junk: test_junk).
+        for step in [100, 100, 300, 100, 100]:
             peer.send_telemetry(link.address, tick_step=step)
         assert recorder.wait(lambda: len(recorder.telemetry) == 5)
         loss = link.stats().loss_estimate

@@ -46,9 +46,14 @@ def test_late_and_repeated_telemetry_never_reaches_the_listeners(
         assert recorder.wait(lambda: len(recorder.telemetry) == 3)
         assert wait_for(lambda: link.stats().stale_telemetry == 2)
         assert [f.packet.tick for f in recorder.telemetry] == [20_000, 20_200, 20_300]
-        # A robot that restarted (ticks 20 s back) counts from zero again: believed at once.
+        # A robot that restarted (ticks 20 s back) counts from zero again: believed once a
+        # second packet agrees (a lone far-off tick is junk: tests/link/test_junk.py).
         send(peer, link, 5, raw)
+        send(peer, link, 105, raw)
         assert recorder.wait(lambda: len(recorder.telemetry) == 4)
+        assert recorder.telemetry[-1].packet.tick == 105
+        assert wait_for(lambda: link.stats().stale_telemetry == 3)
+        assert link.stats().malformed == 0
     finally:
         link.shutdown()
 
