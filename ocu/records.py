@@ -277,6 +277,9 @@ class LinkStats:
     jitter_s: float | None = None
     scan_rate_hz: float = 0.0
     frame_age_s: tuple[float | None, ...] = ()
+    # Share of the commands (sequenced RCPs) sent over the last 30 s that the robot did not
+    # apply, from its echo (ocu.link.stats.UplinkLossEstimator); None: no robot echo.
+    uplink_loss: float | None = None
 
     @classmethod
     def empty(cls, send_rate_hz: float = 0.0) -> LinkStats:

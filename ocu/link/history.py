@@ -11,8 +11,9 @@ its jitter are unknown (the link's own figures keep their last values then: they
 measured on what arrives).
 
 What the OCU cannot know is said, not invented: the loss of commands on their way to the
-robot (uplink) needs the robot to tell which commands it received, which neither the vendor
-protocol nor the extension (docs/protocol.md) does yet.
+robot (uplink) needs the robot to tell which commands it applied. An extended robot echoes
+its sequenced RCPs in its status packets (docs/protocol.md); against a vendor robot the
+history says the loss is not measurable.
 """
 
 from __future__ import annotations
@@ -32,8 +33,9 @@ from ocu.records import LinkEvent, LinkState, LinkStateChanged, LinkStats, Safet
 
 # The longest window the dock offers (10 min); the history keeps this much.
 DEFAULT_SPAN_S = 600.0
-# What the OCU says of the uplink's loss while no robot reports the commands it received.
-UPLINK_LOSS_UNMEASURABLE = "not measurable (the robot reports no command sequence numbers)"
+# What the OCU says of the uplink's loss while the robot does not echo the commands it
+# applied (a vendor robot; docs/protocol.md, status version 3).
+UPLINK_LOSS_UNMEASURABLE = "not measurable (the robot echoes no command sequence numbers)"
 ESTOP_PREFIX = "EMERGENCY STOP"
 # Nothing valid from the robot for this long: every packet it sent meanwhile was lost, and
 # the round trip (measured from what arrives) is not known.
@@ -67,6 +69,7 @@ FIGURES = (
     "video_rate_hz",
     "scan_rate_hz",
     "downlink_loss",
+    "uplink_loss",
     "round_trip_s",
     "jitter_s",
 )
@@ -170,6 +173,7 @@ class LinkHistory:
             stats.video_rate_hz,
             stats.scan_rate_hz,
             1.0 if silent else _value(stats.loss_estimate),
+            math.nan if silent else _value(stats.uplink_loss),
             math.nan if silent else _value(stats.delay_s),
             math.nan if silent else _value(stats.jitter_s),
             *ages,
@@ -200,9 +204,17 @@ class LinkHistory:
             return self._latest
 
     @property
+    def uplink_measurable(self) -> bool:
+        """Whether the robot echoes the commands it applied (the newest statistics say)."""
+        with self._lock:
+            return self._latest is not None and self._latest.uplink_loss is not None
+
+    @property
     def uplink_loss_text(self) -> str:
         """The commands lost on the way to the robot, as the OCU can tell."""
-        return UPLINK_LOSS_UNMEASURABLE
+        with self._lock:
+            loss = None if self._latest is None else self._latest.uplink_loss
+        return UPLINK_LOSS_UNMEASURABLE if loss is None else f"{loss:.0%}"
 
     def marks(self, start_s: float = -math.inf, end_s: float = math.inf) -> list[LinkMark]:
         """The events between two times (inclusive), oldest first."""

@@ -25,7 +25,7 @@ from ocu.control.commands import CommandMapper, commanded_motor_speeds, read_tel
 from ocu.control.plausibility import PlausibilityChecker
 from ocu.link.delay import DelayEstimator
 from ocu.link.reassembly import Reassembler, ReassemblyStats
-from ocu.link.stats import JitterMeter, LossEstimator, RateMeter
+from ocu.link.stats import JitterMeter, LossEstimator, RateMeter, UplinkLossEstimator
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket, VideoFramePacket
 from ocu.protocol.extended import (
@@ -115,6 +115,7 @@ class Receiver:
         self._loss = LossEstimator()
         self._delay = DelayEstimator()
         self._jitter = JitterMeter()
+        self._uplink = UplinkLossEstimator()
         self._scan_rate = RateMeter()
         # When each camera's newest frame arrived (profile order).
         self._frame_at: list[float | None] = [None] * len(profile.link.camera_names)
@@ -319,6 +320,8 @@ class Receiver:
                     self._frame_arrived(complete.camera, at)
             elif isinstance(packet, StatusPacket):
                 event = StatusFrame(packet, at, wall)
+                if packet.rcp_sequence is not None and packet.rcp_applied is not None:
+                    self._uplink.add(packet.rcp_sequence, packet.rcp_applied, at)
             elif isinstance(packet, ScanPacket):
                 self.scans += 1
                 self._scan_rate.add(at)
@@ -357,6 +360,7 @@ class Receiver:
             # What the robot echoes after the silence says nothing of the commands before it.
             self._delay.reset()
             self._jitter.reset()
+            self._uplink.reset()
 
     # ---- state (any thread) ----------------------------------------------------------------
 
@@ -404,6 +408,7 @@ class Receiver:
                 delay_s=self._delay.estimate_s,
                 stale_telemetry=self._stale_telemetry,
                 jitter_s=self._jitter.jitter(now),
+                uplink_loss=self._uplink.loss(now),
                 scan_rate_hz=self._scan_rate.rate(now),
                 frame_age_s=tuple(None if at is None else now - at for at in self._frame_at),
             )

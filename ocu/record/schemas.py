@@ -154,7 +154,10 @@ LINK_STATS_TYPE = MessageType(
         "# arrival less its tick, s),\n"
         "# range scans per second, and per camera (profile order) the seconds since its\n"
         "# newest frame arrived (NaN before its first).\n"
-        "float64 jitter_s\nfloat64 scan_rate_hz\nfloat64[] frame_age_s\n",
+        "float64 jitter_s\nfloat64 scan_rate_hz\nfloat64[] frame_age_s\n"
+        "# Share of the commands sent over 30 s the robot did not apply (its echo of the\n"
+        "# sequenced RCPs); NaN: the robot echoes none.\n"
+        "float64 uplink_loss\n",
         ("builtin_interfaces/Time", _TIME),
     ),
 )

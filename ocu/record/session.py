@@ -364,6 +364,7 @@ class RecordingFile:
                 "jitter_s": s.nan_if_none(stats.jitter_s),
                 "scan_rate_hz": stats.scan_rate_hz,
                 "frame_age_s": [s.nan_if_none(age) for age in stats.frame_age_s],
+                "uplink_loss": s.nan_if_none(stats.uplink_loss),
             },
         )
 

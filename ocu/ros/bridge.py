@@ -317,7 +317,12 @@ def link_report(state: LinkState, stats: LinkStats, hardware_id: str) -> Diagnos
         ("round trip (ms)", _optional(_ms(stats.delay_s), ".0f")),
         ("delay jitter (ms)", _optional(_ms(stats.jitter_s), ".0f")),
         ("scan rate (Hz)", f"{stats.scan_rate_hz:.1f}"),
-        ("command loss", UPLINK_LOSS_UNMEASURABLE),
+        (
+            "command loss",
+            UPLINK_LOSS_UNMEASURABLE
+            if stats.uplink_loss is None
+            else format(stats.uplink_loss, ".3f"),
+        ),
         *(
             (f"frame age camera {index} (s)", _optional(age, ".2f"))
             for index, age in enumerate(stats.frame_age_s)

@@ -46,7 +46,7 @@ MIN_PLOT_HEIGHT_PX = 95
 # minimum), stepping only when the data leaves it or falls below a third of it.
 Y_HEADROOM = 1.35
 DELAY_TOP_PERCENTILE = 95.0
-UPLINK_TITLE = "commands lost (OCU → robot): not measurable"
+UPLINK_UNMEASURABLE_TITLE = "commands lost (OCU → robot): not measurable"
 Y_MIN_TOPS = {"rates": 10.0, "video": 10.0, "delay": 50.0, "frame_age": 1.0}
 RATE_KEY = "link/command_rate_hz"
 WINDOW_KEY = "link/window_min"
@@ -65,13 +65,22 @@ RATE_CURVES = (
     ("scan_rate_hz", "scans received", "#8d6e63", False),
 )
 VIDEO_CURVES = (("video_rate_hz", "frames received, all cameras", "#6a1b9a", False),)
-LOSS_CURVES = (("downlink_loss", "telemetry lost (robot → OCU)", "#c62828", False),)
+LOSS_CURVES = (
+    ("downlink_loss", "telemetry lost (robot → OCU)", "#c62828", False),
+    ("uplink_loss", "commands lost (OCU → robot)", "#283593", False),
+)
 DELAY_CURVES = (
     ("round_trip_s", "round trip", "#00838f", False),
     ("jitter_s", "jitter (robot → OCU delay)", "#f9a825", False),
 )
 # Figures shown in other units than the history's.
-SCALES = {"downlink_loss": 100.0, "round_trip_s": 1000.0, "jitter_s": 1000.0}
+SCALES = {"downlink_loss": 100.0, "uplink_loss": 100.0, "round_trip_s": 1000.0, "jitter_s": 1000.0}
+
+
+def _legend_key(label: str, colour: str, dashed: bool | None) -> str:
+    """A curve's key in a plot's title: its line (none for None) and label in its colour."""
+    line = "" if dashed is None else ("╌╌ " if dashed else "── ")
+    return f"<span style='color:{pg.mkColor(colour).name()}'>{line}{label}</span>"
 
 
 def _setting_number(settings: QSettings, key: str, default: float) -> float:
@@ -156,7 +165,11 @@ class LinkGraphsPanel(QWidget):
         self._plot_of: dict[str, str] = {}
         first: pg.PlotItem | None = None
         camera_curves = tuple(
-            (f"frame_age_{index}", name, pg.intColor(index, hues=max(len(self.camera_names), 1)))
+            (
+                f"frame_age_{index}",
+                name,
+                pg.intColor(index, hues=max(len(self.camera_names), 1)).name(),
+            )
             for index, name in enumerate(self.camera_names)
         )
         layout_rows = (
@@ -169,14 +182,16 @@ class LinkGraphsPanel(QWidget):
         for row, (key, title, curves) in enumerate(layout_rows):
             plot = self.graphics.addPlot(row=row, col=0)
             # The legend is the title: it never covers the data.
-            keys = " ".join(
-                f"<span style='color:{pg.mkColor(colour).name()}'>{'╌╌' if dashed else '──'} "
-                f"{label}</span>"
-                for _, label, colour, dashed in curves
-            )
+            keys = [_legend_key(label, colour, dashed) for _, label, colour, dashed in curves]
             if key == "loss":
-                keys += f" · <span style='color:#555555'>{UPLINK_TITLE}</span>"
-            plot.setTitle(f"{title}: {keys}", size="9pt")
+                # Against a vendor robot the commands' curve gives way to the statement.
+                unmeasurable = _legend_key(UPLINK_UNMEASURABLE_TITLE, "#555555", None)
+                self._loss_titles = (
+                    f"{title}: {' '.join(keys)}",
+                    f"{title}: {keys[0]} · {unmeasurable}",
+                )
+                keys = [keys[0], "·", unmeasurable]
+            plot.setTitle(f"{title}: {' '.join(keys)}", size="9pt")
             for axis in ("left", "bottom"):
                 plot.getAxis(axis).enableAutoSIPrefix(False)
             plot.showGrid(x=True, y=True, alpha=0.3)
@@ -206,9 +221,7 @@ class LinkGraphsPanel(QWidget):
             plot.enableAutoRange(y=False)
         self.plots["loss"].setYRange(0.0, 100.0, padding=0.05)
         self._y_tops: dict[str, float] = {}
-        self.figures.setToolTip(
-            f"Commands lost on their way to the robot: {self.history.uplink_loss_text}."
-        )
+        self._uplink_measurable = False
 
         layout = QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
@@ -374,12 +387,17 @@ class LinkGraphsPanel(QWidget):
         def ms(value: float | None) -> str:
             return "—" if value is None else f"{value * 1e3:.0f} ms"
 
+        measurable = stats.uplink_loss is not None
+        if measurable != self._uplink_measurable:
+            self._uplink_measurable = measurable
+            self.plots["loss"].setTitle(self._loss_titles[0 if measurable else 1], size="9pt")
         loss = "—" if stats.loss_estimate is None else f"{stats.loss_estimate:.0%}"
         self.figures.setText(
             f"sent {stats.rcp_rate_hz:.1f} Hz (set {stats.send_rate_hz:g}) · received: "
             f"telemetry {stats.telemetry_rate_hz:.1f} Hz, video {stats.video_rate_hz:.1f} fps, "
-            f"scans {stats.scan_rate_hz:.1f} Hz · telemetry lost {loss} · commands lost: "
-            f"not measurable · round trip {ms(stats.delay_s)}, jitter {ms(stats.jitter_s)}"
+            f"scans {stats.scan_rate_hz:.1f} Hz · telemetry lost {loss} · commands lost "
+            f"{self.history.uplink_loss_text} · round trip {ms(stats.delay_s)}, "
+            f"jitter {ms(stats.jitter_s)}"
         )
 
     def curve_points(self, name: str) -> int:

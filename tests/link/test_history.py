@@ -138,9 +138,21 @@ def test_the_version_moves_with_every_sample_and_mark() -> None:
     assert first < second < history.version
 
 
-def test_uplink_loss_is_stated_as_not_measurable() -> None:
-    assert LinkHistory(4).uplink_loss_text == UPLINK_LOSS_UNMEASURABLE
+def test_uplink_loss_is_the_robots_echo_or_stated_as_not_measurable() -> None:
+    history = LinkHistory(4, clock=Clock())
+    assert history.uplink_loss_text == UPLINK_LOSS_UNMEASURABLE
+    history(stats())  # a vendor robot: no echo
+    assert not history.uplink_measurable
+    assert history.uplink_loss_text == UPLINK_LOSS_UNMEASURABLE
     assert "not measurable" in UPLINK_LOSS_UNMEASURABLE
+    assert math.isnan(history.series().figures["uplink_loss"][0])
+    history(stats(uplink_loss=0.25))  # an extended robot echoes its sequenced RCPs
+    assert history.uplink_measurable
+    assert history.uplink_loss_text == "25%"
+    assert history.series().figures["uplink_loss"][1] == pytest.approx(0.25)
+    # Silence: what the robot applied meanwhile is not known.
+    history(stats(uplink_loss=0.25, last_valid_age_s=SILENT_AFTER_S + 1.0))
+    assert math.isnan(history.series().figures["uplink_loss"][2])
 
 
 def test_jitter_is_the_spread_of_the_windows_round_trips() -> None:

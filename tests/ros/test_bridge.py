@@ -603,6 +603,8 @@ def test_link_report_has_the_link_docks_figures() -> None:
     assert values["frame age camera 0 (s)"] == "0.12"
     assert values["frame age camera 1 (s)"] == "n/a"
     assert values["command loss"].startswith("not measurable")
+    echoed = dict(link_report(LinkState.CONNECTED, stats(uplink_loss=0.25), "x").values)
+    assert echoed["command loss"] == "0.250"
 
 
 def test_bridge_report(core: BridgeCore, sink: Sink) -> None:

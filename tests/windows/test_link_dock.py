@@ -4,16 +4,18 @@ rate it sets on the wire, and the rate remembered across a restart of the window
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import pytest
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QSettings, Qt
 from PySide6.QtTest import QTest
 from pytestqt.qtbot import QtBot
 
 from ocu.profile import RobotProfile
+from ocu.records import LinkStats
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator
-from ocu.widgets.link_graphs import RATE_KEY, LinkGraphsPanel
+from ocu.widgets.link_graphs import RATE_KEY, UPLINK_UNMEASURABLE_TITLE, LinkGraphsPanel
 from ocu.windows.main_window import MainWindow
 from tests.windows.console_fixtures import DEADLINE_MS, ConsoleFactory
 
@@ -107,3 +109,24 @@ def test_the_command_rate_and_window_are_remembered_across_a_restart(
     assert second.link is not None
     assert second.link.link.rate_hz == 12.0
     assert 9.5 <= rcp_rate_on_the_wire(qtbot, sim) <= 14.5
+
+
+def test_the_commands_lost_curve_replaces_the_statement_when_the_robot_echoes(
+    qtbot: QtBot, profile: RobotProfile, settings: QSettings
+) -> None:
+    panel = LinkGraphsPanel(profile, settings)
+    qtbot.addWidget(panel)
+    vendor = replace(LinkStats.empty(5.0), rcp_rate_hz=5.0, last_valid_age_s=0.1)
+    now = panel.history.clock()
+    panel.history.add(vendor, now - 2.0)
+    panel.redraw(force=True)
+    assert UPLINK_UNMEASURABLE_TITLE in panel.plots["loss"].titleLabel.text
+    assert "not measurable" in panel.figures.text()
+    assert panel.curve_points("uplink_loss") == 0
+    for age_s in (1.0, 0.5, 0.0):
+        panel.history.add(replace(vendor, uplink_loss=0.3), now - age_s)
+    panel.redraw(force=True)
+    assert UPLINK_UNMEASURABLE_TITLE not in panel.plots["loss"].titleLabel.text
+    assert "commands lost (OCU → robot)" in panel.plots["loss"].titleLabel.text
+    assert "commands lost 30%" in panel.figures.text()
+    assert panel.curve_points("uplink_loss") == 3
