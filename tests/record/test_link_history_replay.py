@@ -105,3 +105,6 @@ def test_inspect_states_the_round_trip_and_its_jitter(
     assert summary.jitter_median_ms is not None
     assert summary.jitter_median_ms > 0.0
     assert "round trip    median" in render(summary)
+    # The extended robot echoed its sequenced RCPs: no loss was injected on the way to it.
+    assert summary.rcp_loss == pytest.approx(0.0)
+    assert "drop 0.00 % (the robot's echo" in render(summary)
