@@ -105,6 +105,9 @@ def test_inspect_states_the_round_trip_and_its_jitter(
     assert summary.jitter_median_ms is not None
     assert summary.jitter_median_ms > 0.0
     assert "round trip    median" in render(summary)
-    # The extended robot echoed its sequenced RCPs: no loss was injected on the way to it.
-    assert summary.rcp_loss == pytest.approx(0.0)
-    assert "drop 0.00 % (the robot's echo" in render(summary)
+    # The extended robot echoed its sequenced RCPs. No loss was injected on the way to it;
+    # the e-stop's burst (five zeros in 40 ms) may be reordered by the jitter, and a zero
+    # overtaken by the next one is dropped as late: a few of the ~100 RCPs at most.
+    assert summary.rcp_loss is not None
+    assert summary.rcp_loss <= 0.1
+    assert "(the robot's echo of its sequenced RCPs)" in render(summary)
