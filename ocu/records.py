@@ -270,6 +270,16 @@ class LinkStats:
     # nothing measured yet. Telemetry packets dropped for coming late or twice.
     delay_s: float | None = None
     stale_telemetry: int = 0
+    # How much the link's delay varies: the standard deviation over the last 10 s of each
+    # telemetry packet's arrival less its tick, the robot's clock (None: too few packets).
+    # Range scans received per second. Per camera (profile order): seconds since its newest
+    # frame arrived, None before its first frame.
+    jitter_s: float | None = None
+    scan_rate_hz: float = 0.0
+    frame_age_s: tuple[float | None, ...] = ()
+    # Share of the commands (sequenced RCPs) sent over the last 30 s that the robot did not
+    # apply, from its echo (ocu.link.stats.UplinkLossEstimator); None: no robot echo.
+    uplink_loss: float | None = None
 
     @classmethod
     def empty(cls, send_rate_hz: float = 0.0) -> LinkStats:

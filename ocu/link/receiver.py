@@ -25,7 +25,7 @@ from ocu.control.commands import CommandMapper, commanded_motor_speeds, read_tel
 from ocu.control.plausibility import PlausibilityChecker
 from ocu.link.delay import DelayEstimator
 from ocu.link.reassembly import Reassembler, ReassemblyStats
-from ocu.link.stats import LossEstimator, RateMeter
+from ocu.link.stats import JitterMeter, LossEstimator, RateMeter, UplinkLossEstimator
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket, VideoFramePacket
 from ocu.protocol.extended import (
@@ -114,6 +114,11 @@ class Receiver:
         self._video_rate = RateMeter(window_s=1.0)
         self._loss = LossEstimator()
         self._delay = DelayEstimator()
+        self._jitter = JitterMeter()
+        self._uplink = UplinkLossEstimator()
+        self._scan_rate = RateMeter()
+        # When each camera's newest frame arrived (profile order).
+        self._frame_at: list[float | None] = [None] * len(profile.link.camera_names)
         self._plausibility = PlausibilityChecker(profile)
         self._last_tick: int | None = None
         self._last_tick_at = 0.0
@@ -209,15 +214,20 @@ class Receiver:
                     log.info("telemetry ticks restarted at %d: robot restarted", packet.tick)
                     self._plausibility.reset()
                     self._loss.restart()
+                    self._jitter.reset()  # its clock started over
                 if verdict is _Tick.STALE:
                     self._stale_telemetry += 1
                 else:
                     self._loss.add(packet.tick, at)
                     frame = self._telemetry_frame(packet, at, wall)
+                # The delay's variation: arrival against the robot's own clock (its tick).
+                # The clocks' offset cancels in the spread; late packets count too.
+                self._jitter.add(at - packet.tick / self.profile.link.telemetry_tick_hz, at)
             elif isinstance(packet, VideoFramePacket):
                 self._video += 1
                 self._video_rate.add(at)
                 frame = VideoFrame(packet.jpeg, self._camera, at, wall)
+                self._frame_arrived(self._camera, at)
         if frame is not None:
             self.emit(frame)
         return True
@@ -307,10 +317,14 @@ class Receiver:
                         sequence=complete.sequence,
                         capture_time_us=complete.capture_time_us,
                     )
+                    self._frame_arrived(complete.camera, at)
             elif isinstance(packet, StatusPacket):
                 event = StatusFrame(packet, at, wall)
+                if packet.rcp_sequence is not None and packet.rcp_applied is not None:
+                    self._uplink.add(packet.rcp_sequence, packet.rcp_applied, at)
             elif isinstance(packet, ScanPacket):
                 self.scans += 1
+                self._scan_rate.add(at)
                 event = ScanFrame.from_packet(packet, at, wall)
         if became_active:
             log.info("robot speaks the protocol extension")
@@ -318,6 +332,11 @@ class Receiver:
         if event is not None:
             self.emit(event)
         return True
+
+    def _frame_arrived(self, camera: int | None, at: float) -> None:
+        """Note a camera's frame for its age (lock held); unknown cameras are not aged."""
+        if camera is not None and 0 <= camera < len(self._frame_at):
+            self._frame_at[camera] = at
 
     def expire(self, now: float) -> None:
         """Drop stale partial frames; notice an extension that went silent."""
@@ -339,6 +358,10 @@ class Receiver:
             self._new_clock = None
             self._plausibility.reset()
             self._reassembler.reset()
+            # What the robot echoes after the silence says nothing of the commands before it.
+            self._delay.reset()
+            self._jitter.reset()
+            self._uplink.reset()
 
     # ---- state (any thread) ----------------------------------------------------------------
 
@@ -385,6 +408,10 @@ class Receiver:
                 estop_latched=estop_latched,
                 delay_s=self._delay.estimate_s,
                 stale_telemetry=self._stale_telemetry,
+                jitter_s=self._jitter.jitter(now),
+                uplink_loss=self._uplink.loss(now),
+                scan_rate_hz=self._scan_rate.rate(now),
+                frame_age_s=tuple(None if at is None else now - at for at in self._frame_at),
             )
 
     def video_stats(self) -> ReassemblyStats:

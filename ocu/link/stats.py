@@ -1,4 +1,5 @@
-"""Packet counters, sliding-window rates and a telemetry loss estimate (no Qt, no sockets)."""
+"""Packet counters, sliding-window rates, a telemetry loss estimate and the round trip's
+jitter (no Qt, no sockets)."""
 
 from __future__ import annotations
 
@@ -115,3 +116,99 @@ class LossEstimator:
         limit = now - self.window_s
         while self._events and self._events[0][0] < limit:
             self._events.popleft()
+
+
+# The jitter looks at the packets of this many seconds...
+JITTER_WINDOW_S = 10.0
+# ...and says nothing with fewer than this many of them.
+JITTER_MIN_SAMPLES = 3
+
+
+class JitterMeter:
+    """How much the link's delay varies: the standard deviation of per-packet delays in a
+    sliding time window. The receiver feeds it each telemetry packet's arrival time less its
+    tick (the robot's clock): the clocks' offset is the same for every packet and cancels."""
+
+    def __init__(
+        self, window_s: float = JITTER_WINDOW_S, min_samples: int = JITTER_MIN_SAMPLES
+    ) -> None:
+        self.window_s = window_s
+        self.min_samples = min_samples
+        self._samples: deque[tuple[float, float]] = deque()
+
+    def add(self, delay_s: float, now: float) -> None:
+        """One packet's delay (s), or its arrival less its send time on another clock."""
+        self._samples.append((now, delay_s))
+        self._trim(now)
+
+    def reset(self) -> None:
+        """Forget every delay (the link was lost, the robot's clock started over)."""
+        self._samples.clear()
+
+    def jitter(self, now: float) -> float | None:
+        """The standard deviation of the window's delays (s), None with too few."""
+        self._trim(now)
+        if len(self._samples) < self.min_samples:
+            return None
+        return statistics.pstdev(delay for _, delay in self._samples)
+
+    def _trim(self, now: float) -> None:
+        limit = now - self.window_s
+        while self._samples and self._samples[0][0] < limit:
+            self._samples.popleft()
+
+
+# The commands' loss looks at the robot's echoes of this many seconds.
+UPLINK_WINDOW_S = 30.0
+SEQUENCE_MODULUS = 2**32
+
+
+class UplinkLossEstimator:
+    """The share of the OCU's sequenced RCPs that never reached the robot (or reached it too
+    late to be applied), from the robot's echo in its status packets: the newest sequence
+    number applied and how many were applied (docs/protocol.md, status version 3).
+
+    Between two echoes the OCU sent (newest - oldest sequence) RCPs, and the robot applied
+    (applied - applied before) of them; the window's first and last echoes give the share
+    lost. Both counters wrap at 2**32; counters that go back or apart (a new sequence: the
+    OCU or the robot restarted) start the window over.
+    """
+
+    def __init__(self, window_s: float = UPLINK_WINDOW_S) -> None:
+        self.window_s = window_s
+        self._echoes: deque[tuple[float, int, int]] = deque()
+
+    def add(self, sequence: int, applied: int, now: float) -> None:
+        """One echo: the newest sequence number the robot applied and its count applied."""
+        if self._echoes:
+            _, last_sequence, last_applied = self._echoes[-1]
+            sent = (sequence - last_sequence) % SEQUENCE_MODULUS
+            got = (applied - last_applied) % SEQUENCE_MODULUS
+            if sent >= SEQUENCE_MODULUS // 2 or got > sent:
+                self._echoes.clear()
+        self._echoes.append((now, sequence, applied))
+        self._trim(now)
+
+    def reset(self) -> None:
+        """Forget every echo (the link was lost)."""
+        self._echoes.clear()
+
+    def loss(self, now: float) -> float | None:
+        """Share of the RCPs sent in the window that the robot did not apply; None while no
+        two echoes are apart by at least one RCP."""
+        self._trim(now)
+        if len(self._echoes) < 2:
+            return None
+        _, first_sequence, first_applied = self._echoes[0]
+        _, last_sequence, last_applied = self._echoes[-1]
+        sent = (last_sequence - first_sequence) % SEQUENCE_MODULUS
+        if not sent:
+            return None
+        got = (last_applied - first_applied) % SEQUENCE_MODULUS
+        return max(0.0, 1.0 - got / sent)
+
+    def _trim(self, now: float) -> None:
+        limit = now - self.window_s
+        # The last echo before the window stays: the base of what was sent within it.
+        while len(self._echoes) > 1 and self._echoes[1][0] <= limit:
+            self._echoes.popleft()

@@ -35,6 +35,9 @@ FRAGMENT_HEADER_STRUCT = struct.Struct("<BBIQIIHH")
 STATUS_STRUCT = struct.Struct("<B4sBIHHBhhB")
 # Version 2 of the status packet appends the IMU heading (i16 mrad) to version 1's fields.
 STATUS_YAW_STRUCT = struct.Struct("<h")
+# Version 3 appends the echo of the sequenced RCPs to version 2's fields: the newest one the
+# robot applied and how many it applied (u32 each, wrapping).
+STATUS_RCP_STRUCT = struct.Struct("<II")
 SCAN_HEADER_STRUCT = struct.Struct("<B4sBIQiiHHH")
 # Frame type, magic, version, sequence; then the vendor RCP without its frame type byte.
 SEQUENCED_RCP_HEADER_STRUCT = struct.Struct("<B4sBI")
@@ -44,6 +47,7 @@ CAMERA_REQUEST_SIZE = CAMERA_REQUEST_STRUCT.size
 FRAGMENT_HEADER_SIZE = FRAGMENT_HEADER_STRUCT.size
 STATUS_SIZE = STATUS_STRUCT.size
 STATUS_V2_SIZE = STATUS_SIZE + STATUS_YAW_STRUCT.size
+STATUS_V3_SIZE = STATUS_V2_SIZE + STATUS_RCP_STRUCT.size
 SCAN_HEADER_SIZE = SCAN_HEADER_STRUCT.size
 SEQUENCED_RCP_SIZE = SEQUENCED_RCP_HEADER_STRUCT.size + RCP_SIZE - 1
 
@@ -52,6 +56,7 @@ assert CAMERA_REQUEST_SIZE == 7
 assert FRAGMENT_HEADER_SIZE == 26
 assert STATUS_SIZE == 20
 assert STATUS_V2_SIZE == 22
+assert STATUS_V3_SIZE == 30
 assert SCAN_HEADER_SIZE == 32
 assert SEQUENCED_RCP_SIZE == 66
 
@@ -68,6 +73,7 @@ HEADLIGHT_UNKNOWN = 0xFF
 ANGLE_UNKNOWN = -32768
 CHARGE_FULL_PERMILLE = 1000
 STATUS_VERSION_YAW = 2
+STATUS_VERSION_RCP = 3
 # Scan ranges: 0 means no return within range_max, 0xFFFF no measurement at all.
 SCAN_NO_RETURN = 0
 SCAN_INVALID = 0xFFFF
@@ -261,13 +267,24 @@ class StatusPacket:
     pitch_mrad: int | None = None
     camera_count: int = 0
     # Heading of the robot's IMU, mrad, counter-clockwise seen from above (REP 103), in
-    # [-pi, pi]; its zero is wherever the IMU started. Sent only in version 2.
+    # [-pi, pi]; its zero is wherever the IMU started. Sent from version 2 on.
     yaw_mrad: int | None = None
+    # The sequenced RCPs' echo (version 3): the number of the newest one the robot applied
+    # and how many it has applied (both u32, wrapping); None: no sequenced RCP applied yet,
+    # or a robot that does not echo them.
+    rcp_sequence: int | None = None
+    rcp_applied: int | None = None
 
     def encode(self, frame_type: int) -> bytes:
-        """20 bytes (version 1), or 22 with the heading (version 2); a None field goes on the
-        wire as its "not measured" value."""
+        """20 bytes (version 1), 22 with the heading (version 2), 30 with the sequenced RCPs'
+        echo (version 3); a None field goes on the wire as its "not measured" value."""
         _check("sequence", self.sequence, _U32)
+        echo = self.rcp_sequence is not None or self.rcp_applied is not None
+        if echo:
+            if self.rcp_sequence is None or self.rcp_applied is None:
+                raise ProtocolError("the RCP echo needs both rcp_sequence and rcp_applied")
+            _check("rcp_sequence", self.rcp_sequence, _U32)
+            _check("rcp_applied", self.rcp_applied, _U32)
         _check("camera_count", self.camera_count, _U8)
         voltage = VOLTAGE_UNKNOWN if self.voltage_mv is None else self.voltage_mv
         if self.voltage_mv is not None:
@@ -285,10 +302,14 @@ class StatusPacket:
                 angles.append(value)
         if self.yaw_mrad is not None:
             _check("yaw_mrad", self.yaw_mrad, (ANGLE_UNKNOWN + 1, _I16[1]))
+        if echo:
+            version = STATUS_VERSION_RCP
+        else:
+            version = VERSION if self.yaw_mrad is None else STATUS_VERSION_YAW
         packed = STATUS_STRUCT.pack(
             frame_type,
             MAGIC,
-            VERSION if self.yaw_mrad is None else STATUS_VERSION_YAW,
+            version,
             self.sequence,
             voltage,
             charge,
@@ -297,30 +318,42 @@ class StatusPacket:
             angles[1],
             self.camera_count,
         )
-        if self.yaw_mrad is None:
+        if version == VERSION:
             return packed
-        return packed + STATUS_YAW_STRUCT.pack(self.yaw_mrad)
+        yaw = ANGLE_UNKNOWN if self.yaw_mrad is None else self.yaw_mrad
+        packed += STATUS_YAW_STRUCT.pack(yaw)
+        if version == STATUS_VERSION_YAW:
+            return packed
+        assert self.rcp_sequence is not None
+        assert self.rcp_applied is not None
+        return packed + STATUS_RCP_STRUCT.pack(self.rcp_sequence, self.rcp_applied)
 
     @classmethod
     def decode(cls, data: bytes, frame_type: int) -> StatusPacket:
-        """Parse a status packet: 20 bytes (version 1) or 22 (version 2, with the heading)."""
-        # The version byte says how long the packet must be (version 2 adds the heading).
-        version_2 = len(data) > 5 and data[5] == STATUS_VERSION_YAW
-        expected = STATUS_V2_SIZE if version_2 else STATUS_SIZE
+        """Parse a status packet: 20 bytes (version 1), 22 (version 2, with the heading) or 30
+        (version 3, with the sequenced RCPs' echo)."""
+        # The version byte says how long the packet must be (each version adds fields).
+        sizes = {STATUS_VERSION_YAW: STATUS_V2_SIZE, STATUS_VERSION_RCP: STATUS_V3_SIZE}
+        later = data[5] if len(data) > 5 and data[5] in sizes else None
+        expected = STATUS_SIZE if later is None else sizes[later]
         if len(data) != expected:
             raise ProtocolError(f"status packet must be {expected} bytes, got {len(data)}")
         kind, magic, version, sequence, voltage, charge, headlight, roll, pitch, cameras = (
             STATUS_STRUCT.unpack_from(data)
         )
         _expect_type(kind, frame_type, "status")
-        if not version_2:
+        if later is None:
             _check_header(magic, version, "status")
         elif magic != MAGIC:
             raise ProtocolError(f"status magic {magic!r} is not {MAGIC!r}")
         yaw: int | None = None
-        if version == STATUS_VERSION_YAW:
+        rcp_sequence: int | None = None
+        rcp_applied: int | None = None
+        if later is not None:
             (raw_yaw,) = STATUS_YAW_STRUCT.unpack_from(data, STATUS_SIZE)
             yaw = None if raw_yaw == ANGLE_UNKNOWN else raw_yaw
+        if later == STATUS_VERSION_RCP:
+            rcp_sequence, rcp_applied = STATUS_RCP_STRUCT.unpack_from(data, STATUS_V2_SIZE)
         if charge != CHARGE_UNKNOWN and charge > CHARGE_FULL_PERMILLE:
             raise ProtocolError(f"status charge {charge} permille over {CHARGE_FULL_PERMILLE}")
         if headlight not in (0, 1, HEADLIGHT_UNKNOWN):
@@ -334,6 +367,8 @@ class StatusPacket:
             pitch_mrad=None if pitch == ANGLE_UNKNOWN else pitch,
             camera_count=cameras,
             yaw_mrad=yaw,
+            rcp_sequence=rcp_sequence,
+            rcp_applied=rcp_applied,
         )
 
 

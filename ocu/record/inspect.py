@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import statistics
 import sys
 import time
 from collections import defaultdict
@@ -24,12 +26,12 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
 from ocu.link.receiver import Receiver
-from ocu.link.stats import tick_loss
+from ocu.link.stats import UplinkLossEstimator, tick_loss
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.reader import Recording
-from ocu.records import TELEMETRY, DatagramReceived, LinkEvent, VideoFrame
+from ocu.records import TELEMETRY, DatagramReceived, LinkEvent, StatusFrame, VideoFrame
 
 SEQUENCE_MODULO = 2**32
 
@@ -108,6 +110,12 @@ class Summary:
     estops: int = 0
     malformed: int | None = None
     recorder_dropped: int | None = None
+    # From the link statistics channel: the measured round trip and its jitter (ms).
+    round_trip_median_ms: float | None = None
+    round_trip_max_ms: float | None = None
+    jitter_median_ms: float | None = None
+    # Commands the robot never applied, from its echo (status version 3); None: no echo.
+    rcp_loss: float | None = None
 
     @property
     def telemetry_loss(self) -> float | None:
@@ -136,11 +144,18 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
     sequences: dict[int, tuple[int, int]] = {}
     tick_hz = profile.link.telemetry_tick_hz
 
+    # The robot's echo of the sequenced RCPs over the whole recording (a restart starts over).
+    uplink = UplinkLossEstimator(window_s=math.inf)
+
     def count(event: LinkEvent) -> None:
         # Every telemetry datagram counts for the loss, also the late and repeated ones.
         if isinstance(event, DatagramReceived) and event.kind == TELEMETRY:
             assert event.robot_time_s is not None
             ticks.append(round(event.robot_time_s * tick_hz))
+        elif isinstance(event, StatusFrame):
+            echo = event.packet
+            if echo.rcp_sequence is not None and echo.rcp_applied is not None:
+                uplink.add(echo.rcp_sequence, echo.rcp_applied, event.received_at)
         elif isinstance(event, VideoFrame) and event.camera is not None:
             if event.sequence is None:
                 return
@@ -153,6 +168,8 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
     # The live link's own receiver decodes the recorded datagrams, on the recording's clock.
     receiver = Receiver(profile, count, extension=True)
     last_stats = None
+    round_trips: list[float] = []
+    jitters: list[float] = []
     start_ns = recording.start_ns
     for message in recording.messages():
         topic = message.topic
@@ -167,6 +184,8 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
                 receiver.received(bytes(raw.data), at, at)
         elif topic == s.LINK_STATS:
             last_stats = recording.decode(message)
+            round_trips.append(float(getattr(last_stats, "delay_s", math.nan)) * 1e3)
+            jitters.append(float(getattr(last_stats, "jitter_s", math.nan)) * 1e3)
         elif topic == s.EVENTS:
             event = recording.decode(message)
             offset_s = (message.log_time_ns - start_ns) / 1e9
@@ -209,6 +228,14 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
     if last_stats is not None:
         summary.malformed = int(last_stats.malformed)
         summary.recorder_dropped = int(last_stats.recorder_dropped)
+    summary.rcp_loss = uplink.loss(recording.end_ns / 1e9)
+    known = [value for value in round_trips if math.isfinite(value)]
+    if known:
+        summary.round_trip_median_ms = statistics.median(known)
+        summary.round_trip_max_ms = max(known)
+    known = [value for value in jitters if math.isfinite(value)]
+    if known:
+        summary.jitter_median_ms = statistics.median(known)
     return summary
 
 
@@ -251,13 +278,17 @@ def render(summary: Summary) -> str:
             f"{channel.topic:<34} {channel.messages:>9} {channel.rate_hz:>8.1f}/s "
             f"{_size(channel.bytes):>10}"
         )
+    rcp_drop = (
+        "drop: not observable from the OCU (the robot acknowledges nothing)"
+        if summary.rcp_loss is None
+        else f"drop {_percent(summary.rcp_loss)} (the robot's echo of its sequenced RCPs)"
+    )
     lines += [
         "",
         "link (packet drop = packets sent that never arrived, as in seed 002 section 7)",
         f"  OCU -> robot  {summary.rcp_sent} RCPs sent, {summary.rcp_rate_hz:.1f}/s, "
         f"longest gap {summary.rcp_longest_gap_s:.2f} s "
-        f"(robot watchdog {summary.robot_watchdog_s:.1f} s); "
-        "drop: not observable from the OCU (the robot acknowledges nothing)",
+        f"(robot watchdog {summary.robot_watchdog_s:.1f} s); {rcp_drop}",
         f"  robot -> OCU  telemetry {summary.telemetry_received} received, "
         f"{summary.telemetry_lost} lost: drop {_percent(summary.telemetry_loss)}; "
         f"{summary.telemetry_rate_hz:.1f}/s, longest gap {summary.telemetry_longest_gap_s:.2f} s, "
@@ -276,6 +307,13 @@ def render(summary: Summary) -> str:
         lines.append(
             f"  malformed datagrams {summary.malformed}, "
             f"recorder dropped {summary.recorder_dropped} message(s)"
+        )
+    if summary.round_trip_median_ms is not None:
+        jitter = summary.jitter_median_ms
+        lines.append(
+            f"  round trip    median {summary.round_trip_median_ms:.0f} ms, "
+            f"max {summary.round_trip_max_ms:.0f} ms; jitter median "
+            f"{'n/a' if jitter is None else f'{jitter:.0f} ms'} (link statistics)"
         )
     lines += ["", f"events ({summary.estops} emergency stop(s))"]
     for offset_s, kind, event_state, message in summary.events:

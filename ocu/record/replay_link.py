@@ -81,6 +81,10 @@ def link_stats(message: Any) -> LinkStats:
         # Recordings made before these fields existed lack them.
         delay_s=s.none_if_nan(getattr(message, "delay_s", math.nan)),
         stale_telemetry=int(getattr(message, "stale_telemetry", 0)),
+        jitter_s=s.none_if_nan(getattr(message, "jitter_s", math.nan)),
+        scan_rate_hz=float(getattr(message, "scan_rate_hz", 0.0)),
+        frame_age_s=tuple(s.none_if_nan(float(age)) for age in getattr(message, "frame_age_s", ())),
+        uplink_loss=s.none_if_nan(getattr(message, "uplink_loss", math.nan)),
     )
 
 

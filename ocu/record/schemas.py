@@ -149,7 +149,15 @@ LINK_STATS_TYPE = MessageType(
         "uint64 recorder_dropped\n"
         "# Round trip measured from the robot's echoed speed commands (s); late or repeated\n"
         "# telemetry packets dropped.\n"
-        "float64 delay_s\nuint64 stale_telemetry\n",
+        "float64 delay_s\nuint64 stale_telemetry\n"
+        "# The delay's jitter (standard deviation over 10 s of each telemetry packet's\n"
+        "# arrival less its tick, s),\n"
+        "# range scans per second, and per camera (profile order) the seconds since its\n"
+        "# newest frame arrived (NaN before its first).\n"
+        "float64 jitter_s\nfloat64 scan_rate_hz\nfloat64[] frame_age_s\n"
+        "# Share of the commands sent over 30 s the robot did not apply (its echo of the\n"
+        "# sequenced RCPs); NaN: the robot echoes none.\n"
+        "float64 uplink_loss\n",
         ("builtin_interfaces/Time", _TIME),
     ),
 )

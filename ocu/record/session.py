@@ -361,6 +361,10 @@ class RecordingFile:
                 "recorder_dropped": dropped,
                 "delay_s": s.nan_if_none(stats.delay_s),
                 "stale_telemetry": stats.stale_telemetry,
+                "jitter_s": s.nan_if_none(stats.jitter_s),
+                "scan_rate_hz": stats.scan_rate_hz,
+                "frame_age_s": [s.nan_if_none(age) for age in stats.frame_age_s],
+                "uplink_loss": s.nan_if_none(stats.uplink_loss),
             },
         )
 

@@ -45,6 +45,7 @@ from ocu.control.drive import DriveBounds, DriveError, scale_drive
 from ocu.control.position import PositionController, PositionError
 from ocu.kinematics.arm import ArmError, ArmKinematics, ToolPose, pitch_axis, pitch_of
 from ocu.kinematics.chain import Vector
+from ocu.link.history import UPLINK_LOSS_UNMEASURABLE
 from ocu.model.tree import Matrix
 from ocu.model.urdf import UrdfError, load_urdf
 from ocu.profile import RobotProfile
@@ -371,6 +372,10 @@ def _optional(value: float | None, fmt: str) -> str:
     return "n/a" if value is None else format(value, fmt)
 
 
+def _ms(value_s: float | None) -> float | None:
+    return None if value_s is None else value_s * 1e3
+
+
 def link_report(state: LinkState, stats: LinkStats, hardware_id: str) -> DiagnosticReport:
     """Link health: state, rates, loss, malformed/foreign counts, e-stop latch."""
     if state is LinkState.CONNECTED:
@@ -404,6 +409,19 @@ def link_report(state: LinkState, stats: LinkStats, hardware_id: str) -> Diagnos
         ("last valid packet age (s)", _optional(stats.last_valid_age_s, ".2f")),
         ("send rate setting (Hz)", f"{stats.send_rate_hz:g}"),
         ("emergency stop latched", str(stats.estop_latched).lower()),
+        ("round trip (ms)", _optional(_ms(stats.delay_s), ".0f")),
+        ("delay jitter (ms)", _optional(_ms(stats.jitter_s), ".0f")),
+        ("scan rate (Hz)", f"{stats.scan_rate_hz:.1f}"),
+        (
+            "command loss",
+            UPLINK_LOSS_UNMEASURABLE
+            if stats.uplink_loss is None
+            else format(stats.uplink_loss, ".3f"),
+        ),
+        *(
+            (f"frame age camera {index} (s)", _optional(age, ".2f"))
+            for index, age in enumerate(stats.frame_age_s)
+        ),
     )
     return DiagnosticReport("ocu: robot link", level, message, hardware_id, values)
 

@@ -539,8 +539,12 @@ class ExtendedServer:
         moving: bool,
         rcp_quality: int,
         joints_rad: Mapping[str, float] | None = None,
+        rcp_echo: tuple[int, int] | None = None,
     ) -> None:
-        """Drain the battery; send whatever is due: status packets and camera frames."""
+        """Drain the battery; send whatever is due: status packets and camera frames.
+
+        `rcp_echo` is the newest sequenced RCP applied and how many were (status version 3).
+        """
         if self._last_step_s is not None:
             with self._lock:
                 self._battery.step(max(0.0, now_s - self._last_step_s), moving)
@@ -556,7 +560,7 @@ class ExtendedServer:
         assert client is not None
         if now_s >= self._next_status_s:
             self._next_status_s = max(self._next_status_s + self._status_period_s, now_s)
-            send(self.codec.encode(self._status(torch, pose)), client)
+            send(self.codec.encode(self._status(torch, pose, rcp_echo)), client)
             self._status_sent += 1
         if self.range_sensor is not None and now_s >= self._next_scan_s:
             self._next_scan_s = max(self._next_scan_s + self._scan_period_s, now_s)
@@ -629,7 +633,9 @@ class ExtendedServer:
         self._video_sequences[camera] = (sequence + 1) % 2**32
         stream.sent += 1
 
-    def _status(self, torch: bool, pose: tuple[float, float, float]) -> StatusPacket:
+    def _status(
+        self, torch: bool, pose: tuple[float, float, float], rcp_echo: tuple[int, int] | None
+    ) -> StatusPacket:
         x_m, y_m, heading = pose
         # Terrain slopes along world x and y, seen in the robot's frame.
         slope_x = TERRAIN_PITCH_RAD * math.sin(2 * math.pi * x_m / TERRAIN_WAVELENGTH_M)
@@ -650,6 +656,8 @@ class ExtendedServer:
             camera_count=len(self.cameras.cameras),
             # The IMU's heading: the true one with a little noise (its zero is the world's).
             yaw_mrad=round(self._imu_heading(heading) * 1000),
+            rcp_sequence=None if rcp_echo is None else rcp_echo[0],
+            rcp_applied=None if rcp_echo is None else rcp_echo[1],
         )
 
     def _imu_heading(self, heading_rad: float) -> float:

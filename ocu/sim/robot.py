@@ -120,6 +120,9 @@ class RobotServer:
         # The newest sequenced RCP applied: its client, number and arrival time.
         self._sequenced: tuple[Address, int, float] | None = None
         self.applied_sequence: int | None = None
+        # Sequenced RCPs applied (u32, wrapping): echoed in the status packet with the newest
+        # one's number, so the OCU can tell how many of its commands arrived.
+        self.sequenced_applied = 0
 
     # ---- reading faults (any thread) --------------------------------------------------------
 
@@ -193,6 +196,7 @@ class RobotServer:
             return None
         self._sequenced = (address, packet.sequence, now_s)
         self.applied_sequence = packet.sequence
+        self.sequenced_applied = (self.sequenced_applied + 1) % 2**32
         self._apply(packet.rcp, address, now_s)
         return packet.rcp
 
@@ -311,6 +315,9 @@ class RobotServer:
             moving=not self.physics.all_stopped,
             rcp_quality=self.video_quality,
             joints_rad=self.physics.joints_rad,
+            rcp_echo=(
+                None if self._sequenced is None else (self._sequenced[1], self.sequenced_applied)
+            ),
         )
 
     def next_due_s(self) -> float:

@@ -62,6 +62,7 @@ from ocu.record.recorder import Recorder
 from ocu.record.replay_link import ReplayLink
 from ocu.records import CommandError, LinkState
 from ocu.widgets.gamepad import GamepadPanel, PadIndicator
+from ocu.widgets.link_graphs import LinkGraphsPanel
 from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.map_view import MapPanel, NavStatus
 from ocu.widgets.model3d import Model3DWidget
@@ -239,6 +240,10 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.max_dock, self.log_dock)
         self.tabifyDockWidget(self.log_dock, self.gamepad_dock)
         self.tabifyDockWidget(self.gamepad_dock, self.robot_check_dock)
+        # The link in graphs, and the command rate (remembered in the settings).
+        self.link_graphs = LinkGraphsPanel(profile, settings)
+        self.link_dock = self._dock("link_dock", "Link", self.link_graphs)
+        self.tabifyDockWidget(self.robot_check_dock, self.link_dock)
         # The map beside the 3D model: the robot's pose in the room, its arm in the other.
         self.tabifyDockWidget(self.model_dock, self.map_dock)
         self.model_dock.raise_()
@@ -516,6 +521,7 @@ class MainWindow(QMainWindow):
         self.link = qt
         self.video_panel.set_link(qt)
         self.robot_check.attach(link)  # subscribed before any datagram flows
+        self.link_graphs.attach(link)  # and the operator's command rate applied
         qt.start()
         self.log_event("replay started" if link.read_only else "link started")
 
@@ -530,6 +536,7 @@ class MainWindow(QMainWindow):
             return
         self.video_panel.set_link(None)
         self.robot_check.attach(None)
+        self.link_graphs.attach(None)
         if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
         qt.shutdown()  # zeros last

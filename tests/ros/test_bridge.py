@@ -596,6 +596,19 @@ def test_link_report_values() -> None:
     assert values["state"] == "connected"
 
 
+def test_link_report_has_the_link_docks_figures() -> None:
+    figures = stats(delay_s=0.184, jitter_s=0.021, scan_rate_hz=9.5, frame_age_s=(0.12, None))
+    values = dict(link_report(LinkState.CONNECTED, figures, "x").values)
+    assert values["round trip (ms)"] == "184"
+    assert values["delay jitter (ms)"] == "21"
+    assert values["scan rate (Hz)"] == "9.5"
+    assert values["frame age camera 0 (s)"] == "0.12"
+    assert values["frame age camera 1 (s)"] == "n/a"
+    assert values["command loss"].startswith("not measurable")
+    echoed = dict(link_report(LinkState.CONNECTED, stats(uplink_loss=0.25), "x").values)
+    assert echoed["command loss"] == "0.250"
+
+
 def test_bridge_report(core: BridgeCore, sink: Sink) -> None:
     core.on_cmd_vel(0.1, 0.0)
     core.set_goals(["waist"], [math.radians(10.0)])

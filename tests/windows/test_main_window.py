@@ -26,6 +26,7 @@ DOCKS = {
     "robot_check_dock",
     "calibration_dock",
     "map_dock",
+    "link_dock",
 }
 
 
