@@ -114,8 +114,10 @@ def test_an_unreadable_ocu_ini_is_kept_aside_not_overwritten(tmp_path: Path) -> 
 
 
 def run_ocu_unprivileged(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    """`python -m ocu ARGS` offscreen as a user that cannot write what root owns (as root:
-    nobody, through setpriv; otherwise as the current user, for whom chmod does it)."""
+    """`python -m ocu ARGS` offscreen as a user whom a folder's mode refuses a write (as root:
+    root without the capabilities that override file modes, through setpriv, so the checkout
+    and its venv stay readable wherever they are, /root included; otherwise as the current
+    user, for whom chmod does it)."""
     env = {
         **os.environ,
         "QT_QPA_PLATFORM": "offscreen",
@@ -128,7 +130,7 @@ def run_ocu_unprivileged(folder: Path, *args: str) -> subprocess.CompletedProces
         setpriv = shutil.which("setpriv")
         if setpriv is None:
             pytest.skip("running as root without setpriv: no user to be refused a write")
-        prefix = [setpriv, "--reuid=65534", "--regid=65534", "--clear-groups"]
+        prefix = [setpriv, "--bounding-set", "-dac_override,-dac_read_search,-fowner", "--"]
     return subprocess.run(
         [*prefix, sys.executable, "-m", "ocu", *args],
         env=env,
