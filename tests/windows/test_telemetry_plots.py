@@ -1,0 +1,120 @@
+"""The telemetry plots draw by themselves: the real console, the real simulator, Qt offscreen.
+
+The plots redraw on their own timer, only while on screen. Nothing here calls
+`redraw(force=True)`: the curves must fill while the console simply runs, as in a window.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QImage
+from PySide6.QtTest import QTest
+from pytestqt.qtbot import QtBot
+
+from ocu.profile import RobotProfile
+from ocu.sim.simulator import RobotSimulator
+from ocu.widgets.telemetry_plots import TelemetryPlots
+from ocu.windows.main_window import MainWindow
+from tests.windows.console_fixtures import DEADLINE_MS, ConsoleFactory
+
+TARGET_DEG = 40.0
+MOVE_DEADLINE_MS = 20_000
+# The climb spans most of the angle plot's height (about 80 px): at least this many pixels.
+CLIMB_PIXELS = 30
+
+
+@pytest.fixture
+def sim_9_5_hz(profile: RobotProfile) -> Iterator[RobotSimulator]:
+    """The simulator at the 9.5 Hz telemetry the defect was seen with, no video."""
+    simulator = RobotSimulator(profile, telemetry_hz=9.5, video_fps=0.0)
+    simulator.start()
+    yield simulator
+    simulator.stop()
+
+
+def curve_points(plots: TelemetryPlots, key: str, joint: str) -> tuple[np.ndarray, np.ndarray]:
+    """What one curve holds (empty arrays before its first data)."""
+    xs, ys = plots.curves[(key, joint)].getData()
+    if xs is None or ys is None:
+        return np.empty(0), np.empty(0)
+    return np.asarray(xs), np.asarray(ys)
+
+
+def pixels_painted_by(plots: TelemetryPlots, key: str, joint: str) -> int:
+    """Pixels of one plot's data area that change when the joint's curve is made transparent."""
+    view = plots.graphics
+    curve = plots.curves[(key, joint)]
+    box = view.mapFromScene(plots.plots[key].getViewBox().sceneBoundingRect()).boundingRect()
+
+    def area() -> np.ndarray:
+        image = view.viewport().grab().toImage().convertToFormat(QImage.Format.Format_RGB32)
+        pixels = np.frombuffer(image.constBits(), np.uint32, image.sizeInBytes() // 4)
+        rows = pixels.reshape(image.height(), image.bytesPerLine() // 4)
+        return rows[box.top() : box.bottom() + 1, box.left() : box.right() + 1].copy()
+
+    shown = area()
+    curve.setOpacity(0.0)  # (hide() would also take its line out of the legend)
+    try:
+        without = area()
+    finally:
+        curve.setOpacity(1.0)
+    return int(np.count_nonzero(shown != without))
+
+
+def test_the_curves_fill_while_the_shoulder_moves_without_a_forced_redraw(
+    make_console: ConsoleFactory, sim_9_5_hz: RobotSimulator, qtbot: QtBot
+) -> None:
+    console = make_console(sim_9_5_hz)
+    plots = console.joint_panel.plots
+    at_rest = {key: pixels_painted_by(plots, key, "shoulder") for key in ("position", "speed")}
+    box = console.joint_panel.boxes["shoulder"]
+    box.setFocus()
+    QTest.keyClicks(box, f"{TARGET_DEG:g}")
+    QTest.mouseClick(console.joint_panel.accept_button, Qt.MouseButton.LeftButton)
+    assert "shoulder" in console.model.targets
+
+    def moved_and_drawn() -> bool:
+        _, angles = curve_points(plots, "position", "shoulder")
+        return angles.size > 0 and float(np.nanmax(angles)) >= TARGET_DEG - 1.0
+
+    qtbot.waitUntil(moved_and_drawn, timeout=MOVE_DEADLINE_MS)
+    times, angles = curve_points(plots, "position", "shoulder")
+    assert float(np.min(angles)) <= 1.0  # the climb from 0° is on the curve
+    assert np.all((times >= -console.model.robot.history_s) & (times <= 0.0))
+    _, speeds = curve_points(plots, "speed", "shoulder")
+    assert float(np.max(speeds)) > 0.1  # rad/s while it climbed
+    _, currents = curve_points(plots, "current", "shoulder")
+    assert currents.size > 0
+    # And painted: the climb is a line of pixels in the angle and speed plots.
+    for key, before in at_rest.items():
+        assert pixels_painted_by(plots, key, "shoulder") >= before + CLIMB_PIXELS, key
+
+
+def test_plots_behind_another_tab_wait_and_catch_up_when_raised(
+    console: MainWindow, qtbot: QtBot
+) -> None:
+    plots = console.joint_panel.plots
+    qtbot.waitUntil(lambda: drawn(plots) >= 2, timeout=DEADLINE_MS)
+    assert console.arm_dock is not None  # tabbed with the joint dock in the default layout
+    console.arm_dock.raise_()
+    # Behind a tab the plots still count as visible to Qt, but nothing of them is on screen.
+    qtbot.waitUntil(
+        lambda: plots.graphics.viewport().visibleRegion().isEmpty(), timeout=DEADLINE_MS
+    )
+    assert plots.isVisible()
+    before = drawn(plots)
+    arrived = plots.sample_count("waist")
+    # Several redraw periods of telemetry arrive behind the tab ...
+    qtbot.waitUntil(lambda: plots.sample_count("waist") >= arrived + 8, timeout=DEADLINE_MS)
+    assert drawn(plots) == before  # ... and are not drawn,
+    console.joint_dock.raise_()
+    qtbot.waitUntil(lambda: drawn(plots) >= arrived + 8, timeout=DEADLINE_MS)  # until raised
+
+
+def drawn(plots: TelemetryPlots) -> int:
+    """Samples on the waist's current curve."""
+    return curve_points(plots, "current", "waist")[0].size
