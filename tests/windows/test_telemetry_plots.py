@@ -1,13 +1,19 @@
-"""The telemetry plots draw by themselves: the real console, the real simulator, Qt offscreen.
+"""The telemetry plots draw by themselves: the real console and simulator, offscreen and in X.
 
 The plots redraw on their own timer, only while on screen. Nothing here calls
 `redraw(force=True)`: the curves must fill while the console simply runs, as in a window.
+Once they never did: "on screen" was asked of the QGraphicsView, whose own visible region is
+always empty (its viewport child covers it), on Qt's offscreen and xcb platforms alike.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import subprocess
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,8 +26,11 @@ from ocu.profile import RobotProfile
 from ocu.sim.simulator import RobotSimulator
 from ocu.widgets.telemetry_plots import TelemetryPlots
 from ocu.windows.main_window import MainWindow
-from tests.windows.console_fixtures import DEADLINE_MS, ConsoleFactory
+from tests.test_safety import x_env, xvfb
+from tests.windows.console_fixtures import DEADLINE_MS, RUN_TIMEOUT_S, ConsoleFactory
 from tests.windows.test_joint_position import type_target
+
+__all__ = ["xvfb"]  # a fixture used below
 
 TARGET_DEG = 40.0
 MOVE_DEADLINE_MS = 20_000
@@ -140,3 +149,65 @@ def test_plots_behind_another_tab_wait_and_catch_up_when_raised(
 def drawn(plots: TelemetryPlots) -> int:
     """Samples on the waist's current curve."""
     return curve_points(plots, "current", "waist")[0].size
+
+
+# ---- a real X window (Xvfb, Qt's xcb platform) ---------------------------------------------
+
+# The console against the simulator in a child process on the X display; it reports, as one
+# JSON line, what the plots drew by themselves once 20 samples had arrived (or at a deadline).
+X_CONSOLE = """
+import json, sys
+from PySide6.QtCore import QSettings, QTimer
+from PySide6.QtGui import QGuiApplication
+from PySide6.QtWidgets import QApplication
+from ocu.link.live import UdpLink
+from ocu.profile import load_profile
+from ocu.sim.simulator import RobotSimulator
+from ocu.windows.main_window import MainWindow
+
+app = QApplication([])
+profile = load_profile()
+sim = RobotSimulator(profile, telemetry_hz=9.5, video_fps=0.0)
+sim.start()
+settings = QSettings(sys.argv[1], QSettings.Format.IniFormat)
+window = MainWindow(profile, lambda: UdpLink(profile, sim.address), "simulator", settings)
+window.show()
+plots = window.joint_panel.plots
+report = {}
+
+def check(final=False):
+    samples = plots.sample_count("waist")
+    drawn = {}
+    for key in ("position", "speed", "current"):
+        xs, _ = plots.curves[(key, "waist")].getData()
+        drawn[key] = 0 if xs is None else len(xs)
+    if final or (samples >= 20 and min(drawn.values()) >= 20):
+        report.update(platform=QGuiApplication.platformName(), samples=samples, drawn=drawn)
+        app.quit()
+
+poll = QTimer()
+poll.timeout.connect(check)
+poll.start(100)
+QTimer.singleShot(20_000, lambda: check(final=True))
+app.exec()
+window.shutdown()
+sim.stop()
+print(json.dumps(report))
+"""
+
+
+def test_the_curves_fill_in_a_real_x_window(xvfb: str, tmp_path: Path) -> None:
+    env = x_env(xvfb, tmp_path)
+    result = subprocess.run(
+        [sys.executable, "-c", X_CONSOLE, str(tmp_path / "ocu.ini")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=RUN_TIMEOUT_S,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert report["platform"] == "xcb"
+    assert report["samples"] >= 20, report
+    assert min(report["drawn"].values()) >= 20, report  # none drawn before the fix
