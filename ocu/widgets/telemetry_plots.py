@@ -97,7 +97,9 @@ class TelemetryPlots(QWidget):
         latest = self.robot.last_telemetry_at
         if not self._dirty or latest is None:
             return
-        if not force and self.graphics.visibleRegion().isEmpty():
+        # The viewport, not the view: a QGraphicsView's own region is all covered by its
+        # opaque viewport child, so the view's visibleRegion() is empty even on screen.
+        if not force and self.graphics.viewport().visibleRegion().isEmpty():
             return  # hidden (a closed dock, another tab): drawn when shown again
         self._dirty = False
         spans: dict[str, list[float]] = {key: [] for key, _, _ in QUANTITIES}
