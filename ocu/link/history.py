@@ -11,7 +11,7 @@ its jitter are unknown (the link's own figures keep their last values then: they
 measured on what arrives).
 
 What the OCU cannot know is said, not invented: the loss of commands on their way to the
-robot (uplink) needs the robot to tell which commands it applied. An extended robot echoes
+robot (uplink) needs the robot to tell which commands it received. An extended robot echoes
 its sequenced RCPs in its status packets (docs/protocol.md); against a vendor robot the
 history says the loss is not measurable.
 """

@@ -320,8 +320,8 @@ class Receiver:
                     self._frame_arrived(complete.camera, at)
             elif isinstance(packet, StatusPacket):
                 event = StatusFrame(packet, at, wall)
-                if packet.rcp_sequence is not None and packet.rcp_applied is not None:
-                    self._uplink.add(packet.rcp_sequence, packet.rcp_applied, at)
+                if packet.rcp_sequence is not None and packet.rcp_received is not None:
+                    self._uplink.add(packet.rcp_sequence, packet.rcp_received, at)
             elif isinstance(packet, ScanPacket):
                 self.scans += 1
                 self._scan_rate.add(at)

@@ -164,12 +164,12 @@ SEQUENCE_MODULUS = 2**32
 
 
 class UplinkLossEstimator:
-    """The share of the OCU's sequenced RCPs that never reached the robot (or reached it too
-    late to be applied), from the robot's echo in its status packets: the newest sequence
-    number applied and how many were applied (docs/protocol.md, status version 3).
+    """The share of the OCU's sequenced RCPs that never reached the robot, from the robot's
+    echo in its status packets: the newest sequence number applied and how many distinct
+    ones were received (docs/protocol.md, status version 3).
 
-    Between two echoes the OCU sent (newest - oldest sequence) RCPs, and the robot applied
-    (applied - applied before) of them; the window's first and last echoes give the share
+    Between two echoes the OCU sent (newest - oldest sequence) RCPs, and the robot received
+    (received - received before) of them; the window's first and last echoes give the share
     lost. Both counters wrap at 2**32; counters that go back or apart (a new sequence: the
     OCU or the robot restarted) start the window over.
     """
@@ -178,15 +178,15 @@ class UplinkLossEstimator:
         self.window_s = window_s
         self._echoes: deque[tuple[float, int, int]] = deque()
 
-    def add(self, sequence: int, applied: int, now: float) -> None:
-        """One echo: the newest sequence number the robot applied and its count applied."""
+    def add(self, sequence: int, received: int, now: float) -> None:
+        """One echo: the newest sequence number the robot applied and its count received."""
         if self._echoes:
-            _, last_sequence, last_applied = self._echoes[-1]
+            _, last_sequence, last_received = self._echoes[-1]
             sent = (sequence - last_sequence) % SEQUENCE_MODULUS
-            got = (applied - last_applied) % SEQUENCE_MODULUS
+            got = (received - last_received) % SEQUENCE_MODULUS
             if sent >= SEQUENCE_MODULUS // 2 or got > sent:
                 self._echoes.clear()
-        self._echoes.append((now, sequence, applied))
+        self._echoes.append((now, sequence, received))
         self._trim(now)
 
     def reset(self) -> None:
@@ -194,17 +194,17 @@ class UplinkLossEstimator:
         self._echoes.clear()
 
     def loss(self, now: float) -> float | None:
-        """Share of the RCPs sent in the window that the robot did not apply; None while no
+        """Share of the RCPs sent in the window that never reached the robot; None while no
         two echoes are apart by at least one RCP."""
         self._trim(now)
         if len(self._echoes) < 2:
             return None
-        _, first_sequence, first_applied = self._echoes[0]
-        _, last_sequence, last_applied = self._echoes[-1]
+        _, first_sequence, first_received = self._echoes[0]
+        _, last_sequence, last_received = self._echoes[-1]
         sent = (last_sequence - first_sequence) % SEQUENCE_MODULUS
         if not sent:
             return None
-        got = (last_applied - first_applied) % SEQUENCE_MODULUS
+        got = (last_received - first_received) % SEQUENCE_MODULUS
         return max(0.0, 1.0 - got / sent)
 
     def _trim(self, now: float) -> None:

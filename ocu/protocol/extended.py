@@ -270,21 +270,22 @@ class StatusPacket:
     # [-pi, pi]; its zero is wherever the IMU started. Sent from version 2 on.
     yaw_mrad: int | None = None
     # The sequenced RCPs' echo (version 3): the number of the newest one the robot applied
-    # and how many it has applied (both u32, wrapping); None: no sequenced RCP applied yet,
+    # and how many distinct ones it has received, applied or dropped as late (both u32,
+    # wrapping); None: no sequenced RCP applied yet,
     # or a robot that does not echo them.
     rcp_sequence: int | None = None
-    rcp_applied: int | None = None
+    rcp_received: int | None = None
 
     def encode(self, frame_type: int) -> bytes:
         """20 bytes (version 1), 22 with the heading (version 2), 30 with the sequenced RCPs'
         echo (version 3); a None field goes on the wire as its "not measured" value."""
         _check("sequence", self.sequence, _U32)
-        echo = self.rcp_sequence is not None or self.rcp_applied is not None
+        echo = self.rcp_sequence is not None or self.rcp_received is not None
         if echo:
-            if self.rcp_sequence is None or self.rcp_applied is None:
-                raise ProtocolError("the RCP echo needs both rcp_sequence and rcp_applied")
+            if self.rcp_sequence is None or self.rcp_received is None:
+                raise ProtocolError("the RCP echo needs both rcp_sequence and rcp_received")
             _check("rcp_sequence", self.rcp_sequence, _U32)
-            _check("rcp_applied", self.rcp_applied, _U32)
+            _check("rcp_received", self.rcp_received, _U32)
         _check("camera_count", self.camera_count, _U8)
         voltage = VOLTAGE_UNKNOWN if self.voltage_mv is None else self.voltage_mv
         if self.voltage_mv is not None:
@@ -325,8 +326,8 @@ class StatusPacket:
         if version == STATUS_VERSION_YAW:
             return packed
         assert self.rcp_sequence is not None
-        assert self.rcp_applied is not None
-        return packed + STATUS_RCP_STRUCT.pack(self.rcp_sequence, self.rcp_applied)
+        assert self.rcp_received is not None
+        return packed + STATUS_RCP_STRUCT.pack(self.rcp_sequence, self.rcp_received)
 
     @classmethod
     def decode(cls, data: bytes, frame_type: int) -> StatusPacket:
@@ -348,12 +349,12 @@ class StatusPacket:
             raise ProtocolError(f"status magic {magic!r} is not {MAGIC!r}")
         yaw: int | None = None
         rcp_sequence: int | None = None
-        rcp_applied: int | None = None
+        rcp_received: int | None = None
         if later is not None:
             (raw_yaw,) = STATUS_YAW_STRUCT.unpack_from(data, STATUS_SIZE)
             yaw = None if raw_yaw == ANGLE_UNKNOWN else raw_yaw
         if later == STATUS_VERSION_RCP:
-            rcp_sequence, rcp_applied = STATUS_RCP_STRUCT.unpack_from(data, STATUS_V2_SIZE)
+            rcp_sequence, rcp_received = STATUS_RCP_STRUCT.unpack_from(data, STATUS_V2_SIZE)
         if charge != CHARGE_UNKNOWN and charge > CHARGE_FULL_PERMILLE:
             raise ProtocolError(f"status charge {charge} permille over {CHARGE_FULL_PERMILLE}")
         if headlight not in (0, 1, HEADLIGHT_UNKNOWN):
@@ -368,7 +369,7 @@ class StatusPacket:
             camera_count=cameras,
             yaw_mrad=yaw,
             rcp_sequence=rcp_sequence,
-            rcp_applied=rcp_applied,
+            rcp_received=rcp_received,
         )
 
 

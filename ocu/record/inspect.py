@@ -154,8 +154,8 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
             ticks.append(round(event.robot_time_s * tick_hz))
         elif isinstance(event, StatusFrame):
             echo = event.packet
-            if echo.rcp_sequence is not None and echo.rcp_applied is not None:
-                uplink.add(echo.rcp_sequence, echo.rcp_applied, event.received_at)
+            if echo.rcp_sequence is not None and echo.rcp_received is not None:
+                uplink.add(echo.rcp_sequence, echo.rcp_received, event.received_at)
         elif isinstance(event, VideoFrame) and event.camera is not None:
             if event.sequence is None:
                 return

@@ -657,7 +657,7 @@ class ExtendedServer:
             # The IMU's heading: the true one with a little noise (its zero is the world's).
             yaw_mrad=round(self._imu_heading(heading) * 1000),
             rcp_sequence=None if rcp_echo is None else rcp_echo[0],
-            rcp_applied=None if rcp_echo is None else rcp_echo[1],
+            rcp_received=None if rcp_echo is None else rcp_echo[1],
         )
 
     def _imu_heading(self, heading_rad: float) -> float:

@@ -28,6 +28,7 @@ import logging
 import math
 import random
 import threading
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -50,6 +51,8 @@ from ocu.sim.video import DEFAULT_QUALITY, FrameRenderer, quality_for_bitrate
 
 log = logging.getLogger("ocu.sim")
 
+# Sequence numbers remembered to count a duplicate datagram once (seconds of RCPs at 50 Hz).
+RECENT_SEQUENCES = 256
 STATUS_AT_LOWER_LIMIT = 0x1
 STATUS_AT_UPPER_LIMIT = 0x2
 STATUS_WATCHDOG_STOP = 0x4
@@ -120,9 +123,12 @@ class RobotServer:
         # The newest sequenced RCP applied: its client, number and arrival time.
         self._sequenced: tuple[Address, int, float] | None = None
         self.applied_sequence: int | None = None
-        # Sequenced RCPs applied (u32, wrapping): echoed in the status packet with the newest
-        # one's number, so the OCU can tell how many of its commands arrived.
-        self.sequenced_applied = 0
+        # Distinct sequenced RCPs received, applied or dropped as late (u32, wrapping): echoed
+        # in the status packet with the newest applied one's number, so the OCU can tell how
+        # many of its commands the link lost. A duplicate (the same number again) counts once.
+        self.sequenced_received = 0
+        self._recent_sequences: deque[int] = deque(maxlen=RECENT_SEQUENCES)
+        self._recent_set: set[int] = set()
 
     # ---- reading faults (any thread) --------------------------------------------------------
 
@@ -190,13 +196,21 @@ class RobotServer:
         """
         last = self._sequenced
         current = self._sequencing(address, now_s) and last is not None
+        if not current:
+            self._recent_sequences.clear()
+            self._recent_set.clear()
+        if packet.sequence not in self._recent_set:
+            if len(self._recent_sequences) == RECENT_SEQUENCES:
+                self._recent_set.discard(self._recent_sequences[0])
+            self._recent_sequences.append(packet.sequence)
+            self._recent_set.add(packet.sequence)
+            self.sequenced_received = (self.sequenced_received + 1) % 2**32
         if current and last is not None and not sequence_newer(packet.sequence, last[1]):
             self.counters.stale_rcp += 1
             log.debug("dropped RCP #%d: #%d already applied", packet.sequence, last[1])
             return None
         self._sequenced = (address, packet.sequence, now_s)
         self.applied_sequence = packet.sequence
-        self.sequenced_applied = (self.sequenced_applied + 1) % 2**32
         self._apply(packet.rcp, address, now_s)
         return packet.rcp
 
@@ -316,7 +330,7 @@ class RobotServer:
             rcp_quality=self.video_quality,
             joints_rad=self.physics.joints_rad,
             rcp_echo=(
-                None if self._sequenced is None else (self._sequenced[1], self.sequenced_applied)
+                None if self._sequenced is None else (self._sequenced[1], self.sequenced_received)
             ),
         )
 

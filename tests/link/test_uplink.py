@@ -97,3 +97,21 @@ def test_a_vendor_robot_cannot_tell(profile: RobotProfile) -> None:
     finally:
         sim.stop()
     assert stats.uplink_loss is None
+
+
+def test_commands_reordered_or_duplicated_by_the_link_are_not_counted_lost(
+    profile: RobotProfile,
+) -> None:
+    # 200 ms of jitter at 20 Hz reorders most RCPs: the robot drops the late ones, but they
+    # reached it, and the link lost nothing.
+    faults = FaultConfig(jitter_ms=200.0, duplicate=0.5)
+    sim = RobotSimulator(profile, telemetry_hz=10.0, video_fps=0.0, extended=True, faults=faults)
+    sim.start()
+    try:
+        stats = _settled_uplink(profile, sim, extension=True)
+        dropped_late = sim.state().stale_rcp_count
+    finally:
+        sim.stop()
+    assert dropped_late > 10  # the condition this test is about did happen
+    assert stats.uplink_loss is not None
+    assert stats.uplink_loss == pytest.approx(0.0, abs=0.12)

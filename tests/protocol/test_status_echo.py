@@ -20,7 +20,7 @@ STATUS = StatusPacket(
     camera_count=4,
     yaw_mrad=-1571,
     rcp_sequence=0xFFFFFFFE,
-    rcp_applied=0x01020304,
+    rcp_received=0x01020304,
 )
 V1_FIELDS = "4f435558 03 07000000 245e 7b02 01 ccff 6900 04"
 STATUS_BYTES = bytes.fromhex("12" + V1_FIELDS + "ddf9" + "feffffff" + "04030201")
@@ -40,16 +40,16 @@ def test_an_echo_without_a_heading_says_the_heading_is_unknown() -> None:
 
 
 def test_no_echo_keeps_the_older_versions() -> None:
-    assert len(CODEC.encode(replace(STATUS, rcp_sequence=None, rcp_applied=None))) == 22
-    plain = replace(STATUS, yaw_mrad=None, rcp_sequence=None, rcp_applied=None)
+    assert len(CODEC.encode(replace(STATUS, rcp_sequence=None, rcp_received=None))) == 22
+    plain = replace(STATUS, yaw_mrad=None, rcp_sequence=None, rcp_received=None)
     assert len(CODEC.encode(plain)) == 20
 
 
 def test_half_an_echo_is_refused() -> None:
     with pytest.raises(ProtocolError, match=r"^the RCP echo needs both"):
-        CODEC.encode(replace(STATUS, rcp_applied=None))
-    with pytest.raises(ProtocolError, match=r"^rcp_applied=4294967296 out of range"):
-        CODEC.encode(replace(STATUS, rcp_applied=2**32))
+        CODEC.encode(replace(STATUS, rcp_received=None))
+    with pytest.raises(ProtocolError, match=r"^rcp_received=4294967296 out of range"):
+        CODEC.encode(replace(STATUS, rcp_received=2**32))
 
 
 @pytest.mark.parametrize(
