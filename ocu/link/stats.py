@@ -163,6 +163,10 @@ UPLINK_WINDOW_S = 30.0
 SEQUENCE_MODULUS = 2**32
 
 
+# How far the link may reorder RCPs or their echoes (numbers; 20 s of RCPs at 50 Hz).
+REORDER_SLACK = 1000
+
+
 class UplinkLossEstimator:
     """The share of the OCU's sequenced RCPs that never reached the robot, from the robot's
     echo in its status packets: the newest sequence number applied and how many distinct
@@ -179,12 +183,22 @@ class UplinkLossEstimator:
         self._echoes: deque[tuple[float, int, int]] = deque()
 
     def add(self, sequence: int, received: int, now: float) -> None:
-        """One echo: the newest sequence number the robot applied and its count received."""
+        """One echo: the newest sequence number the robot applied and its count received.
+
+        An echo a little older than the last one was reordered on its way (status packets
+        jitter too): it says nothing new and is left out. Numbers far behind (the OCU's
+        sequence started over) or a count that went back (the robot restarted) start the
+        window over. A count a little ahead of the numbers sent is not a restart: RCPs that
+        arrive late are counted when they arrive, after the echo of a newer one.
+        """
         if self._echoes:
             _, last_sequence, last_received = self._echoes[-1]
+            behind = (last_sequence - sequence) % SEQUENCE_MODULUS
+            if 0 < behind <= REORDER_SLACK:
+                return
             sent = (sequence - last_sequence) % SEQUENCE_MODULUS
             got = (received - last_received) % SEQUENCE_MODULUS
-            if sent >= SEQUENCE_MODULUS // 2 or got > sent:
+            if sent >= SEQUENCE_MODULUS // 2 or got > sent + REORDER_SLACK:
                 self._echoes.clear()
         self._echoes.append((now, sequence, received))
         self._trim(now)
