@@ -47,7 +47,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ocu.control.commands import VelocityLimits
-from ocu.control.position import PositionController, read_since_change
+from ocu.control.position import PositionController
 from ocu.kinematics.arm import ArmError, ArmKinematics, ToolPose
 from ocu.kinematics.chain import Vector
 from ocu.kinematics.collision import Contact
@@ -652,9 +652,7 @@ class ArmController:
         and goes back only once a reading taken after its last change shows it past."""
         out = velocities.copy()
         for i, joint in enumerate(self.joints):
-            if out[i] * move.path.delta[i] < 0.0 and not read_since_change(
-                self.position.predictors[joint]
-            ):
+            if out[i] * move.path.delta[i] < 0.0 and not self.position.may_reverse(joint):
                 out[i] = 0.0
         return out
 

@@ -568,7 +568,7 @@ class PositionController:
         if v_max <= 0.0:
             return 0.0
         direction = math.copysign(1.0, error)
-        if track.direction and direction != track.direction and not read_since_change(predictor):
+        if track.direction and direction != track.direction and not self.may_reverse(name):
             # Past the target by the prediction alone: stop, and let a reading taken after
             # the stop say whether the joint is really past (the prediction assumed a tick
             # that came late, or the servo ran faster than modelled). Held, a small overshoot
@@ -601,6 +601,11 @@ class PositionController:
                 return 0.0
         track.direction = direction
         return math.copysign(speed, error)
+
+    def may_reverse(self, joint: str) -> bool:
+        """Whether a joint may be driven back against its motion: only once a reading taken
+        after its last velocity change landed shows where it is (never on a prediction)."""
+        return read_since_change(self.predictors[joint])
 
     def _confirmed(self, predictor: JointPredictor, error: float, now: float) -> bool:
         """The joint's channel sends zero, and a reading taken after the last velocity change
