@@ -28,6 +28,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,7 +39,7 @@ from baseline_arm_moves import use_main_controllers
 
 from ocu import hotkeys
 from ocu.hotkeys import load_key_map
-from ocu.profile import RobotProfile, load_profile
+from ocu.profile import load_profile
 from tests.console.arm_rig import Rig
 
 LATENCY_S = 0.1
@@ -88,13 +89,14 @@ def tick(rig: Rig, clock: Clock) -> None:
 
 def measure(
     rig: Rig,
-    profile: RobotProfile,
     clock: Clock,
     label: str,
     goal: dict[str, float],
+    *,
     plan_end: float,
-    active: object,
+    active: Callable[[], bool],
 ) -> Moved:
+    profile = rig.profile
     start = dict(rig.robot.joints)
     moving = {
         j: math.copysign(1.0, goal[j] - start[j]) for j in goal if abs(goal[j] - start[j]) > 0.01
@@ -103,7 +105,6 @@ def measure(
     last = dict.fromkeys(moving, rig.t)
     previous = dict(start)
     sent_before = len(rig.robot.sent)
-    assert callable(active)
     while active():
         tick(rig, clock)
         if rig.t > plan_end + 60.0:
@@ -153,16 +154,16 @@ def run(mode: str, controllers: str) -> list[Moved]:
             hotkeys.release(rig.model, key_map, key)
             plan = arm.move_plan
             goal = arm.move_goal
-            assert plan is not None and goal is not None, rig.messages[-3:]
+            assert plan is not None, rig.messages[-3:]
+            assert goal is not None
             results.append(
                 measure(
                     rig,
-                    profile,
                     clock,
                     key,
                     goal,
-                    rig.t + plan.duration_s,
-                    lambda: arm.active,
+                    plan_end=rig.t + plan.duration_s,
+                    active=lambda: arm.active,
                 )
             )
         # The 30° position step, from the ready pose: the shoulder 55° → 85°.
@@ -172,12 +173,11 @@ def run(mode: str, controllers: str) -> list[Moved]:
         results.append(
             measure(
                 rig,
-                profile,
                 clock,
                 f"shoulder {STEP_DEG:+.0f}°",
                 {"shoulder": target},
-                rig.t,
-                lambda: bool(rig.model.controller.targets),
+                plan_end=rig.t,
+                active=lambda: bool(rig.model.controller.targets),
             )
         )
     return results
