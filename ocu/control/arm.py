@@ -11,8 +11,12 @@ Two kinds of motion, one at a time:
   the tool follows the line however late the readings are.
 - **Move**: to a joint pose (a pose goal solved by IK, or a stored pose), all joints starting
   and arriving together on a synchronized trapezoidal profile (ocu.kinematics.trajectory),
-  streamed as the profile's velocity plus K times the error to the profile's position; done
-  when a reading taken after the last command confirms every joint within the tolerance.
+  streamed as the profile's mean velocity over the tick horizon (the longest recent tick
+  interval, with a margin: see ocu.control.position) plus K times the error to the profile's
+  position, K at most one over the horizon, so a late tick carries no joint past the profile
+  or the goal; a joint is never driven back against its move on the prediction alone (it
+  stops until a reading taken after the stop shows it past); done when a reading taken after
+  the last command confirms every joint within the tolerance.
 
 Safety, after MoveIt Servo: a jog slows down when the Jacobian's condition number passes
 `singularity_slow` and stops at `singularity_stop` — only while moving toward the singularity
@@ -172,6 +176,11 @@ class ArmController:
         if self._move is None:
             return None
         return self.kinematics.mapping(self._move.path.goal)
+
+    @property
+    def move_plan(self) -> SyncMove | None:
+        """The synchronized profile of the move under way (None: no move)."""
+        return self._move.path if self._move is not None else None
 
     @property
     def jogging(self) -> bool:
@@ -398,6 +407,7 @@ class ArmController:
         A motion that ends in this step returns nothing: its channels must be zeroed.
         """
         last, self._last_tick = self._last_tick, now
+        self.position.note_tick(now)
         dt = 0.0 if last is None else min(max(now - last, 0.0), MAX_TICK_S)
         jog = self._jog
         if jog is not None and jog.expires_at is not None and now > jog.expires_at:
@@ -588,7 +598,7 @@ class ArmController:
 
     def _move_step(self, move: _Move, eventual: Vector, now: float) -> Vector | None:
         elapsed = now - move.started_at
-        reference, speed = move.path.sample(elapsed)
+        reference, _ = move.path.sample(elapsed)
         error = reference - eventual
         gain = self.position.gain_per_s
         held = self._held_by_driving(move.path.goal - eventual)
@@ -607,11 +617,19 @@ class ArmController:
                 contact = self.kinematics.collision.pair_contact(column, float(gaps[column]))
                 self._finish_move(f"arm: move to {move.label} stopped: {contact.describe()}")
                 return None
+        # The command chosen now stays on the wire until the next tick, which may come late
+        # (a busy caller): the feed-forward is the profile's mean speed over the tick horizon
+        # and the feedback gain at most one over it, so the joints reach the profile's point
+        # at the horizon's end and not past it, and not past the goal at the end of the move.
+        horizon = self.position.tick_horizon_s
+        ahead, _ = move.path.sample(elapsed + horizon)
+        gain = min(gain, 1.0 / horizon)
         if elapsed < move.path.duration_s:
-            return speed + gain * error
+            return self._no_reversal(move, (ahead - reference) / horizon + gain * error)
         # The profile has ended: hold the goal until a reading confirms it.
         velocities = gain * error
         velocities[np.abs(error) <= self.tolerance_rad / 2.0] = 0.0
+        velocities = self._no_reversal(move, velocities)
         self._set_status(ArmStatus("holding", goal=move.label))
         if np.all(np.abs(error) <= self.tolerance_rad) and self._confirmed(now):
             pose = self.kinematics.tool_pose(eventual)
@@ -628,6 +646,15 @@ class ArmController:
             )
             return None
         return velocities
+
+    def _no_reversal(self, move: _Move, velocities: Vector) -> Vector:
+        """A joint is never driven back against its move on the prediction alone: it stops,
+        and goes back only once a reading taken after its last change shows it past."""
+        out = velocities.copy()
+        for i, joint in enumerate(self.joints):
+            if out[i] * move.path.delta[i] < 0.0 and not self.position.may_reverse(joint):
+                out[i] = 0.0
+        return out
 
     def _confirmed(self, now: float) -> bool:
         """Every joint's channel sends zero and has a reading taken after its last change."""

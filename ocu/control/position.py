@@ -28,12 +28,22 @@ travel commanded one delay earlier. The model counts what the robot does with a 
 a servo's starting speed nothing, and on a `locked_while_driving` channel (the waist) nothing
 while the same command drives the chassis (`driving`). A joint whose reading is implausible (see
 ocu.control.plausibility) is never acted on.
+
+Ticks come late. The command chosen at one tick is what the link keeps sending, at its own
+rate from its own thread, until the next tick changes it; a caller on a busy thread (the
+console's GUI thread under load) ticks every 50 ms one moment and every 300 ms the next. So
+the speed is bounded by what the *horizon* allows — the error divided by the longest tick
+interval seen lately, with a margin — not by the last interval: the joint must not run past
+the target while the next tick is late. And a joint is never reversed on the prediction alone:
+when the estimate says a joint driven toward its target went past it, the joint stops, and it
+is driven back only once a reading taken after that stop landed shows it is really past.
 """
 
 from __future__ import annotations
 
 import bisect
 import math
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -60,6 +70,11 @@ STALL_FRACTION = 0.25
 STALL_PACKETS = 2
 LIMIT_MARGIN_RAD = math.radians(0.5)
 DEFAULT_PERIOD_S = 0.05
+# The next tick is assumed to come within this many times the longest tick interval of the last
+# HORIZON_WINDOW_S (a busy caller's ticks are late and irregular), at most MAX_HORIZON_S.
+HORIZON_MARGIN = 1.5
+HORIZON_WINDOW_S = 3.0
+MAX_HORIZON_S = 1.0
 # Kalman filter of the offset b: the servo's speed may differ from the command by this share
 # of the travel, and readings are never trusted below the encoder's resolution.
 MODEL_SPEED_ERROR = 0.05
@@ -254,6 +269,8 @@ class _Track:
     near_since: float | None = None
     stall_packets: int = 0
     velocity_rad_s: float = 0.0
+    # The sign the joint was last driven with (0: not yet): reversing it needs a reading.
+    direction: float = 0.0
 
 
 class PositionController:
@@ -297,6 +314,8 @@ class PositionController:
         self._messages: list[str] = []
         self._last_update_at: float | None = None
         self._period_s = DEFAULT_PERIOD_S
+        # (time, interval) of the recent ticks: the horizon a command must be safe over.
+        self._intervals: deque[tuple[float, float]] = deque()
 
     # ---- derived settings ------------------------------------------------------------------
 
@@ -307,6 +326,13 @@ class PositionController:
         if delay <= 0.0:
             return self.max_gain_per_s
         return min(self.max_gain_per_s, self.gain_delay_product / delay)
+
+    @property
+    def tick_horizon_s(self) -> float:
+        """How long a command chosen now may stay on the wire: the longest tick interval of
+        the last few seconds, with a margin (ticks on a busy thread come late)."""
+        longest = max((dt for _, dt in self._intervals), default=self._period_s)
+        return min(HORIZON_MARGIN * max(longest, self._period_s), MAX_HORIZON_S)
 
     @property
     def stale_after_s(self) -> float:
@@ -468,14 +494,25 @@ class PositionController:
 
     # ---- output ----------------------------------------------------------------------------
 
+    def note_tick(self, now: float) -> None:
+        """A control tick at `now` (update() calls it): the interval goes into the horizon.
+
+        Idempotent for one time; callers that tick without update() (the arm) call it."""
+        last = self._last_update_at
+        if last is not None and now > last:
+            self._period_s = now - last
+            self._intervals.append((now, self._period_s))
+            while self._intervals and self._intervals[0][0] < now - HORIZON_WINDOW_S:
+                self._intervals.popleft()
+        if last is None or now > last:
+            self._last_update_at = now
+
     def update(self, now: float) -> dict[str, float]:
         """Velocity per channel (rad/s) for every joint under control, at time now.
 
         A joint that finished in this step has no entry: its channel must be zeroed.
         """
-        if self._last_update_at is not None and now > self._last_update_at:
-            self._period_s = now - self._last_update_at
-        self._last_update_at = now
+        self.note_tick(now)
         output: dict[str, float] = {}
         for name, track in list(self._tracks.items()):
             channel = self.channel_of(name)
@@ -530,10 +567,29 @@ class PositionController:
         v_max = self.limits.get(channel.name)
         if v_max <= 0.0:
             return 0.0
-        # Lifted to the servo's smallest moving speed, but never so fast that one control
-        # period would carry the joint past the target.
+        direction = math.copysign(1.0, error)
+        if track.direction and direction != track.direction and not self.may_reverse(name):
+            # Past the target by the prediction alone: stop, and let a reading taken after
+            # the stop say whether the joint is really past (the prediction assumed a tick
+            # that came late, or the servo ran faster than modelled). Held, a small overshoot
+            # within the tolerance is then left alone.
+            track.holding = True
+            return 0.0
+        # Lifted to the servo's smallest moving speed, but never so fast that the command
+        # would carry the joint past the target before the next tick, however late it comes
+        # (within the horizon). Below the starting speed the servo does not move: a joint
+        # within the tolerance then holds; one further off takes the starting speed.
         speed = min(max(self.gain_per_s * abs(error), channel.min_speed), v_max)
-        speed = min(speed, abs(error) / self._period_s)
+        speed = min(speed, abs(error) / self.tick_horizon_s)
+        if speed < channel.min_speed:
+            if abs(error) <= self.tolerance_rad:
+                track.holding = True
+                if track.near_since is None:
+                    track.near_since = now
+                if self._confirmed(predictor, error, now):
+                    self._finish(name, f"{name}: reached {math.degrees(track.target_rad):.1f}°")
+                return 0.0
+            speed = channel.min_speed
         limits = track.motor.limits_rad
         measured = predictor.last_angle_rad
         if limits is not None and measured is not None:
@@ -543,15 +599,18 @@ class PositionController:
             if at_low or at_high:
                 self._finish(name, f"{name}: stopped at its limit")
                 return 0.0
+        track.direction = direction
         return math.copysign(speed, error)
+
+    def may_reverse(self, joint: str) -> bool:
+        """Whether a joint may be driven back against its motion: only once a reading taken
+        after its last velocity change landed shows where it is (never on a prediction)."""
+        return read_since_change(self.predictors[joint])
 
     def _confirmed(self, predictor: JointPredictor, error: float, now: float) -> bool:
         """The joint's channel sends zero, and a reading taken after the last velocity change
         landed puts the estimate in the band."""
-        if predictor.velocity(now) != 0.0 or predictor.last_taken_at is None:
-            return False
-        changed_at = predictor.last_change_at
-        if changed_at is not None and predictor.last_taken_at < changed_at:
+        if predictor.velocity(now) != 0.0 or not read_since_change(predictor):
             return False
         return (
             abs(error) <= self.tolerance_rad
@@ -561,6 +620,15 @@ class PositionController:
     def _finish(self, name: str, message: str) -> None:
         self._tracks.pop(name, None)
         self._messages.append(message)
+
+
+def read_since_change(predictor: JointPredictor) -> bool:
+    """Whether a reading was taken after the joint's last velocity change had landed: the
+    estimate then rests on a picture of the joint under the command now in force."""
+    if predictor.last_taken_at is None:
+        return False
+    changed_at = predictor.last_change_at
+    return changed_at is None or predictor.last_taken_at >= changed_at
 
 
 class ConstantSpeedController(PositionController):
