@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from ocu.model.packages import PACKAGE_PATH_VARIABLE
+from ocu.model.packages import add_package_path_option
 from ocu.model.urdf import RobotModel, UrdfError, load_urdf
 
 SUFFIXES = (".urdf", ".URDF")
@@ -104,15 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
         "view does, and print what loaded, what warned and why, and what failed.",
     )
     parser.add_argument("paths", nargs="+", type=Path, metavar="FOLDER_OR_FILE")
-    parser.add_argument(
-        "--package-path",
-        action="append",
-        type=Path,
-        default=[],
-        metavar="DIR",
-        help=f"a folder holding ROS packages named by package:// mesh paths (repeatable; "
-        f"also {PACKAGE_PATH_VARIABLE}, ROS_PACKAGE_PATH, AMENT_PREFIX_PATH)",
-    )
+    add_package_path_option(parser)
     return parser
 
 

@@ -16,6 +16,7 @@ far up the package's root is. Places searched, in order:
 
 from __future__ import annotations
 
+import argparse
 import functools
 import os
 import re
@@ -121,3 +122,16 @@ def _package_folders(name: str, start: Path, extra: Sequence[str]) -> Iterator[P
         yield from _crawl(str(root)).get(name, ())
     for prefix in _environment_list("AMENT_PREFIX_PATH"):
         yield prefix / "share" / name
+
+
+def add_package_path_option(parser: argparse.ArgumentParser) -> None:
+    """`--package-path DIR` (repeatable): folders searched for `package://` packages."""
+    parser.add_argument(
+        "--package-path",
+        action="append",
+        type=Path,
+        default=[],
+        metavar="DIR",
+        help=f"a folder holding ROS packages named by package:// mesh paths (repeatable; "
+        f"also {PACKAGE_PATH_VARIABLE}, ROS_PACKAGE_PATH, AMENT_PREFIX_PATH)",
+    )

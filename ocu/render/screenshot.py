@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from ocu.model.packages import PACKAGE_PATH_VARIABLE
+from ocu.model.packages import add_package_path_option
 from ocu.model.urdf import RobotModel, UrdfError, load_urdf
 from ocu.profile import ProfileError, load_profile
 from ocu.render.camera import VIEWS, OrbitCamera
@@ -143,19 +143,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--profile", type=Path, default=None, help="robot profile TOML")
     add_package_path_option(parser)
     return parser
-
-
-def add_package_path_option(parser: argparse.ArgumentParser) -> None:
-    """`--package-path DIR` (repeatable): folders searched for `package://` packages."""
-    parser.add_argument(
-        "--package-path",
-        action="append",
-        type=Path,
-        default=[],
-        metavar="DIR",
-        help=f"a folder holding ROS packages named by package:// mesh paths (repeatable; "
-        f"also {PACKAGE_PATH_VARIABLE}, ROS_PACKAGE_PATH, AMENT_PREFIX_PATH)",
-    )
 
 
 def main(argv: list[str] | None = None) -> int:
