@@ -13,6 +13,11 @@ per mailbox is ever queued; the GUI takes the newest with `take_telemetry()` and
 frame, which would queue) fire only while something is connected to them, as does
 `command_sent` (a CommandSent record per RCP on the wire, for odometry). Range scans
 (`scan_received`) and status packets come at a few per second and are signalled each.
+
+The link's and the decoder's threads never call Qt: they hand the emits to the GUI thread
+through the application's inbox (`ocu.qt.inbox`), so every signal here is emitted on the GUI
+thread. (Emitting across threads, or asking `isSignalConnected` there, takes Qt's locks with
+the GIL held; that deadlocked a CI run.)
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from PySide6.QtCore import QMetaMethod, QObject, QTimer, Signal
 from PySide6.QtGui import QImage
 
 from ocu.link.base import Link
+from ocu.qt.inbox import gui_inbox
 from ocu.records import (
     CommandSent,
     ExtensionChanged,
@@ -40,6 +46,7 @@ from ocu.video.decoder import DecodedFrame, VideoDecoder
 from ocu.video.slot import LatestFrames
 
 HEARTBEAT_PERIOD_MS = 100
+_EVERY_FRAME, _EVERY_VIDEO, _EVERY_COMMAND = range(3)
 
 
 @dataclass(frozen=True)
@@ -94,15 +101,20 @@ class QtLink(QObject):
             opencv_threads=profile.video.opencv_threads,
         )
         self._telemetry: LatestFrames[TelemetryFrame] = LatestFrames(1)
-        self._every_frame = QMetaMethod.fromSignal(self.telemetry_received)
-        self._every_video = QMetaMethod.fromSignal(self.video_frame_received)
-        self._every_command = QMetaMethod.fromSignal(self.command_sent)
+        self._inbox = gui_inbox()
+        self._every = (
+            QMetaMethod.fromSignal(self.telemetry_received),
+            QMetaMethod.fromSignal(self.video_frame_received),
+            QMetaMethod.fromSignal(self.command_sent),
+        )
+        # Read on the link's and the decoder's threads, set on the GUI thread.
+        self._wants = [self.isSignalConnected(method) for method in self._every]
         link.subscribe(self._on_event)
         # The timer lives in the GUI thread: if that thread stalls, heartbeats stop and the
         # link zeroes any motion after its GUI-alive timeout.
         self._heartbeat = QTimer(self)
         self._heartbeat.setInterval(HEARTBEAT_PERIOD_MS)
-        self._heartbeat.timeout.connect(link.heartbeat)
+        self._heartbeat.timeout.connect(self._beat)
         self._shut = False
 
     @property
@@ -145,37 +157,56 @@ class QtLink(QObject):
     # ---- the link's threads ----------------------------------------------------------------
 
     def _on_event(self, event: LinkEvent) -> None:
+        # No Qt here (see ocu.qt.inbox): the GUI thread emits what is posted to it.
+        post = self._inbox.post
         if isinstance(event, TelemetryFrame):
             if self._telemetry.put(0, event):
-                self.telemetry_ready.emit()
-            if self.isSignalConnected(self._every_frame):
-                self.telemetry_received.emit(event)
+                post(self.telemetry_ready.emit)
+            if self._wants[_EVERY_FRAME]:
+                post(self.telemetry_received.emit, event)
         elif isinstance(event, VideoFrame):
             self.decoder.submit(event)
         elif isinstance(event, StatusFrame):
-            self.status_received.emit(event)
+            post(self.status_received.emit, event)
         elif isinstance(event, ScanFrame):
-            self.scan_received.emit(event)
+            post(self.scan_received.emit, event)
         elif isinstance(event, ExtensionChanged):
-            self.extension_changed.emit(event.active, event.reason)
+            post(self.extension_changed.emit, event.active, event.reason)
         elif isinstance(event, LinkStateChanged):
-            self.link_state_changed.emit(event.state, event.reason)
+            post(self.link_state_changed.emit, event.state, event.reason)
         elif isinstance(event, LinkStats):
-            self.stats_updated.emit(event)
+            post(self.stats_updated.emit, event)
         elif isinstance(event, SafetyEvent):
-            self.safety_event.emit(event.message)
-        elif isinstance(event, CommandSent) and self.isSignalConnected(self._every_command):
-            self.command_sent.emit(event)
+            post(self.safety_event.emit, event.message)
+        elif isinstance(event, CommandSent) and self._wants[_EVERY_COMMAND]:
+            post(self.command_sent.emit, event)
 
     def _on_decoded(self, decoded: DecodedFrame) -> None:
         # Decoder thread: QImage (unlike QPixmap) may be built outside the GUI thread.
         frame = DecodedVideoFrame(decoded.source, wrap_pixels(decoded), decoded)
         if self.frames.put(decoded.slot, frame):
-            self.video_frame_ready.emit(decoded.slot)
-        if self.isSignalConnected(self._every_video):
-            self.video_frame_received.emit(frame)
+            self._inbox.post(self.video_frame_ready.emit, decoded.slot)
+        if self._wants[_EVERY_VIDEO]:
+            self._inbox.post(self.video_frame_received.emit, frame)
 
     def _on_corrupt(self, frame: VideoFrame, slot: int) -> None:
         # Counted by the decoder (decoder.stats); the viewer keeps showing the last good frame.
-        if self.isSignalConnected(self._every_video):
-            self.video_frame_received.emit(DecodedVideoFrame(frame, QImage()))
+        if self._wants[_EVERY_VIDEO]:
+            self._inbox.post(self.video_frame_received.emit, DecodedVideoFrame(frame, QImage()))
+
+    # ---- who wants every frame (the GUI thread) ---------------------------------------------
+
+    def connectNotify(self, signal: QMetaMethod) -> None:
+        """Something connected: one of the every-frame signals is wanted from now on."""
+        for index, method in enumerate(self._every):
+            if signal == method:
+                self._wants[index] = True
+        super().connectNotify(signal)
+
+    def _beat(self) -> None:
+        # The GUI thread's heartbeat; it also forgets every-frame signals nobody listens to
+        # any more (isSignalConnected on this thread only: see ocu.qt.inbox).
+        self.link.heartbeat()
+        for index, method in enumerate(self._every):
+            if self._wants[index] and not self.isSignalConnected(method):
+                self._wants[index] = False

@@ -7,6 +7,7 @@ from pathlib import Path
 from PySide6.QtCore import QTimer, Signal
 from PySide6.QtWidgets import QPushButton, QWidget
 
+from ocu.qt.inbox import to_gui
 from ocu.record.errors import RecordingError
 from ocu.record.recorder import Recorder, default_recordings_dir, timestamped_name
 
@@ -24,7 +25,7 @@ class RecordButton(QPushButton):
     recording_started = Signal(str)
     recording_stopped = Signal(str)
     recording_failed = Signal(str)
-    # The recorder's writer thread reports errors through this (queued to the GUI thread).
+    # The recorder's writer thread reports errors through this (handed to the GUI thread).
     _writer_failed = Signal(str)
 
     def __init__(
@@ -40,7 +41,7 @@ class RecordButton(QPushButton):
         self.setCheckable(True)
         self.clicked.connect(self._on_clicked)
         self._writer_failed.connect(self._on_writer_failed)
-        recorder.on_error = self._writer_failed.emit
+        recorder.on_error = to_gui(self._writer_failed.emit)
         self._timer = QTimer(self)
         self._timer.setInterval(REFRESH_PERIOD_MS)
         self._timer.timeout.connect(self.refresh)

@@ -47,6 +47,7 @@ from ocu.calibrate.writer import write_calibrated_profile
 from ocu.console.model import ConsoleModel
 from ocu.link.base import Link, LinkError
 from ocu.profile import ProfileError, RobotProfile, load_profile_data
+from ocu.qt.inbox import to_gui
 
 # A factory of links to the console's robot for a given profile (the raw profile here).
 CalibrationLinkFactory = Callable[[RobotProfile], Link]
@@ -80,6 +81,9 @@ class DockOperator(QObject):
         super().__init__()
         self.stop = stop
         self._guided = guided
+        # Made on the GUI thread, called on the calibrator's: handed over by the inbox.
+        self._asked = to_gui(self.asked.emit)
+        self._said = to_gui(self.said.emit)
 
     @property
     def guided(self) -> bool:
@@ -87,7 +91,7 @@ class DockOperator(QObject):
         return self._guided
 
     def _ask(self, question: Question) -> object:
-        self.asked.emit(question)
+        self._asked(question)
         while True:
             if self.stop.stopped:
                 raise CalibrationAbortedError(self.stop.reason or "e-stop")
@@ -98,7 +102,7 @@ class DockOperator(QObject):
 
     def say(self, text: str) -> None:
         """A line in the dock's step list."""
-        self.said.emit(text)
+        self._said(text)
 
     def confirm(self, step: str, text: str) -> bool:
         """Go on or skip (automatic steps run unasked on a stand)."""
@@ -336,6 +340,7 @@ class CalibrationPanel(QWidget):
         deadman: Deadman = OnStand() if on_stand else self.deadman
         self.deadman.set(False)
         calibrator = Calibrator(link, self.profile, operator, deadman=deadman, stop=stop)
+        done = to_gui(self._done.emit)
 
         def run() -> None:
             result: CalibrationResult | None = None
@@ -343,7 +348,7 @@ class CalibrationPanel(QWidget):
                 result = calibrator.run()
             finally:
                 link.shutdown()  # zeros last
-                self._done.emit(result)
+                done(result)
 
         self._operator = operator  # kept alive while its signals are in flight
         self._thread = threading.Thread(target=run, name="ocu-calibration", daemon=True)

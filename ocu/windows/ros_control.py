@@ -26,6 +26,7 @@ from PySide6.QtWidgets import QWidget
 from ocu.console.model import ConsoleModel
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
+from ocu.qt.inbox import to_gui
 from ocu.records import CommandError
 from ocu.ros.bridge import STATE_TEXT, BridgeState
 from ocu.ros.environment import master_online, master_uri, missing_ros
@@ -66,7 +67,7 @@ class _ModelSink:
 class RosControl(QObject):
     """The toggle (`action`), the status-bar label (`label`) and the bridge behind them."""
 
-    # From bridge and rospy threads: queued to the GUI thread.
+    # From bridge and rospy threads: handed to the GUI thread (ocu.qt.inbox.to_gui).
     state_changed = Signal(object, str)
     _probed = Signal(object)
     _velocities = Signal(object)
@@ -108,7 +109,7 @@ class RosControl(QObject):
         self._probed.connect(self._on_probed)
         self._velocities.connect(self._apply_velocities)
         self._path.connect(self._follow_path)
-        self._sink = _ModelSink(self._velocities.emit)
+        self._sink = _ModelSink(to_gui(self._velocities.emit))
         self._show_availability()
         self.probe()
 
@@ -125,10 +126,11 @@ class RosControl(QObject):
             self._on_probed(missing)
             return
         uri = master_uri()
+        probed = to_gui(self._probed.emit)
 
         def run() -> None:
             online = master_online(uri, timeout_s=PROBE_TIMEOUT_S)
-            self._probed.emit(None if online else f"no ROS master at {uri} (start roscore)")
+            probed(None if online else f"no ROS master at {uri} (start roscore)")
 
         self._probe_thread = threading.Thread(target=run, name="ocu-ros-probe", daemon=True)
         self._probe_thread.start()
@@ -245,11 +247,11 @@ class RosControl(QObject):
         return RosBridge(
             self.profile,
             hardware_id=self.hardware_id,
-            on_state_changed=self.state_changed.emit,
+            on_state_changed=to_gui(self.state_changed.emit),
             arm_poses_path=arm.poses.path if arm is not None else None,
             navigator=self.model.nav,
             feed_navigator=False,
-            on_path=self._path.emit,
+            on_path=to_gui(self._path.emit),
         )
 
     def _follow_path(self, points: list[tuple[float, float]]) -> None:

@@ -325,7 +325,8 @@ def test_space_flagged_as_auto_repeat_still_stops(
         send_key(console, QEvent.Type.KeyPress, Qt.Key.Key_Space, " ", auto=True, timestamp=at)
     texts = [console.event_log.item(i).text() for i in range(console.event_log.count())]
     assert len(texts) <= lines + 3, texts  # the e-stop, the link's and the halt's words
-    counted = [t for t in texts if " EMERGENCY STOP (Space) (×" in t]
+    # The console's own line (after the time's two spaces), not the link's "link: ..." one.
+    counted = [t for t in texts if "  EMERGENCY STOP (Space) (×" in t]
     assert counted, texts
     assert int(counted[-1].rsplit("×", 1)[1].rstrip(")")) >= 10, texts
 
