@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from functools import partial
 
 from PySide6.QtCore import QObject, Qt, Signal
 from pytestqt.qtbot import QtBot
@@ -74,7 +75,12 @@ def test_a_signal_of_a_deleted_object_is_dropped_and_later_calls_still_run(
     emitter.deleteLater()
     qtbot.waitUntil(lambda: _deleted(emitter), timeout=DEADLINE_MS)
     after: list[int] = []
-    worker = threading.Thread(target=lambda: (inbox.post(emit, 1), inbox.post(after.append, 2)))
+
+    def post_both() -> None:
+        inbox.post(emit, 1)
+        inbox.post(after.append, 2)
+
+    worker = threading.Thread(target=post_both)
     worker.start()
     worker.join()
     qtbot.waitUntil(lambda: after == [2], timeout=DEADLINE_MS)
@@ -135,9 +141,9 @@ def test_every_frame_signals_follow_their_listeners_while_frames_flow(
                 receiver.said.connect(frames.append)
                 qt_link.telemetry_received.connect(receiver.said)
                 qt_link.video_frame_received.connect(receiver.said)
-                qtbot.waitUntil(lambda frames=frames: bool(frames), timeout=DEADLINE_MS)
+                qtbot.waitUntil(partial(bool, frames), timeout=DEADLINE_MS)
                 receiver.deleteLater()
-                qtbot.waitUntil(lambda receiver=receiver: _deleted(receiver), timeout=DEADLINE_MS)
+                qtbot.waitUntil(partial(_deleted, receiver), timeout=DEADLINE_MS)
             # Nobody listens: after the next heartbeat nothing more is posted for those signals.
             qtbot.waitUntil(lambda: not any(qt_link._wants), timeout=DEADLINE_MS)
         finally:
