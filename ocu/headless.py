@@ -52,8 +52,8 @@ class HeadlessConsole:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="ocu-headless", daemon=True)
         self._error: BaseException | None = None
-        model.events.command_changed.connect(self._push)
-        model.events.estop_requested.connect(link.emergency_stop)
+        model.events.command_changed.connect(self._push, direct=True)
+        model.events.estop_requested.connect(link.emergency_stop, direct=True)
 
     def start(self) -> None:
         """Subscribe to the link, start the thread and the link."""

@@ -130,10 +130,12 @@ def test_stalled_gui_thread_stops(
     zeros = zeros_after(sim, start)
     assert zeros, "no zeros during the stall"
     delay = zeros[0].time_s - start
-    # The link's GUI-alive watchdog: zeros after gui_alive_timeout_s, while still stalled.
-    # 0.1 s is the link loop's longest sleep; the rest is margin for a loaded 2-core machine.
+    # The control thread halts the model when the GUI thread is silent for the link's
+    # gui_alive_timeout_s less one heartbeat period (0.1 s) since its last sign of life
+    # (which came up to 0.1 s before the stall): zeros while still stalled. The upper margin
+    # is for a loaded 2-core machine.
     timeout_s = profile.link.gui_alive_timeout_s
-    assert timeout_s - 0.1 <= delay <= timeout_s + 0.35, f"zeros {delay:.3f} s into the stall"
+    assert timeout_s - 0.3 <= delay <= timeout_s + 0.35, f"zeros {delay:.3f} s into the stall"
     assert zeros[0].time_s < end, "zeros only after the stall"
     # After the stall the console agrees with the link: nothing resumes, though W is held.
     wait_sim(qtbot, sim, lambda s: s.all_stopped, "stopped")

@@ -220,7 +220,8 @@ class ConsoleModel:
         self.robot.events.link_state_changed.connect(
             lambda state, _reason: (
                 self.nav.forget_scans() if state is LinkState.CONNECTING else None
-            )
+            ),
+            direct=True,
         )
         self._waypoints: tuple[tuple[float, float], ...] = ()
         self._shuttle: tuple[tuple[float, float], ...] = ()
@@ -248,7 +249,7 @@ class ConsoleModel:
                 log.warning("%s", self.arm_error)
             else:
                 self.arm = ArmConsole(controller, self, arm_poses_path)
-                self.arm.events.message.connect(self.events.message.emit)
+                self.arm.events.message.connect(self.events.message.emit, direct=True)
 
     # ---- state -----------------------------------------------------------------------------
 

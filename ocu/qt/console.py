@@ -28,22 +28,32 @@ VIEW_PERIOD_MS = 33
 class ConsoleBinding(QObject):
     """Feeds `model` from `link` and `link` from `model` until unbind()."""
 
-    def __init__(self, model: ConsoleModel, link: QtLink, parent: QObject | None = None) -> None:
+    def __init__(
+        self,
+        model: ConsoleModel,
+        link: QtLink,
+        parent: QObject | None = None,
+        *,
+        control_thread: bool = False,
+    ) -> None:
         super().__init__(parent)
         self.model = model
         self.link = link
         self._last_take_at = 0.0
         self._bound = True
-        # Methods of this QObject: the signals, emitted on the link's threads, are queued to
-        # the GUI thread, where the model lives.
+        # Methods of this QObject: the signals are emitted on the GUI thread (ocu.qt.inbox).
+        # With a control thread (the console's), that thread takes the telemetry and the
+        # commands sent from the link itself, in their order.
+        telemetry = () if control_thread else ((link.telemetry_ready, self._on_telemetry_ready),)
+        sent = () if control_thread else ((link.command_sent, self._on_command_sent),)
         self._wiring = (
-            (link.telemetry_ready, self._on_telemetry_ready),
+            *telemetry,
             (link.link_state_changed, self._on_link_state),
             (link.stats_updated, self._on_stats),
             (link.status_received, self._on_status),
             (link.extension_changed, self._on_extension),
             (link.scan_received, self._on_scan),
-            (link.command_sent, self._on_command_sent),
+            *sent,
         )
         for signal, slot in self._wiring:
             signal.connect(slot)
@@ -57,7 +67,7 @@ class ConsoleBinding(QObject):
                 (events.estop_requested, self._estop),
             )
         for event, callback in self._commands:
-            event.connect(callback)
+            event.connect(callback, direct=True)  # on the thread that changed the command
         if not link.read_only:
             link.link.set_command(model.command())
             link.link.set_stream_request(model.stream_request)
@@ -65,7 +75,8 @@ class ConsoleBinding(QObject):
         self._timer = QTimer(self)
         self._timer.setInterval(VIEW_PERIOD_MS)
         self._timer.timeout.connect(self.take_telemetry)
-        self._timer.start()
+        if not control_thread:
+            self._timer.start()
 
     def take_telemetry(self) -> None:
         """Hand the newest telemetry frame, if any came, to the model."""

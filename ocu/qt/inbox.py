@@ -28,6 +28,8 @@ from typing import Any
 
 from PySide6.QtCore import QCoreApplication, QObject, QSocketNotifier, QThread
 
+from ocu.console.events import register_dispatcher
+
 log = logging.getLogger(__name__)
 
 _OBJECT_NAME = "ocu-gui-inbox"
@@ -51,6 +53,8 @@ class GuiInbox(QObject):
         self.wakeups = 0
         self._notifier = QSocketNotifier(self._reader.fileno(), QSocketNotifier.Type.Read, self)
         self._notifier.activated.connect(self._drain)
+        # The console's events (ocu.console.events) hand this thread its callbacks the same way.
+        register_dispatcher(self.owner, self.post)
 
     def post(self, fn: Callable[..., object], *args: Any) -> None:
         """Make `fn(*args)` on the GUI thread, after every call posted before it (any thread)."""

@@ -85,7 +85,9 @@ class QtLink(QObject):
     safety_event = Signal(str)
     command_sent = Signal(object)
 
-    def __init__(self, link: Link, parent: QObject | None = None) -> None:
+    def __init__(
+        self, link: Link, parent: QObject | None = None, *, heartbeat: bool = True
+    ) -> None:
         super().__init__(parent)
         self.setObjectName("ocu-qt-link")
         self.link = link
@@ -115,6 +117,8 @@ class QtLink(QObject):
         self._heartbeat = QTimer(self)
         self._heartbeat.setInterval(HEARTBEAT_PERIOD_MS)
         self._heartbeat.timeout.connect(self._beat)
+        # False: another thread (the console's control thread) tells the link it is alive.
+        self._beats_link = heartbeat
         self._shut = False
 
     @property
@@ -206,7 +210,8 @@ class QtLink(QObject):
     def _beat(self) -> None:
         # The GUI thread's heartbeat; it also forgets every-frame signals nobody listens to
         # any more (isSignalConnected on this thread only: see ocu.qt.inbox).
-        self.link.heartbeat()
+        if self._beats_link:
+            self.link.heartbeat()
         for index, method in enumerate(self._every):
             if self._wants[index] and not self.isSignalConnected(method):
                 self._wants[index] = False

@@ -20,9 +20,12 @@ from __future__ import annotations
 import logging
 import math
 import sys
+import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
+from typing import cast
 
 from PySide6.QtCore import QByteArray, QEvent, QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent, QHideEvent, QShowEvent
@@ -39,9 +42,11 @@ from PySide6.QtWidgets import (
 
 from ocu import hotkeys
 from ocu.console.arm import ArmGoal
+from ocu.console.events import hand_over
 from ocu.console.model import ConsoleModel
 from ocu.console.poses import ARM_POSES_NAME, PoseError
-from ocu.console.stall import StallWatch
+from ocu.core.guard import Guarded
+from ocu.core.manager import DEFAULT_RATE_HZ, ControllerManager
 from ocu.gamepad.calibration import CalibrationError, CalibrationStore, PadCalibration
 from ocu.gamepad.mapping import PadMapping, load_pad_mapping
 from ocu.gamepad.pad import PadInfo
@@ -60,7 +65,7 @@ from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
 from ocu.record.replay_link import ReplayLink
-from ocu.records import CommandError, LinkState
+from ocu.records import CommandError, CommandSent, LinkEvent, LinkState
 from ocu.widgets.gamepad import GamepadPanel, PadIndicator
 from ocu.widgets.link_graphs import LinkGraphsPanel
 from ocu.widgets.link_status import LinkStatus
@@ -81,7 +86,6 @@ from ocu.windows.velocity import VelocityPanel
 
 log = logging.getLogger("ocu.console")
 
-CONTROL_PERIOD_MS = 50
 # The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
 # 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks; 5: Robot check, Calibration
@@ -153,6 +157,7 @@ class MainWindow(QMainWindow):
         pad_calibrations: CalibrationStore | None = None,
         calibration_link: CalibrationLinkFactory | None = None,
         settings_status: SettingsStatus | None = None,
+        control_hz: float = DEFAULT_RATE_HZ,
         parent: QWidget | None = None,
     ) -> None:
         sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_INTERVAL_S))
@@ -174,17 +179,37 @@ class MainWindow(QMainWindow):
         # The operator's stored arm poses sit beside the hotkey file and the settings.
         if arm_poses_path is None:
             arm_poses_path = Path(settings.fileName()).parent / ARM_POSES_NAME
-        self.model = ConsoleModel(
+        # The model runs on the control thread (ocu.core.manager); the window and its views
+        # touch it through a handle that takes the model's lock for each call and read, and
+        # the model's events hand their callbacks to this thread.
+        model = ConsoleModel(
             profile, fine_factor=self.key_map.fine_factor, arm_poses_path=arm_poses_path
         )
+        hand_over(model.events, model.robot.events, *([model.arm.events] if model.arm else []))
+        self._model_lock = threading.RLock()
+        self._sent: deque[CommandSent] = deque()
         self.link: QtLink | None = None
         self.replay_controller = ReplayController(replay, self) if replay is not None else None
         self._shut = False
-        # The link zeroes motion when the GUI thread is silent for gui_alive_timeout_s; the
-        # watch tells the control tick when that may have happened (its heartbeat can be one
-        # period older than the last tick, hence the margin).
-        stall_limit_s = profile.link.gui_alive_timeout_s - HEARTBEAT_PERIOD_MS / 1000.0
-        self._stall_watch = StallWatch(max(stall_limit_s, CONTROL_PERIOD_MS / 1000.0))
+        # The control thread: telemetry in, the model's control step, the link told it is
+        # alive; it halts the model when this (GUI) thread is silent past the link's alive
+        # timeout with motion commanded - keys and sliders cannot be released through a
+        # frozen GUI (its heartbeat can be one period older, hence the margin).
+        gui_limit_s = profile.link.gui_alive_timeout_s - HEARTBEAT_PERIOD_MS / 1000.0
+        self.core = ControllerManager(
+            model,
+            self._model_lock,
+            read=self._read_hardware,
+            hardware=self,
+            rate_hz=control_hz,
+            alive_timeout_s=profile.link.gui_alive_timeout_s,
+            gui_timeout_s=max(gui_limit_s, HEARTBEAT_PERIOD_MS / 1000.0),
+        )
+        # Each call into the model is a sign of life of the GUI thread for the control thread,
+        # and so is a timer's tick (below).
+        self.model: ConsoleModel = cast(
+            ConsoleModel, Guarded(model, self._model_lock, self.core.gui_alive)
+        )
         if replay is None:
             self.setWindowTitle(f"ocu — {profile.name} — {address_text}")
         else:
@@ -347,11 +372,13 @@ class MainWindow(QMainWindow):
             self.settings_label.setToolTip("\n".join(self.settings_status.notes))
             self.link_status.add_indicator(self.settings_label)
 
-        self.model.events.command_changed.connect(self._on_command_changed)
-        self._control_timer = QTimer(self)
-        self._control_timer.setInterval(CONTROL_PERIOD_MS)
-        self._control_timer.timeout.connect(self._control_tick)
-        self._control_timer.start()
+        # The GUI thread's sign of life for the control thread.
+        self._alive_timer = QTimer(self)
+        self._alive_timer.setInterval(HEARTBEAT_PERIOD_MS)
+        self._alive_timer.timeout.connect(self.core.gui_alive)
+        self._alive_timer.start()
+        self.core.gui_alive()
+        self.core.start()
         self.binding: ConsoleBinding | None = None
         self.model.robot.events.telemetry_changed.connect(self.model_view.show_reading)
         self._view_timer = QTimer(self)
@@ -513,9 +540,12 @@ class MainWindow(QMainWindow):
             if self.recorder is not None:
                 self.recorder.attach(link)
             self.ros.link_started(link)
-        qt = QtLink(link, self)
+        # The control thread tells the link it is alive and takes its telemetry.
+        qt = QtLink(link, self, heartbeat=False)
         self.model.robot.on_link_state(LinkState.CONNECTING, "connecting")
-        self.binding = ConsoleBinding(self.model, qt, self)
+        self._sent.clear()
+        link.subscribe(self._on_link_event)
+        self.binding = ConsoleBinding(self.model, qt, self, control_thread=True)
         qt.link_state_changed.connect(self._on_link_state)
         qt.safety_event.connect(self._on_safety_event)
         self.link = qt
@@ -540,6 +570,7 @@ class MainWindow(QMainWindow):
         if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
         qt.shutdown()  # zeros last
+        qt.link.unsubscribe(self._on_link_event)
         if self.binding is not None:
             self.binding.unbind()
             self.binding = None
@@ -639,20 +670,28 @@ class MainWindow(QMainWindow):
 
     # ---- control loop ----------------------------------------------------------------------
 
-    def _on_command_changed(self) -> None:
-        # A command pushed is a sign of life for the link's watchdog too.
-        self._stall_watch.alive(time.monotonic(), self.model.is_moving)
+    def _read_hardware(self, model: ConsoleModel) -> None:
+        # The control thread, under the model's lock: the commands the link sent (odometry and
+        # the joints' predictors), then the newest telemetry frame.
+        sent = self._sent
+        while sent:
+            record = sent.popleft()
+            model.on_command_sent(record.command, record.sent_at)
+        qt = self.link
+        frame = qt.take_telemetry() if qt is not None else None
+        if frame is not None:
+            model.on_telemetry(frame)
 
-    def _control_tick(self) -> None:
-        now = time.monotonic()
-        self._stall_watch.alive(now, self.model.is_moving)
-        stalled_s = self._stall_watch.take_stall()
-        if stalled_s is not None:
-            # The GUI thread stalled with motion commanded, long enough for the link to zero
-            # it; this tick may run before the link's safety event arrives, so halt here too.
-            # (A key pressed after a stall with nothing moving is fresh input: it stands.)
-            self.model.halt(f"GUI thread stalled for {stalled_s:.2f} s")
-        self.model.update(now)
+    def _on_link_event(self, event: LinkEvent) -> None:
+        # The link's threads: what it sent, for the control thread (no Qt, no lock).
+        if isinstance(event, CommandSent):
+            self._sent.append(event)
+
+    def heartbeat(self) -> None:
+        """The control thread is alive: the link keeps commanded motion going."""
+        qt = self.link
+        if qt is not None:
+            qt.link.heartbeat()
 
     # ---- focus, visibility, closing --------------------------------------------------------
 
@@ -730,7 +769,8 @@ class MainWindow(QMainWindow):
         self.calibration_panel.shutdown()  # its link's zeros before the window goes
         self.model.halt("console closed")
         self.save_layout()
-        self._control_timer.stop()
+        self._alive_timer.stop()
+        self.core.stop()
         self._view_timer.stop()
         app = QApplication.instance()
         if isinstance(app, QApplication):

@@ -1,0 +1,227 @@
+"""The controller manager: the control loop on a thread of its own, at a fixed rate.
+
+ros2_control's `ControllerManager::update()` reads every hardware component, updates the active
+controllers and writes the hardware, once per period of a real-time loop; ours does the same
+for the console model (ocu.console.model), which holds the input arbitration (the latest manual
+input wins, automatic sources yield to operator input, locks for e-stop, LINK LOST, focus and
+the zones - docs/console.md) and the controllers (position control, synchronized arm moves,
+Cartesian jogs, the assisted modes, tracking). One cycle, in this order, under the model's
+lock:
+
+1. read: what the hardware reported since the last cycle goes into the model (the commands
+   the link sent, then the newest telemetry frame: the joints' predictors need both, in order);
+2. watch: a GUI thread silent past its limit while motion is commanded halts the model (the
+   operator's keys and sliders cannot be released through a frozen GUI); so does a gap in this
+   thread's own cycles longer than the link's alive timeout (the link has zeroed by then);
+3. update: the model's control step at this cycle's time (controllers, assisted modes, zones);
+4. write: a changed command reaches the link from the model's `command_changed` event
+   (connected `direct`, so on this thread), and the link hears this thread is alive.
+
+The GUI posts operator input by calling the model through a `Guarded` handle (ocu.core.guard:
+the same lock, held for one call) and paints from what the model's events hand it on the GUI
+thread (ocu.console.events.hand_over). Nothing the GUI thread does - painting, a stall, a
+garbage collection there - delays a cycle by more than one model call.
+
+Timing is measured: cycles per second, the worst period and the worst cycle time of the last
+`TIMING_WINDOW_S`, and overruns (a period longer than `OVERRUN_FACTOR` times the nominal one).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+from ocu.console.stall import StallWatch
+
+if TYPE_CHECKING:
+    from ocu.console.model import ConsoleModel
+
+log = logging.getLogger("ocu.core")
+
+DEFAULT_RATE_HZ = 100.0
+MIN_RATE_HZ = 5.0
+MAX_RATE_HZ = 1000.0
+# A period longer than this many nominal periods is an overrun.
+OVERRUN_FACTOR = 1.5
+TIMING_WINDOW_S = 10.0
+JOIN_TIMEOUT_S = 2.0
+
+
+class Hardware(Protocol):
+    """What the manager needs of the robot's link."""
+
+    def heartbeat(self) -> None:
+        """This thread is alive (the link zeroes motion when it stops hearing it)."""
+
+
+@dataclass(frozen=True)
+class ControlTiming:
+    """How the control thread keeps its rate (over the last `TIMING_WINDOW_S`)."""
+
+    rate_hz: float  # nominal
+    cycles: int  # since start
+    measured_hz: float  # cycles in the last second
+    worst_period_s: float
+    worst_cycle_s: float  # the longest time one cycle took
+    overruns: int  # since start
+
+    @property
+    def text(self) -> str:
+        """One line for the status bar and the logs."""
+        return (
+            f"control {self.measured_hz:.0f}/{self.rate_hz:.0f} Hz, worst period "
+            f"{1000 * self.worst_period_s:.1f} ms, cycle {1000 * self.worst_cycle_s:.1f} ms, "
+            f"{self.overruns} overrun(s)"
+        )
+
+
+class ControllerManager:
+    """Runs a ConsoleModel's control cycle on the "ocu-control" thread (see the module doc)."""
+
+    def __init__(
+        self,
+        model: ConsoleModel,
+        lock: threading.RLock,
+        *,
+        read: Callable[[ConsoleModel], None],
+        hardware: Hardware | None,
+        rate_hz: float = DEFAULT_RATE_HZ,
+        alive_timeout_s: float = 0.5,
+        gui_timeout_s: float | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if not MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ:
+            raise ValueError(
+                f"control rate must be {MIN_RATE_HZ:g}-{MAX_RATE_HZ:g} Hz, got {rate_hz!r}"
+            )
+        self.model = model
+        self.lock = lock
+        self.read = read
+        self.hardware = hardware
+        self.rate_hz = rate_hz
+        self.period_s = 1.0 / rate_hz
+        self.gui_timeout_s = gui_timeout_s
+        self.clock = clock
+        self._stall = StallWatch(max(alive_timeout_s, self.period_s))
+        self._gui_alive_at: float | None = None
+        self._gui_moving = False
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._timing_lock = threading.Lock()
+        self._periods: deque[tuple[float, float, float]] = deque()  # (at, period, cycle)
+        self._cycles = 0
+        self._overruns = 0
+        self.error: BaseException | None = None
+
+    # ---- the thread --------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Start the control thread (idempotent)."""
+        if self._thread is not None:
+            return
+        self._thread = threading.Thread(target=self._run, name="ocu-control", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the thread after its current cycle (idempotent)."""
+        self._stop.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(JOIN_TIMEOUT_S)
+
+    @property
+    def running(self) -> bool:
+        """Whether the control thread runs."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def _run(self) -> None:
+        next_at = self.clock()
+        last_at: float | None = None
+        try:
+            while not self._stop.is_set():
+                started = self.clock()
+                self.cycle(started)
+                ended = self.clock()
+                if last_at is not None:
+                    self._measure(started, started - last_at, ended - started)
+                last_at = started
+                next_at += self.period_s
+                if next_at < ended:
+                    # Late by more than a period: start again from now, never catch up in a
+                    # burst (a burst of control steps would act on the same readings).
+                    next_at = ended + self.period_s
+                self._stop.wait(max(0.0, next_at - self.clock()))
+        except BaseException as err:  # the thread's end must be known: the link zeroes then
+            self.error = err
+            log.exception("the control thread failed; the link zeroes motion without it")
+            raise
+
+    # ---- one cycle -----------------------------------------------------------------------------
+
+    def cycle(self, now: float | None = None) -> None:
+        """One control cycle (the thread's; tests may call it directly)."""
+        now = self.clock() if now is None else now
+        model = self.model
+        with self.lock:
+            self.read(model)
+            self._stall.alive(now, model.is_moving)
+            stalled_s = self._stall.take_stall()
+            if stalled_s is not None:
+                # This thread was silent long enough for the link to zero what it sent.
+                model.halt(f"control thread stalled for {stalled_s:.2f} s")
+            gui_silent_s = self._gui_silent(now)
+            if gui_silent_s is not None:
+                self._gui_moving = False
+                model.halt(f"GUI thread silent for {gui_silent_s:.2f} s")
+            model.update(now)
+        if self.hardware is not None:
+            self.hardware.heartbeat()
+
+    # ---- the GUI's sign of life ------------------------------------------------------------------
+
+    def gui_alive(self) -> None:
+        """The GUI thread runs (its heartbeat timer, and each call it makes into the model)."""
+        with self.lock:
+            self._gui_moving = bool(self.model.is_moving)
+            self._gui_alive_at = self.clock()
+
+    def _gui_silent(self, now: float) -> float | None:
+        limit = self.gui_timeout_s
+        alive_at = self._gui_alive_at
+        if limit is None or alive_at is None or not self._gui_moving:
+            return None
+        silent = now - alive_at
+        return silent if silent > limit else None
+
+    # ---- timing --------------------------------------------------------------------------------
+
+    def _measure(self, at: float, period: float, cycle: float) -> None:
+        with self._timing_lock:
+            self._cycles += 1
+            if period > OVERRUN_FACTOR * self.period_s:
+                self._overruns += 1
+            periods = self._periods
+            periods.append((at, period, cycle))
+            while periods and periods[0][0] < at - TIMING_WINDOW_S:
+                periods.popleft()
+
+    def timing(self) -> ControlTiming:
+        """The rate kept, the worst period and cycle time, overruns (any thread)."""
+        now = self.clock()
+        with self._timing_lock:
+            periods = list(self._periods)
+            cycles, overruns = self._cycles, self._overruns
+        recent = [p for p in periods if p[0] >= now - 1.0]
+        return ControlTiming(
+            rate_hz=self.rate_hz,
+            cycles=cycles,
+            measured_hz=float(len(recent)),
+            worst_period_s=max((p[1] for p in periods), default=0.0),
+            worst_cycle_s=max((p[2] for p in periods), default=0.0),
+            overruns=overruns,
+        )
