@@ -18,9 +18,13 @@ P = ParamSpec("P")
 _dispatchers: dict[int, Callable[..., None]] = {}
 
 
-def register_dispatcher(thread_id: int, post: Callable[..., None]) -> None:
-    """Callbacks connected on thread `thread_id` are handed to it with `post(fn, *args)`."""
-    _dispatchers[thread_id] = post
+def register_dispatcher(thread_id: int, post: Callable[..., None] | None) -> None:
+    """Callbacks connected on thread `thread_id` are handed to it with `post(fn, *args)`
+    (None: no longer)."""
+    if post is None:
+        _dispatchers.pop(thread_id, None)
+    else:
+        _dispatchers[thread_id] = post
 
 
 class Event(Generic[P]):
