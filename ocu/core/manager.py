@@ -117,6 +117,7 @@ class ControllerManager:
         self._cycles = 0
         self._overruns = 0
         self.error: BaseException | None = None
+        self.failures = 0  # cycles that raised (logged; the thread goes on)
 
     # ---- the thread --------------------------------------------------------------------------
 
@@ -145,7 +146,11 @@ class ControllerManager:
         try:
             while not self._stop.is_set():
                 started = self.clock()
-                self.cycle(started)
+                try:
+                    self.cycle(started)
+                except Exception:  # one bad event or step must not end the robot's control
+                    self.failures += 1
+                    log.exception("control cycle failed")
                 ended = self.clock()
                 if last_at is not None:
                     self._measure(started, started - last_at, ended - started)

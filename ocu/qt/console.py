@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from PySide6.QtCore import QObject, QTimer
+from PySide6.QtCore import QObject, QTimer, SignalInstance
 
 from ocu.console.events import Event
 from ocu.console.model import ConsoleModel
@@ -42,19 +42,19 @@ class ConsoleBinding(QObject):
         self._last_take_at = 0.0
         self._bound = True
         # Methods of this QObject: the signals are emitted on the GUI thread (ocu.qt.inbox).
-        # With a control thread (the console's), that thread takes the telemetry and the
-        # commands sent from the link itself, in their order.
-        telemetry = () if control_thread else ((link.telemetry_ready, self._on_telemetry_ready),)
-        sent = () if control_thread else ((link.command_sent, self._on_command_sent),)
-        self._wiring = (
-            *telemetry,
+        # With a control thread (the console's), that thread feeds the model from the link
+        # itself (ocu.core.feed) and this binding only sends the model's command.
+        self._wiring: tuple[tuple[SignalInstance, Callable[..., None]], ...] = (
+            (link.telemetry_ready, self._on_telemetry_ready),
             (link.link_state_changed, self._on_link_state),
             (link.stats_updated, self._on_stats),
             (link.status_received, self._on_status),
             (link.extension_changed, self._on_extension),
             (link.scan_received, self._on_scan),
-            *sent,
+            (link.command_sent, self._on_command_sent),
         )
+        if control_thread:
+            self._wiring = ()
         for signal, slot in self._wiring:
             signal.connect(slot)
         events = model.events

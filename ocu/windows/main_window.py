@@ -22,7 +22,6 @@ import math
 import sys
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import cast
@@ -45,6 +44,7 @@ from ocu.console.arm import ArmGoal
 from ocu.console.events import hand_over
 from ocu.console.model import ConsoleModel
 from ocu.console.poses import ARM_POSES_NAME, PoseError
+from ocu.core.feed import LinkFeed
 from ocu.core.guard import Guarded
 from ocu.core.manager import DEFAULT_RATE_HZ, ControllerManager
 from ocu.gamepad.calibration import CalibrationError, CalibrationStore, PadCalibration
@@ -65,7 +65,7 @@ from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
 from ocu.record.replay_link import ReplayLink
-from ocu.records import CommandError, CommandSent, LinkEvent, LinkState
+from ocu.records import CommandError, LinkState
 from ocu.widgets.gamepad import GamepadPanel, PadIndicator
 from ocu.widgets.link_graphs import LinkGraphsPanel
 from ocu.widgets.link_status import LinkStatus
@@ -187,7 +187,7 @@ class MainWindow(QMainWindow):
         )
         hand_over(model.events, model.robot.events, *([model.arm.events] if model.arm else []))
         self._model_lock = threading.RLock()
-        self._sent: deque[CommandSent] = deque()
+        self._feed: LinkFeed | None = None
         self.link: QtLink | None = None
         self.replay_controller = ReplayController(replay, self) if replay is not None else None
         self._shut = False
@@ -543,8 +543,7 @@ class MainWindow(QMainWindow):
         # The control thread tells the link it is alive and takes its telemetry.
         qt = QtLink(link, self, heartbeat=False)
         self.model.robot.on_link_state(LinkState.CONNECTING, "connecting")
-        self._sent.clear()
-        link.subscribe(self._on_link_event)
+        self._feed = LinkFeed(link)  # subscribed before any datagram flows
         self.binding = ConsoleBinding(self.model, qt, self, control_thread=True)
         qt.link_state_changed.connect(self._on_link_state)
         qt.safety_event.connect(self._on_safety_event)
@@ -570,7 +569,9 @@ class MainWindow(QMainWindow):
         if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
         qt.shutdown()  # zeros last
-        qt.link.unsubscribe(self._on_link_event)
+        feed, self._feed = self._feed, None
+        if feed is not None:
+            feed.close()
         if self.binding is not None:
             self.binding.unbind()
             self.binding = None
@@ -658,34 +659,22 @@ class MainWindow(QMainWindow):
             return
         self.log_event(f"link {state.value}: {reason}")
         if state == LinkState.LOST:
-            self.model.halt("link lost")
+            # The control thread halted the model already (ocu.core.feed).
             self._override_ros("link lost")
 
     def _on_safety_event(self, message: str) -> None:
         self.log_event(f"link: {message}")
-        # The link zeroed the command by itself (watchdog, link lost): make the model and
-        # ROS agree, so that nothing resumes when the GUI or the link comes back.
-        self.model.halt(message)
+        # The link zeroed the command by itself (watchdog, link lost): the control thread
+        # halted the model (ocu.core.feed); ROS agrees, so nothing resumes when it comes back.
         self._override_ros(message)
 
     # ---- control loop ----------------------------------------------------------------------
 
     def _read_hardware(self, model: ConsoleModel) -> None:
-        # The control thread, under the model's lock: the commands the link sent (odometry and
-        # the joints' predictors), then the newest telemetry frame.
-        sent = self._sent
-        while sent:
-            record = sent.popleft()
-            model.on_command_sent(record.command, record.sent_at)
-        qt = self.link
-        frame = qt.take_telemetry() if qt is not None else None
-        if frame is not None:
-            model.on_telemetry(frame)
-
-    def _on_link_event(self, event: LinkEvent) -> None:
-        # The link's threads: what it sent, for the control thread (no Qt, no lock).
-        if isinstance(event, CommandSent):
-            self._sent.append(event)
+        # The control thread, under the model's lock: what the current link reported.
+        feed = self._feed
+        if feed is not None:
+            feed.read(model)
 
     def heartbeat(self) -> None:
         """The control thread is alive: the link keeps commanded motion going."""
