@@ -20,11 +20,9 @@ from __future__ import annotations
 import logging
 import math
 import sys
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import cast
 
 from PySide6.QtCore import QByteArray, QEvent, QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent, QHideEvent, QShowEvent
@@ -41,12 +39,9 @@ from PySide6.QtWidgets import (
 
 from ocu import hotkeys
 from ocu.console.arm import ArmGoal
-from ocu.console.events import hand_over
 from ocu.console.model import ConsoleModel
 from ocu.console.poses import ARM_POSES_NAME, PoseError
-from ocu.core.feed import LinkFeed
-from ocu.core.guard import Guarded
-from ocu.core.manager import DEFAULT_RATE_HZ, ControllerManager
+from ocu.core.manager import DEFAULT_RATE_HZ
 from ocu.gamepad.calibration import CalibrationError, CalibrationStore, PadCalibration
 from ocu.gamepad.mapping import PadMapping, load_pad_mapping
 from ocu.gamepad.pad import PadInfo
@@ -60,7 +55,7 @@ from ocu.protocol.extended import CameraRequest
 from ocu.qt.collector import pin_garbage_collection
 from ocu.qt.console import ConsoleBinding
 from ocu.qt.gamepad import QtGamepad
-from ocu.qt.link import HEARTBEAT_PERIOD_MS, QtLink
+from ocu.qt.link import QtLink
 from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
@@ -76,6 +71,7 @@ from ocu.widgets.robot_check import RobotCheckPanel
 from ocu.widgets.video import VideoPanel
 from ocu.windows.arm import ArmModeIndicator, ArmPanel
 from ocu.windows.calibration import CalibrationLinkFactory, CalibrationPanel
+from ocu.windows.control import ConsoleControl
 from ocu.windows.help_overlay import HelpOverlay
 from ocu.windows.joint_position import JointPositionPanel
 from ocu.windows.key_filter import KeyFilter
@@ -179,37 +175,21 @@ class MainWindow(QMainWindow):
         # The operator's stored arm poses sit beside the hotkey file and the settings.
         if arm_poses_path is None:
             arm_poses_path = Path(settings.fileName()).parent / ARM_POSES_NAME
-        # The model runs on the control thread (ocu.core.manager); the window and its views
-        # touch it through a handle that takes the model's lock for each call and read, and
-        # the model's events hand their callbacks to this thread.
-        model = ConsoleModel(
-            profile, fine_factor=self.key_map.fine_factor, arm_poses_path=arm_poses_path
+        # The model runs on the control thread (ocu.windows.control, ocu.core); the window
+        # and its views touch it through a guarded handle and are called on this thread.
+        self.control = ConsoleControl(
+            ConsoleModel(
+                profile, fine_factor=self.key_map.fine_factor, arm_poses_path=arm_poses_path
+            ),
+            profile,
+            control_hz=control_hz,
+            parent=self,
         )
-        hand_over(model.events, model.robot.events, *([model.arm.events] if model.arm else []))
-        self._model_lock = threading.RLock()
-        self._feed: LinkFeed | None = None
+        self.core = self.control.manager
+        self.model: ConsoleModel = self.control.model
         self.link: QtLink | None = None
         self.replay_controller = ReplayController(replay, self) if replay is not None else None
         self._shut = False
-        # The control thread: telemetry in, the model's control step, the link told it is
-        # alive; it halts the model when this (GUI) thread is silent past the link's alive
-        # timeout with motion commanded - keys and sliders cannot be released through a
-        # frozen GUI (its heartbeat can be one period older, hence the margin).
-        gui_limit_s = profile.link.gui_alive_timeout_s - HEARTBEAT_PERIOD_MS / 1000.0
-        self.core = ControllerManager(
-            model,
-            self._model_lock,
-            read=self._read_hardware,
-            hardware=self,
-            rate_hz=control_hz,
-            alive_timeout_s=profile.link.gui_alive_timeout_s,
-            gui_timeout_s=max(gui_limit_s, HEARTBEAT_PERIOD_MS / 1000.0),
-        )
-        # Each call into the model is a sign of life of the GUI thread for the control thread,
-        # and so is a timer's tick (below).
-        self.model: ConsoleModel = cast(
-            ConsoleModel, Guarded(model, self._model_lock, self.core.gui_alive)
-        )
         if replay is None:
             self.setWindowTitle(f"ocu — {profile.name} — {address_text}")
         else:
@@ -363,6 +343,7 @@ class MainWindow(QMainWindow):
         self._wire_arm()
         for note in self.settings_status.notes:
             self.log_event(note)
+        self.link_status.add_indicator(self.control.label)
         self.settings_label: QLabel | None = None
         if not self.settings_status.writable:
             # For the whole session, not only in the Events dock, which may be out of view.
@@ -372,13 +353,7 @@ class MainWindow(QMainWindow):
             self.settings_label.setToolTip("\n".join(self.settings_status.notes))
             self.link_status.add_indicator(self.settings_label)
 
-        # The GUI thread's sign of life for the control thread.
-        self._alive_timer = QTimer(self)
-        self._alive_timer.setInterval(HEARTBEAT_PERIOD_MS)
-        self._alive_timer.timeout.connect(self.core.gui_alive)
-        self._alive_timer.start()
-        self.core.gui_alive()
-        self.core.start()
+        self.control.start()
         self.binding: ConsoleBinding | None = None
         self.model.robot.events.telemetry_changed.connect(self.model_view.show_reading)
         self._view_timer = QTimer(self)
@@ -543,7 +518,7 @@ class MainWindow(QMainWindow):
         # The control thread tells the link it is alive and takes its telemetry.
         qt = QtLink(link, self, heartbeat=False)
         self.model.robot.on_link_state(LinkState.CONNECTING, "connecting")
-        self._feed = LinkFeed(link)  # subscribed before any datagram flows
+        self.control.attach(link)  # subscribed before any datagram flows
         self.binding = ConsoleBinding(self.model, qt, self, control_thread=True)
         qt.link_state_changed.connect(self._on_link_state)
         qt.safety_event.connect(self._on_safety_event)
@@ -569,9 +544,7 @@ class MainWindow(QMainWindow):
         if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
         qt.shutdown()  # zeros last
-        feed, self._feed = self._feed, None
-        if feed is not None:
-            feed.close()
+        self.control.detach()
         if self.binding is not None:
             self.binding.unbind()
             self.binding = None
@@ -670,18 +643,6 @@ class MainWindow(QMainWindow):
 
     # ---- control loop ----------------------------------------------------------------------
 
-    def _read_hardware(self, model: ConsoleModel) -> None:
-        # The control thread, under the model's lock: what the current link reported.
-        feed = self._feed
-        if feed is not None:
-            feed.read(model)
-
-    def heartbeat(self) -> None:
-        """The control thread is alive: the link keeps commanded motion going."""
-        qt = self.link
-        if qt is not None:
-            qt.link.heartbeat()
-
     # ---- focus, visibility, closing --------------------------------------------------------
 
     def _focused(self) -> bool:
@@ -758,8 +719,7 @@ class MainWindow(QMainWindow):
         self.calibration_panel.shutdown()  # its link's zeros before the window goes
         self.model.halt("console closed")
         self.save_layout()
-        self._alive_timer.stop()
-        self.core.stop()
+        self.control.shutdown()
         self._view_timer.stop()
         app = QApplication.instance()
         if isinstance(app, QApplication):

@@ -1,0 +1,139 @@
+"""The window's control core: the console model on the control thread, and the GUI's side of it.
+
+`ConsoleControl` puts a `ConsoleModel` under a `ControllerManager` (ocu.core.manager: the
+"ocu-control" thread at `control_hz`, 100 Hz by default) and gives the window:
+
+- `model`: the GUI's handle on it (ocu.core.guard: each call and read under the model's lock;
+  each call also a sign of life of the GUI thread);
+- the model's events handed to the GUI thread (ocu.console.events.hand_over), so views are
+  only ever called there;
+- `attach(link)` / `detach()`: the current link fed to the model by the control thread
+  (ocu.core.feed) and told by it that the controls are alive;
+- the GUI thread's heartbeat (a timer): silent past the link's alive timeout less one period
+  while motion is commanded, and the control thread halts the model - the operator's keys
+  and sliders cannot be released through a frozen GUI;
+- `label`: the control thread's rate, worst period and overruns in the status bar.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import cast
+
+from PySide6.QtCore import QObject, QTimer
+
+from ocu.console.events import hand_over
+from ocu.console.model import ConsoleModel
+from ocu.core.feed import LinkFeed
+from ocu.core.guard import Guarded
+from ocu.core.manager import DEFAULT_RATE_HZ, TIMING_WINDOW_S, ControllerManager
+from ocu.link.base import Link
+from ocu.profile import RobotProfile
+from ocu.qt.link import HEARTBEAT_PERIOD_MS
+from ocu.widgets.elided_label import ElidedLabel
+
+# The control thread's timing in the status bar, refreshed this often.
+TIMING_PERIOD_MS = 1000
+LATE_STYLE = "color:#b35c00;"
+
+
+class ConsoleControl(QObject):
+    """The control thread running `model`, and the window's side of it (module docstring)."""
+
+    def __init__(
+        self,
+        model: ConsoleModel,
+        profile: RobotProfile,
+        *,
+        control_hz: float = DEFAULT_RATE_HZ,
+        parent: QObject | None = None,
+    ) -> None:
+        super().__init__(parent)
+        groups = [model.events, model.robot.events]
+        if model.arm is not None:
+            groups.append(model.arm.events)
+        hand_over(*groups)
+        self.lock = threading.RLock()
+        self._feed: LinkFeed | None = None
+        self._link: Link | None = None
+        gui_limit_s = profile.link.gui_alive_timeout_s - HEARTBEAT_PERIOD_MS / 1000.0
+        self.manager = ControllerManager(
+            model,
+            self.lock,
+            read=self._read,
+            hardware=self,
+            rate_hz=control_hz,
+            alive_timeout_s=profile.link.gui_alive_timeout_s,
+            gui_timeout_s=max(gui_limit_s, HEARTBEAT_PERIOD_MS / 1000.0),
+        )
+        self.model: ConsoleModel = cast(
+            ConsoleModel, Guarded(model, self.lock, self.manager.gui_alive)
+        )
+        self._alive_timer = QTimer(self)
+        self._alive_timer.setInterval(HEARTBEAT_PERIOD_MS)
+        self._alive_timer.timeout.connect(self.manager.gui_alive)
+        self.label = ElidedLabel(floor_text="ctl")
+        self.label.setObjectName("control_timing")
+        self._overruns_shown = 0
+        self._timing_timer = QTimer(self)
+        self._timing_timer.setInterval(TIMING_PERIOD_MS)
+        self._timing_timer.timeout.connect(self.show_timing)
+
+    def start(self) -> None:
+        """Start the control thread and the GUI's heartbeat."""
+        self.manager.gui_alive()
+        self._alive_timer.start()
+        self._timing_timer.start()
+        self.manager.start()
+        self.show_timing()
+
+    def shutdown(self) -> None:
+        """Stop the control thread (the model halted first by the window); idempotent."""
+        self._alive_timer.stop()
+        self._timing_timer.stop()
+        self.manager.stop()
+        self.detach()
+
+    # ---- the link ----------------------------------------------------------------------------
+
+    def attach(self, link: Link) -> None:
+        """Feed this link to the model from now on (subscribe before any datagram flows)."""
+        self.detach()
+        self._feed = LinkFeed(link)
+        self._link = link
+
+    def detach(self) -> None:
+        """Stop feeding the current link; what it still had queued is dropped."""
+        feed, self._feed, self._link = self._feed, None, None
+        if feed is not None:
+            feed.close()
+
+    def _read(self, model: ConsoleModel) -> None:
+        # The control thread, under the model's lock: what the current link reported.
+        feed = self._feed
+        if feed is not None:
+            feed.read(model)
+
+    def heartbeat(self) -> None:
+        """The control thread is alive: the link keeps commanded motion going."""
+        link = self._link
+        if link is not None:
+            link.heartbeat()
+
+    # ---- timing --------------------------------------------------------------------------------
+
+    def show_timing(self) -> None:
+        """The control thread's rate, worst period and overruns in the status bar."""
+        timing = self.manager.timing()
+        overran = timing.overruns > self._overruns_shown
+        self._overruns_shown = timing.overruns
+        self.label.setText(
+            f"ctl {timing.measured_hz:.0f} Hz, {1000 * timing.worst_period_s:.0f} ms"
+        )
+        self.label.setToolTip(
+            "The control thread (position control, arm moves, assisted modes, tracking, the\n"
+            f"zones and the command to the robot): {timing.text} in the last "
+            f"{TIMING_WINDOW_S:.0f} s."
+        )
+        # Orange while cycles came late in the last second.
+        self.label.setStyleSheet(LATE_STYLE if overran else "")
