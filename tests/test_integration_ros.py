@@ -28,7 +28,7 @@ from pytestqt.qtbot import QtBot
 
 from ocu.console.model import ConsoleModel
 from ocu.profile import RobotProfile
-from ocu.ros.bridge import BridgeState
+from ocu.ros.diagnostics import BridgeState
 from ocu.ros.environment import missing_ros
 from ocu.ros.master import RosMaster, free_port
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator

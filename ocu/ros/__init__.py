@@ -1,4 +1,5 @@
 """ROS 1 bridge: a ROS-free core (`bridge`), the rospy wrapper (`rosbridge`), the node (`node`).
 
-Importing this package imports no ROS; `ocu.ros.bridge` imports neither ROS nor Qt.
+Importing this package imports no ROS; `ocu.ros.bridge` (with `convert` and `diagnostics`)
+imports neither ROS nor Qt.
 """

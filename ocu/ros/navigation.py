@@ -24,7 +24,8 @@ import numpy as np
 from ocu.nav.navigator import Navigator
 from ocu.nav.odometry import OdometryEstimate
 from ocu.records import SCAN_FROM_ROS, ScanFrame
-from ocu.ros.bridge import BridgeError, VelocitySink, quoted, rotation_of
+from ocu.ros.bridge import VelocitySink
+from ocu.ros.convert import BridgeError, quoted, rotation_of
 
 ODOM_FRAME = "odom"
 BASE_FRAME = "base_link"

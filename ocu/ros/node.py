@@ -28,7 +28,7 @@ from typing import Any, Protocol
 
 from ocu.console.poses import ARM_POSES_NAME, default_config_dir
 from ocu.profile import ProfileError, RobotProfile, load_profile
-from ocu.ros.bridge import (
+from ocu.ros.convert import (
     DEFAULT_CMD_VEL_TIMEOUT_S,
     DEFAULT_RATE_HZ,
     MAX_CMD_VEL_TIMEOUT_S,

@@ -60,21 +60,17 @@ from ocu.records import (
     TelemetryFrame,
     VideoFrame,
 )
-from ocu.ros.bridge import (
-    BridgeCore,
+from ocu.ros.bridge import BridgeCore, StateCallback, VelocitySink
+from ocu.ros.convert import (
     BridgeError,
     BridgeSettings,
-    BridgeState,
-    StateCallback,
     Throttle,
-    VelocitySink,
-    bridge_report,
     camera_name,
     joint_state,
-    link_report,
     quaternion_xyzw,
     quoted,
 )
+from ocu.ros.diagnostics import BridgeState, bridge_report, link_report
 from ocu.ros.environment import ensure_ros_path
 from ocu.ros.navigation import (
     FrameTree,

@@ -7,7 +7,7 @@ import logging
 from typing import Any
 
 from ocu.profile import RobotProfile
-from ocu.ros.bridge import DiagnosticReport
+from ocu.ros.diagnostics import DiagnosticReport
 from ocu.ros.environment import ensure_ros_path
 
 ensure_ros_path()

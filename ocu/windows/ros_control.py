@@ -28,7 +28,7 @@ from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.qt.inbox import to_gui
 from ocu.records import CommandError
-from ocu.ros.bridge import STATE_TEXT, BridgeState
+from ocu.ros.diagnostics import STATE_TEXT, BridgeState
 from ocu.ros.environment import master_online, master_uri, missing_ros
 from ocu.widgets.elided_label import ElidedLabel
 

@@ -16,7 +16,7 @@ import pytest
 from ocu.kinematics.arm import ArmKinematics, ToolPose
 from ocu.model.urdf import load_urdf
 from ocu.profile import RobotProfile
-from ocu.ros.bridge import quaternion_xyzw, rotation_of
+from ocu.ros.convert import quaternion_xyzw, rotation_of
 from ocu.ros.master import RosMaster
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, SimState

@@ -15,24 +15,20 @@ from ocu.control.position import PositionError
 from ocu.kinematics.arm import ArmError, ToolPose
 from ocu.profile import RobotProfile, load_profile
 from ocu.records import JointReading, LinkState, LinkStats
-from ocu.ros.bridge import (
-    BridgeCore,
+from ocu.ros.bridge import BridgeCore
+from ocu.ros.convert import (
     BridgeError,
     BridgeSettings,
-    BridgeState,
     CmdVelTimeout,
-    DiagnosticLevel,
-    LinkGate,
     bound_arm_twist,
-    bridge_report,
     camera_name,
     joint_state,
-    link_report,
     quaternion_xyzw,
     quoted,
     rotation_of,
     twist_to_drive,
 )
+from ocu.ros.diagnostics import BridgeState, DiagnosticLevel, LinkGate, bridge_report, link_report
 
 # The Engineer's chassis channels, by their roles in the shipped profile.
 DRIVE_LINEAR, DRIVE_TURN = load_profile().drive_channels or ("", "")

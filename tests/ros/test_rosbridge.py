@@ -13,7 +13,7 @@ from ocu.control.commands import VelocityLimits
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.records import Command, LinkState
-from ocu.ros.bridge import BridgeState
+from ocu.ros.diagnostics import BridgeState
 from ocu.sim.simulator import RobotSimulator, SimState
 
 if TYPE_CHECKING:
@@ -171,7 +171,7 @@ def test_a_failing_bridge_step_halts_ros_motion_and_the_bridge_goes_on(
 def test_hosted_bridge_learns_link_loss_and_recovery_from_the_link(
     profile: RobotProfile, sim: RobotSimulator, ros_client: None
 ) -> None:
-    from ocu.ros.bridge import LinkGate
+    from ocu.ros.diagnostics import LinkGate
     from ocu.ros.rosbridge import RosBridge
 
     def gate() -> LinkGate:
