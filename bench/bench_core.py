@@ -1,0 +1,302 @@
+"""The control core under load: key press, release and Space to the datagram, the console busy.
+
+    .venv/bin/python bench/bench_core.py [--trials 120] [--hogs 2]
+    .venv/bin/python bench/bench_core.py --baseline-tree /tmp/old-main   # and against main
+
+The simulator runs as its own process (`ocu-sim --extended`, four cameras at 640x480 and
+30 fps through the protocol extension, telemetry at 10 Hz). This process is the console as an
+operator runs it: the main window with every dock, offscreen at 1600x1000, the video in the
+2x2 grid with the profile's correction, the 3D view redrawn 30 times a second (OSMesa), the
+map dock floating beside it. Key events are *posted* to the window, so each waits in the GUI
+thread's queue behind the paints, as an X event does. Measured at the wire (the link's
+DatagramSent, decoded): W press -> the first RCP driving forward; W release -> the first RCP
+with the drive at zero; Space while driving -> the first RCP with every axis at zero (the start
+of the e-stop burst; the robot is at rest when it reads it). Each trial waits a random 5-150 ms
+first, so events land at every phase of the paints. Two phases: the machine as it is, then with
+`--hogs` CPU-bound processes beside the console. With `--baseline-tree DIR` the same benchmark
+runs again on another checkout (`git archive main | tar -x -C DIR`) in a child process, and
+the ratios are printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from bench_console_video import WINDOW_SIZE, cpu_s, wait
+from common import percentile
+from PySide6.QtCore import QCoreApplication, QEvent, QSettings, Qt, QTimer
+from PySide6.QtGui import QKeyEvent
+from PySide6.QtWidgets import QApplication
+
+from ocu.link.live import UdpLink
+from ocu.profile import RobotProfile, load_profile
+from ocu.protocol import RemoteControlPacket
+from ocu.protocol.extended import SEQUENCED_RCP_SIZE, SequencedRcp
+from ocu.protocol.wire import make_codec, make_extension_codec
+from ocu.records import RCP, DatagramSent, LinkEvent, LinkState
+from ocu.sim.launcher import SimulatorProcess
+from ocu.windows.main_window import MainWindow
+
+WAIT_S = 3.0
+FPS = 30
+SIZE_PX = (640, 480)
+HOG = "while True: pass"
+
+
+class WireProbe:
+    """The first RCP leaving the link that matches what a trial waits for (the link's thread)."""
+
+    def __init__(self, profile: RobotProfile) -> None:
+        self.codec = make_codec(profile)
+        # With the extension the link sends sequenced RCPs (the vendor RCP behind a number).
+        self.extended = make_extension_codec(profile)
+        self.axis = profile.channels["drive_linear"].axis
+        self.lock = threading.Lock()
+        self.want: str | None = None  # "moving", "drive zero", "all zero"
+        self.since = 0.0
+        self.found: float | None = None
+
+    def arm(self, want: str) -> float:
+        with self.lock:
+            self.want, self.found = want, None
+            self.since = time.monotonic()
+            return self.since
+
+    def rcp(self, data: bytes) -> RemoteControlPacket:
+        if self.extended is not None and len(data) == SEQUENCED_RCP_SIZE:
+            sequenced = self.extended.decode(data)
+            assert isinstance(sequenced, SequencedRcp)
+            return sequenced.rcp
+        packet = self.codec.decode(data)
+        assert isinstance(packet, RemoteControlPacket)
+        return packet
+
+    def on_event(self, event: LinkEvent) -> None:
+        if not isinstance(event, DatagramSent) or event.kind != RCP:
+            return
+        with self.lock:
+            if self.want is None or event.sent_at < self.since:
+                return
+            packet = self.rcp(event.data)
+            drive = packet.axes[self.axis]
+            hit = (
+                (self.want == "moving" and drive != 0)
+                or (self.want == "drive zero" and drive == 0)
+                or (self.want == "all zero" and not any(packet.axes))
+            )
+            if hit:
+                self.found = event.sent_at
+                self.want = None
+
+
+@dataclass
+class Phase:
+    """What one phase measured (ms)."""
+
+    label: str
+    press_ms: list[float] = field(default_factory=list)
+    release_ms: list[float] = field(default_factory=list)
+    space_ms: list[float] = field(default_factory=list)
+    cpu_percent: float = 0.0
+    control: str = ""
+    model_fps: float = 0.0
+
+    def line(self, name: str, values: list[float]) -> str:
+        if not values:
+            return f"  {name:<16}: none"
+        return (
+            f"  {name:<16}: p50 {percentile(values, 50):6.2f} ms  p99 "
+            f"{percentile(values, 99):7.2f} ms  max {max(values):7.2f} ms  ({len(values)})"
+        )
+
+
+def post_key(window: MainWindow, key: Qt.Key, press: bool, text: str = "") -> None:
+    kind = QEvent.Type.KeyPress if press else QEvent.Type.KeyRelease
+    QCoreApplication.postEvent(window, QKeyEvent(kind, key, Qt.KeyboardModifier.NoModifier, text))
+
+
+def until(app: QApplication, probe: WireProbe, timeout_s: float = WAIT_S) -> float | None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        app.processEvents()
+        with probe.lock:
+            if probe.found is not None:
+                return probe.found
+        time.sleep(0.0005)
+    return None
+
+
+def run_phase(
+    app: QApplication, window: MainWindow, probe: WireProbe, label: str, *, trials: int, seed: int
+) -> Phase:
+    phase = Phase(label)
+    rng = random.Random(seed)
+    renders0 = window.model_view.frames_rendered
+    cpu0, t0 = cpu_s(), time.monotonic()
+    for trial in range(trials):
+        wait(app, rng.uniform(0.005, 0.15))
+        pressed = probe.arm("moving")
+        post_key(window, Qt.Key.Key_W, True, "w")
+        at = until(app, probe)
+        if at is not None:
+            phase.press_ms.append(1000 * (at - pressed))
+        wait(app, rng.uniform(0.03, 0.12))
+        if trial % 4 == 3:
+            stopped = probe.arm("all zero")
+            post_key(window, Qt.Key.Key_Space, True, " ")
+            at = until(app, probe)
+            if at is not None:
+                phase.space_ms.append(1000 * (at - stopped))
+            post_key(window, Qt.Key.Key_Space, False, " ")
+            post_key(window, Qt.Key.Key_W, False, "w")
+            wait(app, 0.05)
+            continue
+        released = probe.arm("drive zero")
+        post_key(window, Qt.Key.Key_W, False, "w")
+        at = until(app, probe)
+        if at is not None:
+            phase.release_ms.append(1000 * (at - released))
+    elapsed = time.monotonic() - t0
+    phase.cpu_percent = 100 * (cpu_s() - cpu0) / elapsed
+    phase.model_fps = (window.model_view.frames_rendered - renders0) / elapsed
+    core = getattr(window, "core", None)
+    if core is not None:
+        phase.control = core.timing().text
+    return phase
+
+
+def hogs(count: int) -> list[subprocess.Popen[bytes]]:
+    return [subprocess.Popen([sys.executable, "-c", HOG]) for _ in range(count)]
+
+
+def measure(args: argparse.Namespace) -> list[Phase]:
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    assert isinstance(app, QApplication)
+    profile = load_profile()
+    probe = WireProbe(profile)
+    sim_args = ["--extended", "--telemetry-hz", "10", "--log-level", "WARNING"]
+    phases = []
+    with SimulatorProcess(None, sim_args) as sim, tempfile.TemporaryDirectory() as config:
+        settings = QSettings(str(Path(config) / "ocu.ini"), QSettings.Format.IniFormat)
+
+        def make_link() -> UdpLink:
+            link = UdpLink(profile, sim.address, extension=True)
+            link.subscribe(probe.on_event)
+            return link
+
+        window = MainWindow(profile, make_link, "simulator", settings)
+        window.resize(*WINDOW_SIZE)
+        window.show()
+        window.activateWindow()
+        for camera in range(len(profile.link.camera_names)):
+            window.video_panel.set_stream_request(camera, *SIZE_PX, FPS)
+        deadline = time.monotonic() + 10.0
+        while window.link_status.state != LinkState.CONNECTED and time.monotonic() < deadline:
+            wait(app, 0.05)
+        window.video_panel.set_grid(True)
+        window.map_dock.setFloating(True)
+        window.map_dock.show()
+        window.model_dock.show()
+        window.model_dock.raise_()
+        print(
+            f"3D view visible: {window.model_view.isVisible()}, map: {window.map_dock.isVisible()}"
+        )
+        redraw = QTimer()
+        redraw.setInterval(1000 // FPS)
+        redraw.timeout.connect(window.model_view.update)
+        redraw.start()
+        wait(app, args.warmup)
+        phases.append(run_phase(app, window, probe, "idle", trials=args.trials, seed=1))
+        procs = hogs(args.hogs)
+        try:
+            wait(app, 1.0)
+            phases.append(
+                run_phase(app, window, probe, f"{args.hogs} hogs", trials=args.trials, seed=2)
+            )
+        finally:
+            for proc in procs:
+                proc.kill()
+                proc.wait()
+        redraw.stop()
+        window.close()
+        window.shutdown()
+        app.processEvents()
+    return phases
+
+
+def report(title: str, phases: list[Phase]) -> None:
+    print(title)
+    for phase in phases:
+        print(
+            f" {phase.label}: console CPU {phase.cpu_percent:.0f} % of a core, 3D view "
+            f"{phase.model_fps:.1f} frames/s{'; ' + phase.control if phase.control else ''}"
+        )
+        print(phase.line("W press -> RCP", phase.press_ms))
+        print(phase.line("release -> zero", phase.release_ms))
+        print(phase.line("Space -> zeros", phase.space_ms))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--trials", type=int, default=120)
+    parser.add_argument("--hogs", type=int, default=2)
+    parser.add_argument("--warmup", type=float, default=3.0)
+    parser.add_argument("--json", help="write the phases here (the baseline's child run)")
+    parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
+    args = parser.parse_args()
+    print(f"{os.cpu_count()} cores; load {os.getloadavg()[0]:.1f} before the run")
+    phases = measure(args)
+    if args.json:
+        Path(args.json).write_text(json.dumps([asdict(p) for p in phases]), encoding="utf-8")
+        return 0
+    report("this tree", phases)
+    if args.baseline_tree:
+        with tempfile.TemporaryDirectory() as out:
+            target = Path(out) / "baseline.json"
+            env = dict(os.environ, PYTHONPATH=args.baseline_tree)
+            subprocess.run(
+                [
+                    sys.executable,
+                    os.path.abspath(__file__),
+                    "--trials",
+                    str(args.trials),
+                    "--hogs",
+                    str(args.hogs),
+                    "--warmup",
+                    str(args.warmup),
+                    "--json",
+                    str(target),
+                ],
+                env=env,
+                check=True,
+                cwd=args.baseline_tree,
+            )
+            base = [Phase(**p) for p in json.loads(target.read_text(encoding="utf-8"))]
+        report(f"baseline tree {args.baseline_tree}", base)
+        print("p99 ratios baseline / this tree:")
+        for ours, theirs in zip(phases, base, strict=True):
+            ratios = []
+            for name in ("press_ms", "release_ms", "space_ms"):
+                a, b = getattr(ours, name), getattr(theirs, name)
+                if a and b:
+                    ratios.append(f"{name[:-3]} {percentile(b, 99) / percentile(a, 99):.2f}x")
+            print(f"  {ours.label}: {', '.join(ratios)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
