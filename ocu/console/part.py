@@ -1,10 +1,11 @@
-"""What the parts of the console model (driving.py, clicktrack.py, inputs.py,
-video.py) use of it.
+"""What the parts of the console model (driving.py, clicktrack.py, inputs.py, video.py) use
+of it.
 
-`ModelPart` declares, for the type checker, the attributes ConsoleModel sets in `__init__`
-and the methods of its channel core that the parts call; ConsoleModel (ocu.console.model)
-inherits every part and defines them, so nothing here runs (as `CalibratorCore` is the
-calibrator's steps' view of the calibration, ocu.calibrate.core).
+Each part subclasses `ModelPart`, as the calibrator's steps subclass `CalibratorCore`
+(ocu.calibrate.core). Here the state and the channel core stay in ConsoleModel
+(ocu.console.model), which inherits every part: `ModelPart` only declares, for the type
+checker, the attributes ConsoleModel sets in `__init__` and the core methods the parts call.
+Nothing in it runs.
 """
 
 from __future__ import annotations
