@@ -21,11 +21,18 @@ press, a slider move, Accept, a switch, a new target). `halt()` zeroes everythin
 burst, for focus loss, minimising, a stalled GUI thread, a lost or closed link.
 
 Driving with a map (`nav`, ocu.nav.navigator): odometry, scans and the occupancy grid are
-fed from the link; the drive pair, once composed from whichever source commands it, passes
-the safety zones last (`_apply_drive`), so keys, sliders, typed values, ROS, the assisted
-modes and any later input are all slowed near an obstacle. The assisted modes (the linear
-shuttle, path following) are one more automatic source: they run in `update()` and yield to
-any operator input, an emergency stop, a halt, LINK LOST and stale odometry.
+fed from the link; the drive pair, composed from whichever source commands it, passes the
+safety zones last, so every input is slowed near an obstacle; the assisted modes are one more
+automatic source, run in `update()` (driving.py says more).
+
+This module holds the core: the state, the channels and how a command is composed and
+published, the operator's sliders, typed values, switches and hotkeys, position targets, the
+stops and `update()`. `ConsoleModel` inherits its parts, one module each: driving.py (the
+drive pair through the zones, waypoints, the assisted modes), clicktrack.py (click-to-track),
+inputs.py (the game controller, a planner through ROS, the arm's channels) and video.py (the
+camera, bit-rate and streams asked for); part.py declares what the parts use of the core,
+channels.py what they all share (`Source`, `ChannelCommand`, `ConsoleEvents`, imported here
+too).
 """
 
 from __future__ import annotations
@@ -33,35 +40,32 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
-from enum import Enum
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
-import numpy as np
-import numpy.typing as npt
-
 from ocu.console.arm import ArmConsole
-from ocu.console.events import Event
-from ocu.console.robot import RobotState
-from ocu.console.tracking import (
-    FRAME_TIMEOUT_S,
-    LOST_TIMEOUT_S,
-    TrackSession,
-    TrackView,
-    camera_axes,
-    click_box,
+from ocu.console.channels import (
+    MANUAL_SOURCES,
+    PAD_AT_REST,
+    ChannelCommand,
+    ConsoleEvents,
+    PadWish,
+    Source,
+    check_finite,
 )
+from ocu.console.clicktrack import ClickToTrack
+from ocu.console.driving import Driving
+from ocu.console.inputs import InputSources
+from ocu.console.robot import RobotState
+from ocu.console.tracking import TrackSession
+from ocu.console.video import VideoRequest
 from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
-from ocu.control.drive import DriveBounds, scale_drive
 from ocu.control.position import PositionController, PositionError
 from ocu.control.tracking import TrackingOptions
 from ocu.kinematics.arm import ArmError, ArmKinematics
 from ocu.model.urdf import UrdfError, load_urdf
-from ocu.nav.assist import AssistError
-from ocu.nav.navigator import Navigator, ZoneState
-from ocu.nav.tracking import ellipse
+from ocu.nav.navigator import Navigator
 from ocu.profile import RobotProfile
 from ocu.protocol.extended import CameraRequest
 from ocu.records import (
@@ -73,91 +77,24 @@ from ocu.records import (
     StatusFrame,
     TelemetryFrame,
 )
-from ocu.video.tracker import TrackState
+
+__all__ = [
+    "DEFAULT_FINE_FACTOR",
+    "MANUAL_SOURCES",
+    "PAD_AT_REST",
+    "ChannelCommand",
+    "ConsoleEvents",
+    "ConsoleModel",
+    "PadWish",
+    "Source",
+]
 
 log = logging.getLogger("ocu.console")
 
 DEFAULT_FINE_FACTOR = 0.25
 
 
-class Source(Enum):
-    """What set a channel's velocity."""
-
-    NONE = "none"
-    SLIDER = "slider"
-    TEXT = "text"
-    HOTKEY = "hotkey"
-    SWITCH = "switch"
-    POSITION = "position"
-    # A planner through the ROS bridge: any manual input on the channel overrides it.
-    ROS = "ros"
-    # The arm in Cartesian space (ocu.console.arm): jogs, pose goals, stored poses.
-    ARM = "arm"
-    # The operator's game controller (ocu.gamepad): a stick or a button held, deadman held.
-    GAMEPAD = "gamepad"
-    # An assisted mode (linear shuttle, path following): any operator input ends it.
-    ASSIST = "assist"
-    # Click-to-track (ocu.console.tracking): the pan and tilt joints keep an object centred;
-    # any operator input ends it.
-    TRACK = "track"
-
-
-MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH, Source.GAMEPAD)
-# What the pad asks of one channel: a stick's fraction of the maximum, a button's direction.
-PadWish = tuple[float, int]
-PAD_AT_REST: PadWish = (0.0, 0)
-
-
-@dataclass(frozen=True)
-class ChannelCommand:
-    """One channel's commanded velocity (m/s or rad/s) and its source."""
-
-    velocity: float = 0.0
-    source: Source = Source.NONE
-
-
-class ConsoleEvents:
-    """Everything a view may subscribe to (the robot's own are on `model.robot.events`)."""
-
-    def __init__(self) -> None:
-        self.channel_changed: Event[[str, ChannelCommand]] = Event()
-        self.command_changed: Event[[]] = Event()
-        self.max_changed: Event[[str, float]] = Event()
-        self.hotkey_speed_changed: Event[[str, float]] = Event()
-        self.estop_requested: Event[[str]] = Event()
-        self.estop_changed: Event[[bool, str]] = Event()
-        self.torch_changed: Event[[bool]] = Event()
-        self.fine_changed: Event[[bool]] = Event()
-        self.held_changed: Event[[frozenset[str]]] = Event()
-        self.targets_changed: Event[[dict[str, float]]] = Event()
-        self.connection_changed: Event[[bool]] = Event()
-        self.help_changed: Event[[bool]] = Event()
-        self.camera_changed: Event[[int | None]] = Event()
-        self.bitrate_changed: Event[[float]] = Event()
-        self.stream_request_changed: Event[[tuple[CameraRequest, ...]]] = Event()
-        self.message: Event[[str]] = Event()
-        self.position_message: Event[[str]] = Event()
-        # Before any operator input or emergency stop takes effect (a host hands control back
-        # from another commander, e.g. ROS, before the operator's command is sent).
-        self.operator_acted: Event[[]] = Event()
-        # Driving with a map: what the safety zones say, the assisted mode running (None)
-        # with a message, the operator's waypoints and shuttle points, an odometry reset.
-        self.zones_changed: Event[[ZoneState]] = Event()
-        self.assist_changed: Event[[str | None, str]] = Event()
-        self.waypoints_changed: Event[[tuple[tuple[float, float], ...]]] = Event()
-        self.shuttle_points_changed: Event[[tuple[tuple[float, float], ...]]] = Event()
-        self.odometry_reset: Event[[]] = Event()
-        # Click-to-track: what to draw (None: not tracking) after every frame, start and stop.
-        self.tracking_changed: Event[[TrackView | None]] = Event()
-
-
-def _check_finite(channel: str, value: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise CommandError(f"{channel}: velocity must be a finite number, got {value!r}")
-    return float(value)
-
-
-class ConsoleModel:
+class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
     """The command (channels, switches, camera, bit-rate, streams), e-stop latch, targets,
     hotkeys and Shift, the velocity limits, and the robot's state."""
 
@@ -278,21 +215,6 @@ class ConsoleModel:
         )
 
     @property
-    def camera(self) -> int | None:
-        """The camera asked for (None: none selected yet)."""
-        return self._camera
-
-    @property
-    def video_bitrate(self) -> float:
-        """The RCP's video bit-rate field."""
-        return self._bitrate
-
-    @property
-    def stream_request(self) -> tuple[CameraRequest, ...]:
-        """What an extended robot is asked to stream, per camera."""
-        return self._streams
-
-    @property
     def is_moving(self) -> bool:
         """Whether any channel is commanded to move."""
         return bool(self.velocities())
@@ -375,7 +297,7 @@ class ConsoleModel:
         checked = {}
         for channel, raw in values.items():
             self._check_channel(channel)
-            value = _check_finite(channel, raw)
+            value = check_finite(channel, raw)
             # The drive pair is bounded together when it is composed (turn radius kept).
             drive = channel in self._drive_request
             checked[channel] = value if drive else self.limits.clamp(channel, value)
@@ -468,39 +390,6 @@ class ConsoleModel:
         self._publish()
         self.events.fine_changed.emit(fine)
 
-    def select_camera(self, camera: int) -> None:
-        """Ask for a camera's stream (the vendor protocol sends one at a time)."""
-        if not 0 <= camera < len(self.profile.link.camera_names):
-            raise CommandError(
-                f"camera {camera} outside 0-{len(self.profile.link.camera_names) - 1}"
-            )
-        if camera == self._camera:
-            return
-        self._camera = camera
-        self.events.camera_changed.emit(camera)
-        self._publish()
-
-    def set_video_bitrate(self, bitrate: float) -> None:
-        """The RCP's video bit-rate field (bits per second, >= 0)."""
-        if not (math.isfinite(bitrate) and bitrate >= 0.0):
-            raise CommandError(f"video bit-rate must be finite and >= 0, got {bitrate!r}")
-        if bitrate == self._bitrate:
-            return
-        self._bitrate = float(bitrate)
-        self.events.bitrate_changed.emit(self._bitrate)
-        self._publish()
-
-    def set_stream_request(self, request: CameraRequest) -> None:
-        """What an extended robot should stream for one camera (size, rate)."""
-        streams = list(self._streams)
-        if not 0 <= request.camera < len(streams):
-            raise CommandError(f"no stream request for camera {request.camera}")
-        if streams[request.camera] == request:
-            return
-        streams[request.camera] = request
-        self._streams = tuple(streams)
-        self.events.stream_request_changed.emit(self._streams)
-
     def set_torch(self, on: bool) -> None:
         """Headlight on or off."""
         if on == self._torch:
@@ -523,7 +412,7 @@ class ConsoleModel:
         """Speed of a channel's hotkeys and switch (None: follow the maximum); returns it."""
         self._check_channel(channel)
         if value is not None:
-            value = min(max(_check_finite(channel, value), 0.0), self.limits.get(channel))
+            value = min(max(check_finite(channel, value), 0.0), self.limits.get(channel))
         self._hotkey_speed[channel] = value
         speed = self.hotkey_speed(channel)
         self.events.hotkey_speed_changed.emit(channel, speed)
@@ -613,92 +502,6 @@ class ConsoleModel:
             self._help_visible = visible
             self.events.help_changed.emit(visible)
 
-    # ---- the game controller (ocu.gamepad, through the window) -----------------------------
-
-    def set_gamepad(
-        self, fractions: Mapping[str, float], held: Mapping[str, int] | None = None
-    ) -> None:
-        """What the pad asks of each channel it maps; a channel left out is at rest.
-
-        `fractions`: a stick's share of the channel's maximum, in [-1, 1]; `held`: a button's
-        direction (-1, 0, 1), at the channel's hotkey speed. A channel becomes the pad's when
-        its wish leaves rest (the latest manual input wins) and follows the wish while the
-        pad holds it. Anything else that takes the channel meanwhile (a key, a slider, a
-        target, a halt, an e-stop) keeps it until the pad's wish is back at rest: a stick
-        still deflected never takes it back by itself.
-        """
-        held = held or {}
-        wishes: dict[str, PadWish] = {}
-        for channel in (*fractions, *held):
-            self._check_channel(channel)
-            fraction = _check_finite(channel, fractions.get(channel, 0.0))
-            direction = held.get(channel, 0)
-            if direction not in (-1, 0, 1):
-                raise ValueError(f"pad direction must be -1, 0 or 1, got {direction!r}")
-            wishes[channel] = (min(max(fraction, -1.0), 1.0), direction)
-        for channel in self._pad:
-            wishes.setdefault(channel, PAD_AT_REST)
-        taking = []
-        for channel, wish in wishes.items():
-            previous = self._pad.get(channel, PAD_AT_REST)
-            self._pad[channel] = wish
-            ours = self._requested(channel).source is Source.GAMEPAD
-            if wish == PAD_AT_REST:
-                self._pad_blocked.discard(channel)
-                if ours:
-                    self._set_channel(channel, 0.0, Source.NONE)
-            elif channel in self._pad_blocked:
-                continue
-            elif ours:
-                self._set_channel(channel, self._pad_velocity(channel), Source.GAMEPAD)
-            elif previous == PAD_AT_REST:
-                taking.append(channel)
-            else:
-                # Taken from the pad while its wish was away from rest.
-                self._pad_blocked.add(channel)
-        if taking:
-            self._operator_acted()
-            for channel in taking:
-                self._take_manual(channel)
-                self._set_channel(channel, self._pad_velocity(channel), Source.GAMEPAD)
-        self._publish()
-
-    def stop_arm(self, reason: str) -> bool:
-        """The arm's automatic motion (a jog, a goal, a stored pose) stops now; True if it
-        was moving. For inputs that started a move and let go (the pad's deadman)."""
-        if self.arm is None:
-            return False
-        moving = any(self._channels[c].source is Source.ARM for c in self.arm.channels)
-        self._stop_arm(reason)
-        self._publish()
-        return moving
-
-    def stop_gamepad(self, reason: str) -> bool:
-        """The pad lets go (deadman released, unplugged, stalled): its channels stop now.
-
-        True if the pad was moving anything; its wishes are at rest afterwards.
-        """
-        moving = self.gamepad_channels
-        self._pad = dict.fromkeys(self._pad, PAD_AT_REST)
-        self._pad_blocked.clear()
-        for channel in moving:
-            self._set_channel(channel, 0.0, Source.NONE)
-        self._publish()
-        if moving:
-            self.events.message.emit(f"gamepad motion stopped: {reason}")
-        return bool(moving)
-
-    @property
-    def gamepad_channels(self) -> list[str]:
-        """Channels the game controller drives now."""
-        return [c for c in self._channels if self._requested(c).source is Source.GAMEPAD]
-
-    def _pad_velocity(self, channel: str) -> float:
-        fraction, direction = self._pad.get(channel, PAD_AT_REST)
-        if direction:
-            return direction * self.hotkey_speed(channel)
-        return fraction * self.limits.get(channel)
-
     # ---- robot input -----------------------------------------------------------------------
 
     def on_telemetry(self, frame: TelemetryFrame) -> None:
@@ -728,207 +531,6 @@ class ConsoleModel:
         """A command the link put on the wire: odometry integrates what was sent."""
         self.nav.on_command(command, sent_at)
 
-    # ---- driving with a map ----------------------------------------------------------------
-
-    @property
-    def waypoints(self) -> tuple[tuple[float, float], ...]:
-        """The operator's waypoints (odometry frame, m) for the path mode."""
-        return self._waypoints
-
-    def set_waypoints(self, points: Sequence[tuple[float, float]]) -> None:
-        """Replace the waypoints (the map's clicks)."""
-        checked = tuple((float(x), float(y)) for x, y in points)
-        if not all(math.isfinite(v) for point in checked for v in point):
-            raise CommandError("waypoints must be finite numbers")
-        self._waypoints = checked
-        self.events.waypoints_changed.emit(checked)
-
-    def add_waypoint(self, x_m: float, y_m: float) -> None:
-        """One more waypoint at the end."""
-        self.set_waypoints((*self._waypoints, (x_m, y_m)))
-
-    @property
-    def shuttle_points(self) -> tuple[tuple[float, float], ...]:
-        """The linear mode's two points (fewer while the operator marks them)."""
-        return self._shuttle
-
-    def add_shuttle_point(self, x_m: float, y_m: float) -> None:
-        """Mark a point for the linear mode; the last two marked count."""
-        if not (math.isfinite(x_m) and math.isfinite(y_m)):
-            raise CommandError("a shuttle point must be finite")
-        self._shuttle = (*self._shuttle, (float(x_m), float(y_m)))[-2:]
-        self.events.shuttle_points_changed.emit(self._shuttle)
-
-    def clear_waypoints(self) -> None:
-        """No waypoints nor shuttle points; a running mode stops."""
-        self.set_waypoints(())
-        self._shuttle = ()
-        self.events.shuttle_points_changed.emit(())
-        self._end_assist("path cleared")
-        self._publish()
-
-    def reset_odometry(self) -> None:
-        """The operator's odometry reset: the robot is at the origin again, sure of it."""
-        self._end_assist("odometry reset")
-        self.nav.reset_odometry()
-        self.set_waypoints(())
-        self._shuttle = ()
-        self.events.shuttle_points_changed.emit(())
-        self.events.odometry_reset.emit()
-        self.events.message.emit("odometry reset: pose (0, 0, 0°)")
-
-    def override_zones(self) -> None:
-        """The deliberate override: the next motion passes the safety zones (pushing a box)."""
-        self.nav.override_zones()
-        self.events.message.emit(
-            "safety zones OVERRIDDEN for the next motion (it ends when the tracks stop)"
-        )
-        self._apply_drive_now()
-        self._emit_zones(self.nav.zones, force=True)
-
-    @property
-    def assist_mode(self) -> str | None:
-        """The assisted mode running: 'linear', 'path' or None."""
-        return self.nav.assist_kind
-
-    def start_linear(
-        self,
-        start_xy: tuple[float, float] | None = None,
-        stop_xy: tuple[float, float] | None = None,
-        cycles: int | None = None,
-    ) -> None:
-        """The linear shuttle between two points (seed 002, Algorithm 5.4), the marked ones
-        by default; CommandError if it cannot start."""
-        if start_xy is None or stop_xy is None:
-            if len(self._shuttle) < 2:
-                raise CommandError("linear mode: mark two points on the map first")
-            start_xy, stop_xy = self._shuttle
-        self._start_assist(
-            lambda: self.nav.start_shuttle(
-                start_xy, stop_xy, max_linear_m_s=self._max_linear(), cycles=cycles
-            ),
-            f"linear mode: shuttling between ({start_xy[0]:.2f}, {start_xy[1]:.2f}) and "
-            f"({stop_xy[0]:.2f}, {stop_xy[1]:.2f})",
-        )
-
-    def start_path(
-        self, waypoints: Sequence[tuple[float, float]] | None = None, *, external: bool = False
-    ) -> None:
-        """Follow waypoints (the operator's when None) with Samson's controller."""
-        points = tuple(self._waypoints if waypoints is None else waypoints)
-        if not points:
-            raise CommandError("no waypoints: click on the map to set some")
-        self._start_assist(
-            lambda: self.nav.start_path(points, external=external),
-            f"path mode: following {len(points)} waypoint(s)",
-            external=external,
-        )
-
-    def start_ellipse(self) -> None:
-        """Seed 002's test: the ellipse of eq. 6.1 (40 s ideal) from where the robot is."""
-        pose = self.nav.estimate().pose
-        self._start_assist(
-            lambda: self.nav.start_trajectory(ellipse(pose)),
-            "path mode: the ellipse of seed 002 (3.6 m x 2 m, 40 s)",
-        )
-
-    def stop_assist(self, reason: str = "operator") -> None:
-        """End the assisted mode; its channels stop."""
-        self._end_assist(reason)
-        self._publish()
-
-    def _start_assist(
-        self, start: Callable[[], None], message: str, *, external: bool = False
-    ) -> None:
-        if self._drive is None:
-            raise CommandError("the profile has no chassis to drive")
-        if not external:
-            # Starting a mode is the operator's act: it takes over from ROS, ends an e-stop.
-            self._operator_acted()
-        for channel in self._drive:
-            self._take_manual(channel)
-        try:
-            start()
-        except AssistError as err:
-            raise CommandError(str(err)) from err
-        self.events.assist_changed.emit(self.nav.assist_kind, message)
-        self.events.message.emit(message)
-
-    def _end_assist(self, reason: str) -> bool:
-        kind = self.nav.assist_kind
-        if not self.nav.stop_assist(reason):
-            self._zero_assist()
-            return False
-        self._zero_assist()
-        text = f"{kind} mode stopped: {reason}"
-        self.events.assist_changed.emit(None, text)
-        self.events.message.emit(text)
-        return True
-
-    def _zero_assist(self) -> None:
-        for channel in self._drive or ():
-            if self._requested(channel).source is Source.ASSIST:
-                self._set_channel(channel, 0.0, Source.NONE)
-
-    def _max_linear(self) -> float:
-        assert self._drive is not None
-        return self.limits.get(self._drive[0])
-
-    def _assist_tick(self, now: float) -> None:
-        link_ok = self.robot.link_state is LinkState.CONNECTED
-        command = self.nav.assist_step(now, link_ok=link_ok)
-        if command is None or self._drive is None:
-            return
-        if command.done:
-            self._zero_assist()
-            self.events.assist_changed.emit(None, command.message)
-            self.events.message.emit(command.message)
-            return
-        linear_name, turn_name = self._drive
-        for name, value in ((linear_name, command.linear_m_s), (turn_name, command.angular_rad_s)):
-            # A channel the operator holds stays the operator's.
-            if self._requested(name).source in (Source.NONE, Source.ASSIST):
-                self._drive_request[name] = ChannelCommand(
-                    float(value), Source.ASSIST if value else Source.NONE
-                )
-        self._apply_drive()
-
-    # ---- a planner (the ROS bridge, through the window) ------------------------------------
-
-    def set_external_velocities(self, values: Mapping[str, float]) -> dict[str, float]:
-        """Velocities from a planner (ROS), bounded like every input; what was applied.
-
-        A channel the operator holds (a key, a slider, a typed value, a switch, a position
-        target) stays the operator's: the latest manual input wins.
-        """
-        checked = {}
-        for channel, raw in values.items():
-            self._check_channel(channel)
-            checked[channel] = _check_finite(channel, raw)
-        applied: dict[str, float] = {}
-        for channel, wanted in checked.items():
-            if self._requested(channel).source not in (Source.NONE, Source.ROS):
-                continue
-            # The drive pair is bounded together when it is composed (turn radius kept).
-            drive = channel in self._drive_request
-            value = wanted if drive else self.limits.clamp(channel, wanted)
-            self._set_channel(channel, value, Source.ROS if value else Source.NONE)
-            applied[channel] = self._channels[channel].velocity
-        self._publish()
-        return applied
-
-    def clear_external(self) -> None:
-        """The planner lost control: every channel it drives stops."""
-        for channel in self._channels:
-            if self._requested(channel).source is Source.ROS:
-                self._set_channel(channel, 0.0, Source.NONE)
-        self._publish()
-
-    @property
-    def external_channels(self) -> list[str]:
-        """Channels a planner drives now."""
-        return [c for c in self._channels if self._requested(c).source is Source.ROS]
-
     def predicted_angles(self, now: float | None = None) -> dict[str, float]:
         """Where the joints are now by the prediction (readings advanced by what was sent)."""
         return self.controller.predicted_angles(self.clock() if now is None else now)
@@ -954,158 +556,6 @@ class ConsoleModel:
         if self.arm is not None:
             self.arm.step(now)
         self._publish(now)
-
-    # ---- click-to-track (ocu.console.tracking; the video view calls these) -----------------
-
-    @property
-    def tracking(self) -> TrackView | None:
-        """What is tracked and where it was last seen (None: not tracking)."""
-        return None if self._tracking is None else self._tracking.view()
-
-    @property
-    def tracking_session(self) -> TrackSession | None:
-        """The tracking session (for its numbers: frames, update time); None when idle."""
-        return self._tracking
-
-    def start_tracking(
-        self, camera: int, pixels: npt.NDArray[np.uint8], point: tuple[float, float]
-    ) -> None:
-        """Follow the object at a normalised point (0..1) of a camera's frame (BGR or BGRA)
-        by turning the joints that carry the camera; CommandError, nothing changed, if it
-        cannot be done (a camera on the chassis, no arm, no readings yet, a bad point)."""
-        if self.arm is None:
-            raise CommandError(self.arm_error or "this robot has no arm to turn a camera")
-        if not 0 <= camera < len(self.profile.cameras):
-            raise CommandError(f"no camera {camera}")
-        if not all(0.0 <= v <= 1.0 and math.isfinite(v) for v in point):
-            raise CommandError(f"point {point!r} outside the frame")
-        now = self.clock()
-        angles = self.controller.predicted_angles(now)
-        axes = camera_axes(self.profile.cameras[camera], self.arm.controller.kinematics, angles)
-        missing = [j for j in (axes.pan_joint, axes.tilt_joint) if j not in angles]
-        if missing:
-            raise CommandError(f"no reading of {', '.join(missing)} yet")
-        channels = (
-            self.controller.channel_of(axes.pan_joint),
-            self.controller.channel_of(axes.tilt_joint),
-        )
-        session = TrackSession(
-            camera,
-            axes,
-            channels,
-            (self.limits.get(channels[0]), self.limits.get(channels[1])),
-            self.tracking_options,
-        )
-        height, width = pixels.shape[:2]
-        session.start(pixels, click_box(point, (width, height)), now)
-        self._end_tracking("a new object was clicked", quiet=True)
-        # Starting is the operator's act: it ends an e-stop latch, a planner, an assisted mode.
-        self._operator_acted()
-        for channel in channels:
-            self._take_manual(channel)
-            self._set_channel(channel, 0.0, Source.TRACK)
-        self._tracking = session
-        name = self.profile.cameras[camera].name
-        self.events.tracking_changed.emit(session.view())
-        self.events.message.emit(
-            f"tracking in the {name} camera with the {axes.pan_joint} and {axes.tilt_joint}: "
-            "any motion input, Space or Esc takes over"
-        )
-        self._publish()
-
-    def on_tracking_frame(
-        self, camera: int, pixels: npt.NDArray[np.uint8], received_at: float
-    ) -> None:
-        """A decoded frame of a camera: the tracker follows the object in it."""
-        session = self._tracking
-        if session is None or camera != session.camera:
-            return
-        now = self.clock()
-        # The picture was taken about half a round trip before it arrived.
-        taken_at = received_at - (self.controller.delay_s or 0.0) / 2.0
-        was = session.result.state
-        result = session.on_frame(pixels, taken_at, self.controller.predicted_angles(taken_at), now)
-        if result.state is not was:
-            if result.state is TrackState.LOST:
-                self.events.message.emit("tracking: object LOST, searching the whole frame")
-            elif result.refound:
-                self.events.message.emit("tracking: object found again")
-        self.events.tracking_changed.emit(session.view())
-
-    def stop_tracking(self, reason: str = "operator") -> bool:
-        """End the tracking; its channels stop. True if it was running."""
-        ended = self._end_tracking(reason)
-        self._publish()
-        return ended
-
-    def _end_tracking(self, reason: str, *, quiet: bool = False) -> bool:
-        session = self._tracking
-        if session is None:
-            return False
-        self._tracking = None
-        for channel in session.channels:
-            if self._requested(channel).source is Source.TRACK:
-                self._set_channel(channel, 0.0, Source.NONE)
-        self.events.tracking_changed.emit(None)
-        if not quiet:
-            self.events.message.emit(f"tracking stopped: {reason}")
-        return True
-
-    def _tracking_tick(self, now: float) -> None:
-        session = self._tracking
-        if session is None:
-            return
-        if self.robot.link_state is LinkState.LOST:
-            self._end_tracking("LINK LOST")
-            return
-        if session.frame_age(now) > FRAME_TIMEOUT_S:
-            session.mark_lost(now)  # no pictures: nothing to steer by
-        lost_s = session.lost_for(now)
-        if lost_s >= LOST_TIMEOUT_S:
-            self._end_tracking(f"object lost for {lost_s:.1f} s")
-            return
-        eventual = self.controller.eventual_angles(now)
-        for channel, velocity in session.velocities(now, eventual, self.controller.delay_s).items():
-            if self._requested(channel).source is Source.TRACK:
-                self._set_channel(channel, self.limits.clamp(channel, velocity), Source.TRACK)
-
-    # ---- the arm (ocu.console.arm calls these) ---------------------------------------------
-
-    def arm_starting(self, *, move: bool) -> None:
-        """The arm takes its channels: the operator acted (e-stop latch, ROS), position targets
-        and held keys on its joints are dropped."""
-        assert self.arm is not None
-        self._operator_acted(keep_arm=True)
-        for channel in self.arm.channels:
-            joint = self._joint_of(channel)
-            if joint is not None and joint in self._targets:
-                self.controller.cancel(joint)
-            self._drop_keys(channel)
-            self._set_channel(channel, 0.0, Source.ARM)
-        self._sync_targets()
-        self._publish()
-
-    def arm_output(self, velocities: Mapping[str, float]) -> None:
-        """The arm's velocities now; its channels return to nobody when it commands nothing."""
-        assert self.arm is not None
-        active = self.arm.controller.active
-        for channel in self.arm.channels:
-            if self._channels[channel].source is not Source.ARM:
-                continue
-            if channel in velocities:
-                self._set_channel(channel, velocities[channel], Source.ARM)
-            else:
-                self._set_channel(channel, 0.0, Source.ARM if active else Source.NONE)
-        self._publish()
-
-    def _stop_arm(self, reason: str) -> None:
-        """The arm stops at once; its channels go to zero."""
-        if self.arm is None:
-            return
-        self.arm.stop(reason)
-        for channel in self.arm.channels:
-            if self._channels[channel].source is Source.ARM:
-                self._set_channel(channel, 0.0, Source.NONE)
 
     # ---- internals -------------------------------------------------------------------------
 
@@ -1205,48 +655,6 @@ class ConsoleModel:
         if command != self._channels[channel]:
             self._channels[channel] = command
             self.events.channel_changed.emit(channel, command)
-
-    def _apply_drive(self) -> None:
-        """Both drive channels from the operator's request, scaled by one factor."""
-        assert self._drive is not None
-        linear_name, turn_name = self._drive
-        linear, turn = self._drive_request[linear_name], self._drive_request[turn_name]
-        channels = self.profile.channels
-        bounds = DriveBounds(
-            max_linear_m_s=self.limits.get(linear_name),
-            max_angular_rad_s=self.limits.get(turn_name),
-            min_linear_m_s=channels[linear_name].min_speed,
-            min_angular_rad_s=channels[turn_name].min_speed,
-        )
-        v, w = scale_drive(linear.velocity, turn.velocity, bounds)
-        # The safety zones come last, whoever commands: keys, sliders, ROS, assisted modes.
-        zones = self.nav.guard(v, w)
-        if zones.decision is not None:
-            v, w = zones.decision.linear_m_s, zones.decision.angular_rad_s
-        self._emit_zones(zones)
-        self._store(linear_name, ChannelCommand(v, linear.source if v else Source.NONE))
-        self._store(turn_name, ChannelCommand(w, turn.source if w else Source.NONE))
-
-    def _apply_drive_now(self) -> None:
-        """Compose the drive pair again (a new scan, a tick) if it is asked to move."""
-        if self._drive is None:
-            return
-        if any(self._drive_request[name].velocity for name in self._drive) or any(
-            self._channels[name].velocity for name in self._drive
-        ):
-            self._apply_drive()
-            self._publish()
-        else:
-            self._emit_zones(self.nav.guard(0.0, 0.0))
-
-    def _emit_zones(self, zones: ZoneState, *, force: bool = False) -> None:
-        if zones.text != self._zone_text or force:
-            self._zone_text = zones.text
-            self.events.zones_changed.emit(zones)
-        limiting = zones.limiting
-        if limiting and not self._zone_limiting:
-            self.events.message.emit(zones.text)
-        self._zone_limiting = limiting
 
     def _zero_all(
         self, *, keep_external: bool = False, keep_gamepad: bool = False, reason: str = "stopped"

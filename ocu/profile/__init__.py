@@ -1,12 +1,13 @@
 """Robot profile: load and validate the TOML file that holds every robot fact.
 
-A package of five modules, read in this order:
+A package of six modules, read in this order:
   keys.py         the vocabulary (the keys each table may hold), wire constants, ProfileError
   hardware.py     what the wire needs (packet IDs, link timing, the extension, video transport,
                   the RCP's velocity channels): the hardware's settings
   description.py  what the robot is (motors, limits, cameras, chassis, navigation, arm) and
                   the whole RobotProfile: the robot's description
-  parse.py        TOML document -> RobotProfile, every error naming the file and the key
+  reader.py       one TOML table read key by key, every error naming the file and the key
+  parse.py        TOML document -> RobotProfile, section by section
   writer.py       RobotProfile's document -> TOML, atomically (ocu calibrate, ocu-sim --scramble)
 Everything public is imported from here (`from ocu.profile import RobotProfile, load_profile`).
 """

@@ -1,5 +1,5 @@
-"""Reading and validating a profile's TOML document into a RobotProfile; errors name the file
-and the key."""
+"""Reading and validating a profile's TOML document into a RobotProfile, section by section
+(each table through reader.py's TableReader); errors name the file and the key."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ import datetime as dt
 import itertools
 import math
 import tomllib
-from collections.abc import Collection
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -67,6 +66,7 @@ from ocu.profile.keys import (
     ProfileError,
     did_you_mean,
 )
+from ocu.profile.reader import TableReader
 
 
 def default_profile_path() -> Path:
@@ -98,103 +98,7 @@ def load_profile_data(path: str | Path | None = None) -> dict[str, Any]:
         raise ProfileError(f"{profile_path}: not valid TOML: {err}") from err
 
 
-class _Reader:
-    """Typed access to a TOML table with error messages that name the key.
-
-    With `keys`, a key outside them is refused at once, before any value is read.
-    """
-
-    def __init__(
-        self,
-        table: dict[str, Any],
-        where: str,
-        keys: Collection[str] | None,
-        unknown: str = "unknown key",
-    ) -> None:
-        self.table = table
-        self.where = where
-        if keys is not None:
-            errors = [
-                f"{where}.{key}: {unknown}; {did_you_mean(key, keys)}"
-                for key in table
-                if key not in keys
-            ]
-            if errors:
-                raise ProfileError("; ".join(errors))
-
-    def _get(self, key: str) -> Any:
-        if key not in self.table:
-            raise ProfileError(f"{self.where}.{key}: missing")
-        return self.table[key]
-
-    def sub(self, key: str, keys: Collection[str] | None, unknown: str = "unknown key") -> _Reader:
-        value = self._get(key)
-        if not isinstance(value, dict):
-            raise ProfileError(f"{self.where}.{key}: must be a table")
-        return _Reader(value, f"{self.where}.{key}", keys, unknown)
-
-    def number(self, key: str, *, low: float | None = None, high: float | None = None) -> float:
-        value = self._get(key)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ProfileError(f"{self.where}.{key}: must be a number, got {value!r}")
-        number = float(value)
-        if not math.isfinite(number):
-            raise ProfileError(f"{self.where}.{key}: must be finite, got {value!r}")
-        if low is not None and number < low:
-            raise ProfileError(f"{self.where}.{key}: must be >= {low}, got {value!r}")
-        if high is not None and number > high:
-            raise ProfileError(f"{self.where}.{key}: must be <= {high}, got {value!r}")
-        return number
-
-    def integer(self, key: str, *, low: int, high: int) -> int:
-        value = self._get(key)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ProfileError(f"{self.where}.{key}: must be an integer, got {value!r}")
-        if not low <= value <= high:
-            raise ProfileError(f"{self.where}.{key}: must be in [{low}, {high}], got {value}")
-        return value
-
-    def string(self, key: str) -> str:
-        value = self._get(key)
-        if not isinstance(value, str) or not value:
-            raise ProfileError(f"{self.where}.{key}: must be a non-empty string")
-        return value
-
-    def optional(self, key: str) -> bool:
-        return key in self.table
-
-    def boolean(self, key: str) -> bool:
-        value = self._get(key)
-        if not isinstance(value, bool):
-            raise ProfileError(f"{self.where}.{key}: must be true or false, got {value!r}")
-        return value
-
-    def choice(self, key: str, choices: tuple[str, ...]) -> str:
-        value = self.string(key)
-        if value not in choices:
-            raise ProfileError(f"{self.where}.{key}: must be one of {choices}, got {value!r}")
-        return value
-
-    def numbers(
-        self, key: str, lengths: tuple[int, ...], *, low: float | None = None
-    ) -> tuple[float, ...]:
-        value = self._get(key)
-        if (
-            not isinstance(value, list)
-            or len(value) not in lengths
-            or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                for v in value
-            )
-        ):
-            sizes = " or ".join(str(n) for n in lengths)
-            raise ProfileError(f"{self.where}.{key}: must be a list of {sizes} finite numbers")
-        if low is not None and any(v < low for v in value):
-            raise ProfileError(f"{self.where}.{key}: every value must be >= {low}")
-        return tuple(float(v) for v in value)
-
-
-def _parse_channel(name: str, reader: _Reader, scales: dict[str, float]) -> Channel:
+def _parse_channel(name: str, reader: TableReader, scales: dict[str, float]) -> Channel:
     axis = reader.integer("axis", low=0, high=AXIS_COUNT - 1)
     scale = reader.string("scale")
     if scale not in scales:
@@ -251,7 +155,7 @@ def _parse_channel(name: str, reader: _Reader, scales: dict[str, float]) -> Chan
     )
 
 
-def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Motor:
+def _parse_motor(name: str, reader: TableReader, channels: dict[str, Channel]) -> Motor:
     device_id = reader.integer("device_id", low=0, high=255)
     channel = reader.string("channel") if reader.optional("channel") else None
     if channel is not None and channel not in channels:
@@ -302,7 +206,7 @@ def _parse_motor(name: str, reader: _Reader, channels: dict[str, Channel]) -> Mo
     )
 
 
-def _parse_extension(reader: _Reader, vendor: FrameTypes) -> ExtensionSettings:
+def _parse_extension(reader: TableReader, vendor: FrameTypes) -> ExtensionSettings:
     types_reader = reader.sub(
         "frame_types", (*EXTENSION_FRAME_TYPE_KEYS, *OPTIONAL_EXTENSION_FRAME_TYPE_KEYS)
     )
@@ -338,7 +242,7 @@ def _parse_extension(reader: _Reader, vendor: FrameTypes) -> ExtensionSettings:
     )
 
 
-def _parse_video(reader: _Reader) -> VideoSettings:
+def _parse_video(reader: TableReader) -> VideoSettings:
     return VideoSettings(
         no_signal_after_s=reader.number("no_signal_after_s", low=0.01),
         battery_warning_percent=reader.number("battery_warning_percent", low=0.0, high=100.0),
@@ -358,7 +262,7 @@ def _parse_video(reader: _Reader) -> VideoSettings:
     )
 
 
-def _parse_camera(name: str, index: int, reader: _Reader) -> CameraSettings:
+def _parse_camera(name: str, index: int, reader: TableReader) -> CameraSettings:
     model = reader.choice("model", CAMERA_MODELS)
     size = reader.numbers("calibration_size_px", (2,), low=1.0)
     if not all(v.is_integer() for v in size):
@@ -388,7 +292,7 @@ def _parse_camera(name: str, index: int, reader: _Reader) -> CameraSettings:
     )
 
 
-def _parse_mount(reader: _Reader) -> CameraMount | None:
+def _parse_mount(reader: TableReader) -> CameraMount | None:
     if not reader.optional("mount_xyz_m"):
         for key in ("mount_yaw_deg", "mount_pitch_deg", "mount_link"):
             if reader.optional(key):
@@ -405,7 +309,7 @@ def _parse_mount(reader: _Reader) -> CameraMount | None:
     return CameraMount((xyz[0], xyz[1], xyz[2]), math.radians(yaw), math.radians(pitch), link)
 
 
-def _ascending(reader: _Reader, key: str, count: int | None, low: float) -> tuple[float, ...]:
+def _ascending(reader: TableReader, key: str, count: int | None, low: float) -> tuple[float, ...]:
     value = reader.table.get(key)
     lengths = (count,) if count is not None else tuple(range(1, 9))
     numbers = reader.numbers(key, lengths, low=low)
@@ -414,7 +318,7 @@ def _ascending(reader: _Reader, key: str, count: int | None, low: float) -> tupl
     return numbers
 
 
-def _parse_navigation(reader: _Reader) -> NavigationSettings:
+def _parse_navigation(reader: TableReader) -> NavigationSettings:
     default = NavigationSettings()
     footprint = Footprint(
         front_m=reader.number("footprint_front_m", low=0.01),
@@ -471,12 +375,12 @@ def _parse_navigation(reader: _Reader) -> NavigationSettings:
     )
 
 
-def _parse_cameras(root: _Reader, names: tuple[str, ...]) -> tuple[CameraSettings, ...]:
+def _parse_cameras(root: TableReader, names: tuple[str, ...]) -> tuple[CameraSettings, ...]:
     # A camera without a table has no calibration and no correction by default.
     tables = (
         root.sub("cameras", names, unknown="not in link.camera_names")
         if root.optional("cameras")
-        else _Reader({}, "profile.cameras", None)
+        else TableReader({}, "profile.cameras", None)
     )
     return tuple(
         _parse_camera(name, index, tables.sub(name, CAMERA_KEYS))
@@ -486,7 +390,7 @@ def _parse_cameras(root: _Reader, names: tuple[str, ...]) -> tuple[CameraSetting
     )
 
 
-def _parse_arm(reader: _Reader, motors: dict[str, Motor]) -> ArmSettings:
+def _parse_arm(reader: TableReader, motors: dict[str, Motor]) -> ArmSettings:
     joints = reader.table.get("joints")
     if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
         raise ProfileError(f"{reader.where}.joints: must be a non-empty list of motor names")
@@ -546,7 +450,7 @@ def _parse_arm(reader: _Reader, motors: dict[str, Motor]) -> ArmSettings:
     )
 
 
-def _link_lost_after_s(link: _Reader) -> float:
+def _link_lost_after_s(link: TableReader) -> float:
     """LINK LOST's delay: longer than one telemetry period (or it would come between any two
     packets), at most LINK_LOST_MAX_S (or it would never come when it matters)."""
     period_s = 1.0 / link.number("telemetry_rate_hz", low=0.01)
@@ -577,7 +481,7 @@ def parse_profile(data: dict[str, Any], source: str = "<profile>") -> RobotProfi
 
 
 def _parse_profile(data: dict[str, Any], source: str) -> RobotProfile:
-    root = _Reader(data, "profile", TOP_KEYS)
+    root = TableReader(data, "profile", TOP_KEYS)
     link = root.sub("link", LINK_KEYS)
     frame_reader = link.sub("frame_types", FRAME_TYPE_KEYS)
     frame_types = FrameTypes(
@@ -696,7 +600,7 @@ def _parse_profile(data: dict[str, Any], source: str) -> RobotProfile:
 
 
 def _parse_measured(
-    root: _Reader, data: dict[str, Any], assumptions: list[str]
+    root: TableReader, data: dict[str, Any], assumptions: list[str]
 ) -> dict[str, Measurement]:
     """The `[measured."key"]` entries; each must name a key the profile holds."""
     if not root.optional("measured"):
@@ -707,7 +611,7 @@ def _parse_measured(
         where = f'profile.measured."{key}"'
         if not isinstance(entry, dict):
             raise ProfileError(f"{where}: must be a table (how, when, residual, ...)")
-        reader = _Reader(entry, where, MEASUREMENT_KEYS)
+        reader = TableReader(entry, where, MEASUREMENT_KEYS)
         value: Any = data
         for part in key.split("."):
             if not isinstance(value, dict) or part not in value:

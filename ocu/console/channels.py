@@ -1,0 +1,95 @@
+"""A channel's command and what set it (`Source`), and the events the console model emits.
+
+Shared by the model (ocu.console.model) and its parts (driving.py, clicktrack.py, inputs.py);
+`ocu.console.model` imports them back, so `from ocu.console.model import Source` still works.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+
+from ocu.console.events import Event
+from ocu.console.tracking import TrackView
+from ocu.nav.navigator import ZoneState
+from ocu.protocol.extended import CameraRequest
+from ocu.records import CommandError
+
+
+class Source(Enum):
+    """What set a channel's velocity."""
+
+    NONE = "none"
+    SLIDER = "slider"
+    TEXT = "text"
+    HOTKEY = "hotkey"
+    SWITCH = "switch"
+    POSITION = "position"
+    # A planner through the ROS bridge: any manual input on the channel overrides it.
+    ROS = "ros"
+    # The arm in Cartesian space (ocu.console.arm): jogs, pose goals, stored poses.
+    ARM = "arm"
+    # The operator's game controller (ocu.gamepad): a stick or a button held, deadman held.
+    GAMEPAD = "gamepad"
+    # An assisted mode (linear shuttle, path following): any operator input ends it.
+    ASSIST = "assist"
+    # Click-to-track (ocu.console.tracking): the pan and tilt joints keep an object centred;
+    # any operator input ends it.
+    TRACK = "track"
+
+
+MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH, Source.GAMEPAD)
+# What the pad asks of one channel: a stick's fraction of the maximum, a button's direction.
+PadWish = tuple[float, int]
+PAD_AT_REST: PadWish = (0.0, 0)
+
+
+@dataclass(frozen=True)
+class ChannelCommand:
+    """One channel's commanded velocity (m/s or rad/s) and its source."""
+
+    velocity: float = 0.0
+    source: Source = Source.NONE
+
+
+class ConsoleEvents:
+    """Everything a view may subscribe to (the robot's own are on `model.robot.events`)."""
+
+    def __init__(self) -> None:
+        self.channel_changed: Event[[str, ChannelCommand]] = Event()
+        self.command_changed: Event[[]] = Event()
+        self.max_changed: Event[[str, float]] = Event()
+        self.hotkey_speed_changed: Event[[str, float]] = Event()
+        self.estop_requested: Event[[str]] = Event()
+        self.estop_changed: Event[[bool, str]] = Event()
+        self.torch_changed: Event[[bool]] = Event()
+        self.fine_changed: Event[[bool]] = Event()
+        self.held_changed: Event[[frozenset[str]]] = Event()
+        self.targets_changed: Event[[dict[str, float]]] = Event()
+        self.connection_changed: Event[[bool]] = Event()
+        self.help_changed: Event[[bool]] = Event()
+        self.camera_changed: Event[[int | None]] = Event()
+        self.bitrate_changed: Event[[float]] = Event()
+        self.stream_request_changed: Event[[tuple[CameraRequest, ...]]] = Event()
+        self.message: Event[[str]] = Event()
+        self.position_message: Event[[str]] = Event()
+        # Before any operator input or emergency stop takes effect (a host hands control back
+        # from another commander, e.g. ROS, before the operator's command is sent).
+        self.operator_acted: Event[[]] = Event()
+        # Driving with a map: what the safety zones say, the assisted mode running (None)
+        # with a message, the operator's waypoints and shuttle points, an odometry reset.
+        self.zones_changed: Event[[ZoneState]] = Event()
+        self.assist_changed: Event[[str | None, str]] = Event()
+        self.waypoints_changed: Event[[tuple[tuple[float, float], ...]]] = Event()
+        self.shuttle_points_changed: Event[[tuple[tuple[float, float], ...]]] = Event()
+        self.odometry_reset: Event[[]] = Event()
+        # Click-to-track: what to draw (None: not tracking) after every frame, start and stop.
+        self.tracking_changed: Event[[TrackView | None]] = Event()
+
+
+def check_finite(channel: str, value: float) -> float:
+    """A velocity as a float; CommandError if it is not a finite number."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise CommandError(f"{channel}: velocity must be a finite number, got {value!r}")
+    return float(value)
