@@ -80,6 +80,9 @@ class ArmHost(Protocol):
 class ArmConsole:
     """The console's arm; see the module docstring."""
 
+    # A part of the console model: the GUI reaches it under the model's lock (ocu.core.guard).
+    guarded = True
+
     def __init__(
         self, controller: ArmController, host: ArmHost, poses_path: Path | None = None
     ) -> None:

@@ -71,6 +71,9 @@ def check_name(name: str) -> str:
 class PoseStore:
     """The profile's poses (read-only) and the operator's (read from and saved to a file)."""
 
+    # A part of the console model: the GUI reaches it under the model's lock (ocu.core.guard).
+    guarded = True
+
     def __init__(
         self,
         builtin: Mapping[str, Mapping[str, float]],

@@ -38,6 +38,9 @@ class RobotEvents:
 class RobotState:
     """The latest telemetry, link state, statistics and status, with a plot history."""
 
+    # A part of the console model: the GUI reaches it under the model's lock (ocu.core.guard).
+    guarded = True
+
     def __init__(
         self,
         profile: RobotProfile,

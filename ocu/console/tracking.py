@@ -144,6 +144,9 @@ def _signs(
 class TrackSession:
     """One object followed in one camera: the tracker and the controller of two joints."""
 
+    # A part of the console model: the GUI reaches it under the model's lock (ocu.core.guard).
+    guarded = True
+
     def __init__(
         self,
         camera: int,

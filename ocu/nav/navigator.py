@@ -92,6 +92,9 @@ NO_ZONES = ZoneState(None, False, False, ZONES_OFF_NO_DATA)
 class Navigator:
     """See the module docstring. `grid=False` skips the occupancy grid (the ROS node)."""
 
+    # A part of the console model: the GUI reaches it under the model's lock (ocu.core.guard).
+    guarded = True
+
     def __init__(
         self,
         profile: RobotProfile,

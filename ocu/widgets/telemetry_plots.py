@@ -107,7 +107,8 @@ class TelemetryPlots(QWidget):
             if not series:
                 continue
             samples = np.array(
-                [(s[0], math.nan if s[1] is None else s[1], s[2], s[3]) for s in series],
+                # tuple(): one copy the control thread cannot change under the loop.
+                [(s[0], math.nan if s[1] is None else s[1], s[2], s[3]) for s in tuple(series)],
                 dtype=np.float64,
             )
             times = samples[:, 0] - latest
