@@ -1,9 +1,10 @@
 """The cockpit: one window of dock widgets, a status bar that is always visible, hotkeys.
 
 The window owns the operator model, the link's lifetime (Connect/Disconnect) and the Qt side
-of the safety rules: focus loss, hiding, minimising, a lost link and closing all stop the
-robot through the model; a stalled GUI thread is caught by the link's own watchdog, and the
-model is halted when the thread comes back so nothing resumes by itself.
+of the safety rules: focus loss, hiding, minimising (ocu.windows.focus), a lost link and
+closing all stop the robot through the model; a stalled GUI thread is caught by the link's own
+watchdog, and the model is halted when the thread comes back so nothing resumes by itself.
+Where the docks go and what the settings remember: ocu.windows.layout.
 
 The window only wires: the link's events (through its Qt adapter) go into the console model,
 the model's command goes to the link, and the views subscribe to the model. Beside the
@@ -24,8 +25,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from PySide6.QtCore import QByteArray, QEvent, QSettings, Qt, QTimer
-from PySide6.QtGui import QAction, QCloseEvent, QHideEvent, QShowEvent
+from PySide6.QtCore import QSettings, Qt, QTimer
+from PySide6.QtGui import QAction, QCloseEvent
 from PySide6.QtWidgets import (
     QApplication,
     QDockWidget,
@@ -50,8 +51,6 @@ from ocu.hotkeys import KeyMap
 from ocu.kinematics.arm import ArmError
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
-from ocu.protocol import ProtocolError
-from ocu.protocol.extended import CameraRequest
 from ocu.qt.collector import pin_garbage_collection
 from ocu.qt.console import ConsoleBinding
 from ocu.qt.gamepad import QtGamepad
@@ -60,9 +59,8 @@ from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
 from ocu.record.recorder import Recorder
 from ocu.record.replay_link import ReplayLink
-from ocu.records import CommandError, LinkState
+from ocu.records import LinkState
 from ocu.widgets.gamepad import GamepadPanel, PadIndicator
-from ocu.widgets.link_graphs import LinkGraphsPanel
 from ocu.widgets.link_status import LinkStatus
 from ocu.widgets.map_view import MapPanel, NavStatus
 from ocu.widgets.model3d import Model3DWidget
@@ -72,20 +70,34 @@ from ocu.widgets.video import VideoPanel
 from ocu.windows.arm import ArmModeIndicator, ArmPanel
 from ocu.windows.calibration import CalibrationLinkFactory, CalibrationPanel
 from ocu.windows.control import ConsoleControl
+from ocu.windows.focus import FocusStops
 from ocu.windows.help_overlay import HelpOverlay
 from ocu.windows.joint_position import JointPositionPanel
 from ocu.windows.key_filter import KeyFilter
+from ocu.windows.layout import (
+    LAYOUT_VERSION,
+    DockLayout,
+    format_stream_setting,
+    parse_stream_setting,
+)
 from ocu.windows.max_velocity import MaxVelocityPanel
 from ocu.windows.ros_control import RosControl
 from ocu.windows.settings_file import SettingsStatus
 from ocu.windows.velocity import VelocityPanel
 
+# The stream settings are ocu.windows.layout's, still importable from here.
+__all__ = [
+    "GIL_SWITCH_INTERVAL_S",
+    "LinkFactory",
+    "MainWindow",
+    "format_stream_setting",
+    "parse_stream_setting",
+]
+
 log = logging.getLogger("ocu.console")
 
 # The 3D view's predicted pose is redrawn this often (about 30 Hz).
 VIEW_PERIOD_MS = 33
-# 2: the Video dock; 3: the Arm dock; 4: the Gamepad and Map docks; 5: Robot check, Calibration
-LAYOUT_VERSION = 5
 # The Calibration dock's default output, beside the settings.
 CALIBRATED_PROFILE_NAME = "calibrated_profile.toml"
 # How far the 3D model's ghost turns the joint the calibration asks about.
@@ -107,34 +119,14 @@ LinkFactory = Callable[[], Link]
 GIL_SWITCH_INTERVAL_S = 0.001
 
 
-STREAMS_KEY = "video/streams"
-
-
-def format_stream_setting(request: CameraRequest) -> str:
-    """A stream request as the settings keep it: "CAMERA:WIDTHxHEIGHT@FPS"."""
-    return f"{request.camera}:{request.width_px}x{request.height_px}@{request.fps}"
-
-
-def parse_stream_setting(text: str) -> CameraRequest:
-    """The stream request of a "CAMERA:WIDTHxHEIGHT@FPS" setting; ValueError if malformed."""
-    try:
-        camera, rest = text.split(":", 1)
-        size, fps = rest.split("@", 1)
-        width, height = size.lower().split("x", 1)
-        request = CameraRequest(int(camera), int(width), int(height), int(fps))
-        request.check()
-    except (ValueError, ProtocolError) as err:
-        raise ValueError(f"not CAMERA:WIDTHxHEIGHT@FPS: {text!r} ({err})") from err
-    return request
-
-
-class MainWindow(QMainWindow):
+class MainWindow(FocusStops, DockLayout, QMainWindow):
     """The operator console; `link_factory` makes a fresh, not yet started link per Connect.
 
     With `replay` (and no link factory) the console shows a recording instead; with a
     `recorder` it has a Record button and records every link it makes. With `pad_mapping`
     it reads game controllers (calibrations from `pad_calibrations`); without, the Gamepad
-    dock shows the default mapping and says the pad is off.
+    dock shows the default mapping and says the pad is off. Its focus stops live in
+    ocu.windows.focus, its dock layout and saved settings in ocu.windows.layout.
     """
 
     def __init__(
@@ -235,28 +227,7 @@ class MainWindow(QMainWindow):
             "calibration_dock", "Calibration", self.calibration_panel
         )
         self.calibration_panel.finished.connect(lambda _result: self._after_calibration())
-        # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
-        # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
-        self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
-        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.video_dock)
-        self.splitDockWidget(self.video_dock, self.joint_dock, Qt.Orientation.Vertical)
-        self.model_dock = add_model_dock(self)
-        self.tabifyDockWidget(self.model_dock, self.max_dock)
-        self.tabifyDockWidget(self.max_dock, self.log_dock)
-        self.tabifyDockWidget(self.log_dock, self.gamepad_dock)
-        self.tabifyDockWidget(self.gamepad_dock, self.robot_check_dock)
-        # The link in graphs, and the command rate (remembered in the settings).
-        self.link_graphs = LinkGraphsPanel(profile, settings)
-        self.link_dock = self._dock("link_dock", "Link", self.link_graphs)
-        self.tabifyDockWidget(self.robot_check_dock, self.link_dock)
-        # The map beside the 3D model: the robot's pose in the room, its arm in the other.
-        self.tabifyDockWidget(self.model_dock, self.map_dock)
-        self.model_dock.raise_()
-        self.resizeDocks(
-            [self.velocity_dock, self.video_dock], [500, 1100], Qt.Orientation.Horizontal
-        )
-        self.resizeDocks([self.velocity_dock, self.model_dock], [440, 490], Qt.Orientation.Vertical)
-        self.resizeDocks([self.video_dock, self.joint_dock], [480, 450], Qt.Orientation.Vertical)
+        self._arrange_docks()
         model_view = self.model_dock.widget()
         assert isinstance(model_view, Model3DWidget)
         self.model_view = model_view
@@ -265,13 +236,7 @@ class MainWindow(QMainWindow):
         if self.model.arm is not None:
             self.arm_panel = ArmPanel(self.model.arm)
             self.arm_dock = self._dock("arm_dock", "Arm", self.arm_panel)
-            self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.arm_dock)
-            self.tabifyDockWidget(self.joint_dock, self.arm_dock)
-            self.joint_dock.raise_()
-        # On the right, so the 3D model stays in view: it shows the joint a device should be.
-        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.calibration_dock)
-        self.tabifyDockWidget(self.joint_dock, self.calibration_dock)
-        self.joint_dock.raise_()
+        self._arrange_joint_tabs()
 
         self.link_status = LinkStatus(self.model, address_text)
         self.statusBar().addPermanentWidget(self.link_status, 1)
@@ -377,23 +342,7 @@ class MainWindow(QMainWindow):
         else:
             self.model.set_connected(False)
 
-    # ---- layout ----------------------------------------------------------------------------
-
-    def _dock(self, name: str, title: str, widget: QWidget) -> QDockWidget:
-        dock = QDockWidget(title, self)
-        dock.setObjectName(name)
-        dock.setWidget(widget)
-        dock.setFeatures(
-            QDockWidget.DockWidgetFeature.DockWidgetMovable
-            | QDockWidget.DockWidgetFeature.DockWidgetFloatable
-            | QDockWidget.DockWidgetFeature.DockWidgetClosable
-        )
-        dock.topLevelChanged.connect(lambda _floating: self._check_focus())
-        return dock
-
-    def docks(self) -> list[QDockWidget]:
-        """Every dock of the console."""
-        return self.findChildren(QDockWidget)
+    # ---- the menu and the replay bar -------------------------------------------------------
 
     def _build_menu(self) -> None:
         view = self.view_menu = self.menuBar().addMenu("&View")
@@ -438,63 +387,6 @@ class MainWindow(QMainWindow):
         self.model.nav.set_time_scale(source.speed)
         source.speed_changed.connect(self.model.nav.set_time_scale)
         self.link_status.set_replay()
-
-    def restore_layout(self) -> bool:
-        """Window geometry and dock layout from the settings; False if none was saved."""
-        geometry = self.settings.value("main_window/geometry")
-        state = self.settings.value("main_window/state")
-        restored = False
-        if isinstance(geometry, QByteArray):
-            restored = self.restoreGeometry(geometry)
-        if isinstance(state, QByteArray):
-            restored = self.restoreState(state, LAYOUT_VERSION) and restored
-        return restored
-
-    def save_layout(self) -> None:
-        """Remember window geometry and dock layout (unless the settings cannot be saved)."""
-        if not self.settings_status.writable:
-            log.warning("window layout not saved (%s)", "; ".join(self.settings_status.notes))
-            return
-        self.settings.setValue("main_window/geometry", self.saveGeometry())
-        self.settings.setValue("main_window/state", self.saveState(LAYOUT_VERSION))
-        self.settings.sync()
-
-    def restore_streams(self) -> None:
-        """The stream request of each camera from the settings (what the operator chose)."""
-        saved = self.settings.value(STREAMS_KEY)
-        if saved is None:
-            return
-        texts = saved if isinstance(saved, list) else [saved]
-        for text in texts:
-            try:
-                request = parse_stream_setting(str(text))
-                self.model.set_stream_request(request)
-            except (ValueError, CommandError) as err:
-                log.warning("settings %s: %s ignored (%s)", STREAMS_KEY, text, err)
-
-    def save_streams(self) -> None:
-        """Remember each camera's stream request."""
-        if not self.settings_status.writable:
-            return
-        self.settings.setValue(
-            STREAMS_KEY, [format_stream_setting(r) for r in self.model.stream_request]
-        )
-
-    def reset_layout(self) -> None:
-        """Back to the default dock layout."""
-        for dock in self.docks():
-            dock.setFloating(False)
-            dock.show()
-        self.restoreState(self._default_state, LAYOUT_VERSION)
-
-    def owns(self, widget: QWidget) -> bool:
-        """Whether a widget belongs to this console (floating docks and dialogs included)."""
-        current: QWidget | None = widget
-        while current is not None:
-            if current is self:
-                return True
-            current = current.parentWidget()
-        return False
 
     # ---- link ------------------------------------------------------------------------------
 
@@ -641,69 +533,7 @@ class MainWindow(QMainWindow):
         # halted the model (ocu.core.feed); ROS agrees, so nothing resumes when it comes back.
         self._override_ros(message)
 
-    # ---- control loop ----------------------------------------------------------------------
-
-    # ---- focus, visibility, closing --------------------------------------------------------
-
-    def _focused(self) -> bool:
-        active = QApplication.activeWindow()
-        return active is not None and self.owns(active)
-
-    def _check_focus(self) -> None:
-        if not self._focused():
-            # A planner the operator watches in another window (rviz) goes on, and so does
-            # a pad whose deadman is held, if its mapping allows the background.
-            self.model.halt(
-                "console lost focus",
-                keep_external=True,
-                keep_gamepad=self.teleop.mapping.background,
-            )
-        self._apply_pad_policy()
-
-    def _apply_pad_policy(self) -> None:
-        """The pad's focus policy (docs/gamepad.md): never while the console cannot be seen;
-        in the background only if its mapping allows it."""
-        if self._shut:
-            return
-        if not self.isVisible() or self.isMinimized():
-            self.teleop.set_active(False, "console hidden or minimised")
-        elif not (self._focused() or self.teleop.mapping.background):
-            self.teleop.set_active(False, "console lost focus")
-        else:
-            self.teleop.set_active(True)
-
-    def _on_focus_window(self, _window: object) -> None:
-        self._check_focus()
-
-    def _on_application_state(self, state: Qt.ApplicationState) -> None:
-        if state != Qt.ApplicationState.ApplicationActive:
-            self.model.halt(
-                "application inactive",
-                keep_external=True,
-                keep_gamepad=self.teleop.mapping.background,
-            )
-        self._apply_pad_policy()
-
-    def changeEvent(self, event: QEvent) -> None:
-        """Minimising or losing activation stops the robot."""
-        if event.type() == QEvent.Type.WindowStateChange:
-            if self.isMinimized():
-                self.model.halt("window minimised")
-            self._apply_pad_policy()
-        elif event.type() == QEvent.Type.ActivationChange and not self.isActiveWindow():
-            self._check_focus()
-        super().changeEvent(event)
-
-    def showEvent(self, event: QShowEvent) -> None:
-        """A console shown again lets the pad engage again (with a fresh deadman press)."""
-        super().showEvent(event)
-        self._apply_pad_policy()
-
-    def hideEvent(self, event: QHideEvent) -> None:
-        """A hidden console commands nothing."""
-        self.model.halt("window hidden")
-        super().hideEvent(event)
-        self._apply_pad_policy()
+    # ---- closing ---------------------------------------------------------------------------
 
     def closeEvent(self, event: QCloseEvent) -> None:
         """Stop, remember the layout, close the link (zeros last)."""
@@ -779,12 +609,3 @@ def _calibration(store: CalibrationStore | None, info: PadInfo) -> PadCalibratio
     except CalibrationError as err:
         log.warning("%s; using SDL's ranges", err)
         return PadCalibration()
-
-
-def add_model_dock(window: MainWindow) -> QDockWidget:
-    """The 3D model dock under the velocity dock: live pose, a ghost at the targets."""
-    widget = Model3DWidget(window.profile)
-    dock = window._dock("model3d_dock", "3D model", widget)
-    window.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, dock)
-    window.splitDockWidget(window.velocity_dock, dock, Qt.Orientation.Vertical)
-    return dock
