@@ -19,6 +19,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ocu.console.poses import CONFIG_DIR_ENV, default_config_dir
+from ocu.core.manager import DEFAULT_RATE_HZ as DEFAULT_CONTROL_HZ
+from ocu.core.manager import MAX_RATE_HZ as MAX_CONTROL_HZ
+from ocu.core.manager import MIN_RATE_HZ as MIN_CONTROL_HZ
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.windows.settings_file import SETTINGS_FILE
 
@@ -110,8 +113,29 @@ def build_parser() -> argparse.ArgumentParser:
         "--pad-map", metavar="FILE", type=Path, help="gamepad mapping merged over the default one"
     )
     parser.add_argument("--no-gamepad", action="store_true", help="do not read game controllers")
+    parser.add_argument(
+        "--control-hz",
+        type=control_rate,
+        default=DEFAULT_CONTROL_HZ,
+        metavar="HZ",
+        help=f"the control thread's rate (default {DEFAULT_CONTROL_HZ:g}; "
+        f"{MIN_CONTROL_HZ:g}-{MAX_CONTROL_HZ:g})",
+    )
     parser.add_argument("--log-level", default="INFO")
     return parser
+
+
+def control_rate(text: str) -> float:
+    """--control-hz: a rate the control thread can keep, in Hz."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not MIN_CONTROL_HZ <= value <= MAX_CONTROL_HZ:
+        raise argparse.ArgumentTypeError(
+            f"{text} Hz is outside {MIN_CONTROL_HZ:g}-{MAX_CONTROL_HZ:g} Hz"
+        )
+    return value
 
 
 def refuse_file(message: str) -> int:
@@ -188,7 +212,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return refuse_file(str(err))
     if args.replay is not None:
         return run_replay(
-            profile, args.replay, args.quit_after, config_dir=config_dir, key_map=key_map
+            profile,
+            args.replay,
+            args.quit_after,
+            config_dir=config_dir,
+            key_map=key_map,
+            control_hz=args.control_hz,
         )
     return run_console(
         profile,
@@ -200,6 +229,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         key_map=key_map,
         record_path=args.record,
         pad_mapping=None if args.no_gamepad else pad_mapping,
+        control_hz=args.control_hz,
     )
 
 
@@ -214,6 +244,7 @@ def run_console(
     key_map: KeyMap,
     record_path: Path | None = None,
     pad_mapping: PadMapping | None = None,
+    control_hz: float = DEFAULT_CONTROL_HZ,
 ) -> int:
     """Start simulator (if no robot), link and window; run the Qt event loop."""
     from PySide6.QtWidgets import QApplication
@@ -277,6 +308,7 @@ def run_console(
             calibration_link=lambda raw: UdpLink(
                 raw, robot_address, extension=False, description=address_text
             ),
+            control_hz=control_hz,
         )
         with last_zeros_guard():
             return run_window(app, window, quit_after_s)
@@ -293,6 +325,7 @@ def run_replay(
     *,
     config_dir: Path,
     key_map: KeyMap,
+    control_hz: float = DEFAULT_CONTROL_HZ,
 ) -> int:
     """The console on a recording: no simulator, no link; plays from the start."""
     from PySide6.QtWidgets import QApplication
@@ -318,6 +351,7 @@ def run_replay(
         key_map,
         replay=source,
         settings_status=settings_status,
+        control_hz=control_hz,
     )
     source.play()
     return run_window(app, window, quit_after_s)

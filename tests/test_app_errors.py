@@ -179,3 +179,20 @@ def test_a_read_only_config_dir_runs_says_so_and_writes_nothing(
         assert f"config directory {config} cannot be written" in result.stderr
     assert "the window layout is not saved this session" in result.stderr
     assert "window layout not saved (" in result.stderr  # said again at exit
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [("2", "2 Hz is outside 5-1000 Hz"), ("fast", "not a number: 'fast'")],
+)
+def test_a_control_rate_it_cannot_keep_is_refused(value: str, expected: str) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "ocu", "--control-hz", value],
+        capture_output=True,
+        text=True,
+        timeout=RUN_TIMEOUT_S,
+        check=False,
+    )
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
+    assert f"argument --control-hz: {expected}" in done.stderr
