@@ -146,6 +146,9 @@ def run_phase(
     phase = Phase(label)
     rng = random.Random(seed)
     renders0 = window.model_view.frames_rendered
+    waits = _lock_waits()
+    if waits is not None:
+        waits.reset()
     cpu0, t0 = cpu_s(), time.monotonic()
     for trial in range(trials):
         wait(app, rng.uniform(0.005, 0.15))
@@ -176,7 +179,21 @@ def run_phase(
     core = getattr(window, "core", None)
     if core is not None:
         phase.control = core.timing().text
+    if waits is not None:
+        phase.control += (
+            f"; GUI calls into the model: {waits.calls}, {waits.slow} waited > 5 ms for the "
+            f"lock, the longest {1000 * waits.worst_s:.1f} ms"
+        )
     return phase
+
+
+def _lock_waits() -> object | None:
+    """The guarded handle's lock statistics (None on a tree without the control core)."""
+    try:
+        from ocu.core.guard import WAITS
+    except ImportError:
+        return None
+    return WAITS
 
 
 def hogs(count: int) -> list[subprocess.Popen[bytes]]:

@@ -16,8 +16,28 @@ callback is a list append, and where the callback runs is the event's business
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
+
+# A call that waited longer than this for the lock is counted as slow.
+SLOW_WAIT_S = 0.005
+
+
+class LockWaits:
+    """How long calls through Guarded handles waited for the model's lock (benchmarks)."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+        self.slow = 0
+        self.worst_s = 0.0
+
+    def reset(self) -> None:
+        """Start counting afresh."""
+        self.calls, self.slow, self.worst_s = 0, 0, 0.0
+
+
+WAITS = LockWaits()
 
 
 class Guarded:
@@ -76,7 +96,13 @@ def _locked(
     method: Callable[..., Any], lock: threading.RLock, touched: Callable[[], None] | None
 ) -> Callable[..., Any]:
     def call(*args: Any, **kwargs: Any) -> Any:
+        asked = time.perf_counter()
         with lock:
+            waited = time.perf_counter() - asked
+            WAITS.worst_s = max(WAITS.worst_s, waited)
+            WAITS.calls += 1
+            if waited > SLOW_WAIT_S:
+                WAITS.slow += 1
             try:
                 return method(*args, **kwargs)
             finally:

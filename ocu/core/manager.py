@@ -67,7 +67,8 @@ class ControlTiming:
     cycles: int  # since start
     measured_hz: float  # cycles in the last second
     worst_period_s: float
-    worst_cycle_s: float  # the longest time one cycle took
+    worst_cycle_s: float  # the longest time one cycle took (its wait for the lock included)
+    worst_wait_s: float  # the longest a cycle waited for the model's lock (the GUI held it)
     overruns: int  # since start
 
     @property
@@ -75,7 +76,8 @@ class ControlTiming:
         """One line for the status bar and the logs."""
         return (
             f"control {self.measured_hz:.0f}/{self.rate_hz:.0f} Hz, worst period "
-            f"{1000 * self.worst_period_s:.1f} ms, cycle {1000 * self.worst_cycle_s:.1f} ms, "
+            f"{1000 * self.worst_period_s:.1f} ms, cycle {1000 * self.worst_cycle_s:.1f} ms "
+            f"(waited {1000 * self.worst_wait_s:.1f} ms for the lock), "
             f"{self.overruns} overrun(s)"
         )
 
@@ -113,11 +115,13 @@ class ControllerManager:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._timing_lock = threading.Lock()
-        self._periods: deque[tuple[float, float, float]] = deque()  # (at, period, cycle)
+        # (at, period, cycle, wait for the lock)
+        self._periods: deque[tuple[float, float, float, float]] = deque()
         self._cycles = 0
         self._overruns = 0
         self.error: BaseException | None = None
         self.failures = 0  # cycles that raised (logged; the thread goes on)
+        self._last_wait_s = 0.0  # how long the last cycle waited for the model's lock
 
     # ---- the thread --------------------------------------------------------------------------
 
@@ -153,7 +157,7 @@ class ControllerManager:
                     log.exception("control cycle failed")
                 ended = self.clock()
                 if last_at is not None:
-                    self._measure(started, started - last_at, ended - started)
+                    self._measure(started, started - last_at, ended - started, self._last_wait_s)
                 last_at = started
                 next_at += self.period_s
                 if next_at < ended:
@@ -172,7 +176,9 @@ class ControllerManager:
         """One control cycle (the thread's; tests may call it directly)."""
         now = self.clock() if now is None else now
         model = self.model
+        asked = time.perf_counter()
         with self.lock:
+            self._last_wait_s = time.perf_counter() - asked
             self.read(model)
             self._stall.alive(now, model.is_moving)
             stalled_s = self._stall.take_stall()
@@ -205,13 +211,13 @@ class ControllerManager:
 
     # ---- timing --------------------------------------------------------------------------------
 
-    def _measure(self, at: float, period: float, cycle: float) -> None:
+    def _measure(self, at: float, period: float, cycle: float, wait: float) -> None:
         with self._timing_lock:
             self._cycles += 1
             if period > OVERRUN_FACTOR * self.period_s:
                 self._overruns += 1
             periods = self._periods
-            periods.append((at, period, cycle))
+            periods.append((at, period, cycle, wait))
             while periods and periods[0][0] < at - TIMING_WINDOW_S:
                 periods.popleft()
 
@@ -228,5 +234,6 @@ class ControllerManager:
             measured_hz=float(len(recent)),
             worst_period_s=max((p[1] for p in periods), default=0.0),
             worst_cycle_s=max((p[2] for p in periods), default=0.0),
+            worst_wait_s=max((p[3] for p in periods), default=0.0),
             overruns=overruns,
         )
