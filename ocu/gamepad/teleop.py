@@ -99,7 +99,8 @@ class GamepadTeleop:
         self._hooks: dict[str, Hook] = {}
         # How to stop what hooks started during this engagement (a stored pose's move).
         self._hook_stops: list[Stopper] = []
-        model.events.estop_changed.connect(self._on_estop)
+        # Direct: the pad lets go in the same step as the e-stop, on whatever thread it came.
+        model.events.estop_changed.connect(self._on_estop, direct=True)
 
     # ---- what the views read ---------------------------------------------------------------
 

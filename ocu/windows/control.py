@@ -18,7 +18,7 @@
 from __future__ import annotations
 
 import threading
-from typing import cast
+from typing import TypeVar, cast
 
 from PySide6.QtCore import QObject, QTimer
 
@@ -31,6 +31,8 @@ from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.qt.link import HEARTBEAT_PERIOD_MS
 from ocu.widgets.elided_label import ElidedLabel
+
+T = TypeVar("T")
 
 # The control thread's timing in the status bar, refreshed this often.
 TIMING_PERIOD_MS = 1000
@@ -78,6 +80,12 @@ class ConsoleControl(QObject):
         self._timing_timer = QTimer(self)
         self._timing_timer.setInterval(TIMING_PERIOD_MS)
         self._timing_timer.timeout.connect(self.show_timing)
+
+    def adopt(self, part: T) -> T:
+        """Another part of the model (the pad's teleop): the GUI reaches it under the model's
+        lock, and its events (`part.events`) call the GUI's callbacks on the GUI thread."""
+        hand_over(part.events)  # type: ignore[attr-defined]
+        return cast(T, Guarded(part, self.lock, self.manager.gui_alive))
 
     def start(self) -> None:
         """Start the control thread and the GUI's heartbeat."""

@@ -193,10 +193,13 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self.max_panel = MaxVelocityPanel(self.model)
         self.joint_panel = JointPositionPanel(self.model)
         self.video_panel = VideoPanel(self.model)
-        self.teleop = GamepadTeleop(
-            self.model,
-            pad_mapping or load_pad_mapping(profile),
-            calibration_for=lambda info: _calibration(pad_calibrations, info),
+        # The pad's teleop is a part of the model: under its lock, its events on this thread.
+        self.teleop = self.control.adopt(
+            GamepadTeleop(
+                self.model,
+                pad_mapping or load_pad_mapping(profile),
+                calibration_for=lambda info: _calibration(pad_calibrations, info),
+            )
         )
         self.teleop.register_hook("pose", self._pad_pose)
         self.gamepad_panel = GamepadPanel(self.teleop, pad_calibrations)
