@@ -31,6 +31,7 @@ import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
@@ -50,6 +51,9 @@ from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import RCP, DatagramSent, LinkEvent, LinkState
 from ocu.sim.launcher import SimulatorProcess
 from ocu.windows.main_window import MainWindow
+
+if TYPE_CHECKING:
+    from ocu.core.guard import LockWaits
 
 WAIT_S = 3.0
 FPS = 30
@@ -187,7 +191,7 @@ def run_phase(
     return phase
 
 
-def _lock_waits() -> object | None:
+def _lock_waits() -> LockWaits | None:
     """The guarded handle's lock statistics (None on a tree without the control core)."""
     try:
         from ocu.core.guard import WAITS
