@@ -40,8 +40,14 @@ HIGH_PRIORITY = Qt.EventPriority.HighEventPriority.value
 class QtGamepad(QObject):
     """Runs the poller and feeds the teleop on the GUI thread; `shutdown()` stops both."""
 
-    def __init__(self, teleop: GamepadTeleop, parent: QObject | None = None) -> None:
+    def __init__(
+        self, teleop: GamepadTeleop, parent: QObject | None = None, *, direct: bool = False
+    ) -> None:
         super().__init__(parent)
+        # direct: the poll thread hands its events and states to the teleop itself - the
+        # console's control core guards the teleop with the model's lock and hands its events
+        # to the GUI thread - so a busy GUI thread (a 3D redraw, video) cannot delay the pad.
+        self.direct = direct
         self.setObjectName("ocu-qt-gamepad")
         self.teleop = teleop
         mapping = teleop.mapping
@@ -79,10 +85,16 @@ class QtGamepad(QObject):
     # ---- the poll thread ---------------------------------------------------------------------
 
     def _on_state_thread(self) -> None:
+        if self.direct:
+            self._take()
+            return
         self._post()
 
     def _on_event_thread(self, event: PadEvent) -> None:
         self._events.append(event)
+        if self.direct:
+            self._take()
+            return
         self._post()
 
     def _post(self) -> None:
@@ -93,7 +105,7 @@ class QtGamepad(QObject):
             self._posted = True
         QCoreApplication.postEvent(self, QEvent(READY), HIGH_PRIORITY)
 
-    # ---- the GUI thread ----------------------------------------------------------------------
+    # ---- the GUI thread (and the poll thread when direct) -------------------------------------
 
     def customEvent(self, event: QEvent) -> None:
         """The poll thread has something new: its events in order, then the newest state."""
@@ -102,6 +114,11 @@ class QtGamepad(QObject):
             return
         with self._post_lock:
             self._posted = False
+        self._take()
+
+    def _take(self) -> None:
+        # The pad's events in order, then its newest state (the GUI thread, or the poll
+        # thread when direct).
         while self._events:
             self._on_event(self._events.popleft())
         state = self.poller.take()

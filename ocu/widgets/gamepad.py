@@ -31,7 +31,7 @@ from ocu.gamepad.calibration import (
     CalibrationStore,
     PadCalibration,
 )
-from ocu.gamepad.pad import AXES, BUTTONS, PadInfo, control_label
+from ocu.gamepad.pad import AXES, BUTTONS, PadInfo, PadState, control_label
 from ocu.gamepad.teleop import GamepadTeleop, PadStatus
 
 REFRESH_MS = 33
@@ -306,7 +306,8 @@ class GamepadPanel(QWidget):
 
         teleop.events.status_changed.connect(lambda _status, _text: self._show_status())
         teleop.events.pad_changed.connect(self._on_pad)
-        teleop.events.state_changed.connect(lambda _state: self._feed())
+        # Each state as it was taken (the event may reach this thread after newer ones came).
+        teleop.events.state_changed.connect(self._feed)
         self._fill_mapping()
         self._show_status()
         self._update_buttons()
@@ -369,8 +370,9 @@ class GamepadPanel(QWidget):
         what = "Calibration saved" if calibration is not None else "Calibration reset"
         self.calibration_message.setText(f"{what}{where}.")
 
-    def _feed(self) -> None:
-        state = self.teleop.state
+    def _feed(self, state: PadState | None = None) -> None:
+        if state is None:
+            state = self.teleop.state
         if self.session is not None and state is not None:
             self.session.feed(dict(zip(AXES, state.axes, strict=True)))
 

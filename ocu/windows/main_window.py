@@ -54,6 +54,7 @@ from ocu.profile import RobotProfile
 from ocu.qt.collector import pin_garbage_collection
 from ocu.qt.console import ConsoleBinding
 from ocu.qt.gamepad import QtGamepad
+from ocu.qt.inbox import to_gui
 from ocu.qt.link import QtLink
 from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
@@ -201,6 +202,7 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
                 calibration_for=lambda info: _calibration(pad_calibrations, info),
             )
         )
+        self._log_from_any_thread = to_gui(self.log_event)
         self.teleop.register_hook("pose", self._pad_pose)
         self.gamepad_panel = GamepadPanel(self.teleop, pad_calibrations)
         self.map_panel = MapPanel(self.model)
@@ -278,7 +280,8 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         # The pad is read only on a live console: a replay commands nothing.
         self.gamepad: QtGamepad | None = None
         if pad_mapping is not None and replay is None:
-            self.gamepad = QtGamepad(self.teleop, self)
+            # The poll thread feeds the guarded teleop itself (ocu.windows.control).
+            self.gamepad = QtGamepad(self.teleop, self, direct=True)
         self.help_overlay = HelpOverlay(
             self.model, self.key_map, self, pad_rows=self.gamepad_panel.help_rows
         )
@@ -570,14 +573,16 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
 
     def _pad_pose(self, name: str) -> Stopper | None:
         """The pad's "pose NAME" button: the arm's stored pose, stopped when the pad lets go."""
+        # The pad's poll thread calls this: the Events dock hears of it on the GUI thread.
+        log = self._log_from_any_thread
         arm = self.model.arm
         if arm is None:
-            self.log_event(self.model.arm_error or "this robot has no arm profile")
+            log(self.model.arm_error or "this robot has no arm profile")
             return None
         try:
             arm.go_to(name)
         except (ArmError, PoseError) as err:
-            self.log_event(f"arm: {err}")
+            log(f"arm: {err}")
             return None
         return lambda reason: self.model.stop_arm(f"stored pose {name} stopped ({reason})")
 
