@@ -117,6 +117,9 @@ class _Release:
     timestamp_ms: int
     real: bool  # taken as the key going up
     stopped: bool  # and it stopped a key the model held
+    # Taken as a repeat's only because the window system said the key was down when we
+    # asked: the next press tells (the same server time: a repeat; another: it went up).
+    asked: bool = False
 
 
 class KeyGuard:
@@ -134,7 +137,9 @@ class KeyGuard:
       keyboard (Qt's xcb flag outlives a release that went to another window: a key the
       window system said was up is pressed anew, whatever Qt says).
     - A release is an auto-repeat's if Qt says so or the window system says the key is
-      still down (an X11 pair's press is generated with its release, before we ask).
+      still down (an X11 pair's press is generated with its release, before we ask) - unless
+      the next press carries another server time: then the key went up and was pressed
+      again before we asked (the GUI thread was busy), and the release counts.
     - An auto-repeat of a key not seen going down blocks it. One that comes sooner than any
       auto-repeat delay after the press acted on means that press was a repeat too: stop.
     """
@@ -184,6 +189,11 @@ class KeyGuard:
         now_ms = float(timestamp_ms) if timestamp_ms else self.clock() * 1000.0
         last = self._last_release.pop(key, None)
         pair = bool(timestamp_ms) and last is not None and last.timestamp_ms == timestamp_ms
+        if last is not None and last.asked and timestamp_ms and last.timestamp_ms and not pair:
+            # That release was real: the key went up and was pressed again before we asked
+            # (a busy GUI thread). It counts as up; this press is judged on its own.
+            self._down.discard(key)
+            self._blocked.discard(key)
         if key in self._blocked:
             return Verdict.BLOCKED
         qt_says_repeat = qt_repeat and not self._keys_known
@@ -213,7 +223,9 @@ class KeyGuard:
             now = self.pressed_now()
             still_down = now is not None and key in now
         if qt_repeat or still_down:
-            self._last_release[key] = _Release(timestamp_ms, real=False, stopped=False)
+            self._last_release[key] = _Release(
+                timestamp_ms, real=False, stopped=False, asked=still_down and not qt_repeat
+            )
             return False
         self._down.discard(key)
         self._blocked.discard(key)

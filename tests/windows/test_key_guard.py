@@ -56,3 +56,22 @@ def test_qt_repeat_flag_of_a_key_the_window_system_said_was_up_is_a_press() -> N
     silent = KeyGuard(lambda: None)
     silent.activated()
     assert silent.press("W", T0, qt_repeat=True) is Verdict.BLOCKED
+
+
+def test_a_release_and_a_new_press_before_the_console_asked_are_both_real() -> None:
+    # A busy GUI thread handles W's release after W went down again: the X server says W is
+    # down, but the press that follows carries another server time - not a repeat pair. The
+    # release counts (W blocked since before is unblocked) and the press drives.
+    down: set[str] = {"W"}
+    guard = KeyGuard(lambda: frozenset(down))
+    guard.activated()
+    assert guard.press("W", T0, qt_repeat=False) is Verdict.BLOCKED
+    assert not guard.release("W", T0 + 100, qt_repeat=False, held=False)  # W down again
+    assert guard.press("W", T0 + 103, qt_repeat=False) is Verdict.PRESS
+    assert guard.blocked == frozenset()
+    # The same with a key the console holds: the new press goes on driving.
+    assert not guard.release("W", T0 + 900, qt_repeat=False, held=True)
+    assert guard.press("W", T0 + 905, qt_repeat=False) is Verdict.PRESS
+    # A true repeat pair (one server time) is still a repeat.
+    assert not guard.release("W", T0 + 1565, qt_repeat=False, held=True)
+    assert guard.press("W", T0 + 1565, qt_repeat=False) is Verdict.REPEAT
