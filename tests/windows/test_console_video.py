@@ -131,10 +131,14 @@ def test_the_operators_single_view_survives_a_lost_link(
     extended_sim.cut_link()
     qtbot.waitUntil(lambda: console.link_status.state == LinkState.LOST, timeout=DEADLINE_MS)
     extended_sim.restore_link()
+    # The model's events reach this (GUI) thread after the control thread changed its state.
     qtbot.waitUntil(
-        lambda: console.link_status.state == LinkState.CONNECTED and panel.extension_active,
+        lambda: (
+            console.link_status.state == LinkState.CONNECTED
+            and panel.extension_active
+            and changes[-1:] == [True]  # the extension came back (the old grid trigger)
+        ),
         timeout=DEADLINE_MS,
     )
-    assert changes[-1:] == [True], changes  # the extension came back (the old grid trigger)
     assert not panel.view.grid
     assert panel.controls.single_button.isChecked()
