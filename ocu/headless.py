@@ -1,8 +1,8 @@
 """The console model bound to a link without Qt: benchmarks, tests and scripts.
 
 `HeadlessConsole` runs the same control core as the window (ocu.core): a `ControllerManager`
-("ocu-control" thread, every `control_period_s`: 50 ms unless told otherwise) feeds the model from the link
-(`LinkFeed`: telemetry, status, scans, statistics, the commands the link sent, the link's
+("ocu-control" thread, every `control_period_s`: 50 ms unless told otherwise) feeds the
+model from the link (`LinkFeed`: telemetry, status, scans, statistics, the commands the link sent, the link's
 state; LINK LOST and the link's own safety stops halt the model), runs its control step
 (position control, assisted modes, the safety zones) and tells the link it is alive; the
 model's command goes to the link whenever it changes and the e-stop reaches the link at once.
