@@ -2,12 +2,13 @@
 
 `HeadlessConsole` runs the same control core as the window (ocu.core): a `ControllerManager`
 ("ocu-control" thread, every `control_period_s`: 50 ms unless told otherwise) feeds the
-model from the link (`LinkFeed`: telemetry, status, scans, statistics, the commands the link sent, the link's
-state; LINK LOST and the link's own safety stops halt the model), runs its control step
-(position control, assisted modes, the safety zones) and tells the link it is alive; the
-model's command goes to the link whenever it changes and the e-stop reaches the link at once.
-Operator input goes through `call()`, which runs a function under the model's lock and
-returns its result - the same lock the control thread holds for each cycle.
+model from the link (`LinkFeed`: telemetry, status, scans, statistics, the commands the
+link sent, the link's state; LINK LOST and the link's own safety stops halt the model),
+runs its control step (position control, assisted modes, the safety zones) and tells the
+link it is alive; the model's command goes to the link whenever it changes and the e-stop
+reaches the link at once. Operator input goes through `call()`, which runs a function
+under the model's lock and returns its result - the same lock the control thread holds for
+each cycle.
 """
 
 from __future__ import annotations
