@@ -219,7 +219,8 @@ def measure(args: argparse.Namespace) -> list[Phase]:
             link.subscribe(probe.on_event)
             return link
 
-        window = MainWindow(profile, make_link, "simulator", settings)
+        extra = {"control_hz": args.control_hz} if args.control_hz else {}
+        window = MainWindow(profile, make_link, "simulator", settings, **extra)
         window.resize(*WINDOW_SIZE)
         window.show()
         window.activateWindow()
@@ -276,6 +277,7 @@ def main() -> int:
     parser.add_argument("--trials", type=int, default=120)
     parser.add_argument("--hogs", type=int, default=2)
     parser.add_argument("--warmup", type=float, default=3.0)
+    parser.add_argument("--control-hz", type=float, help="the control thread's rate (default)")
     parser.add_argument("--json", help="write the phases here (the baseline's child run)")
     parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
     args = parser.parse_args()
