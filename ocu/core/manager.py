@@ -43,7 +43,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("ocu.core")
 
-DEFAULT_RATE_HZ = 100.0
+# 50 Hz: measured (bench/bench_core.py), a 100 Hz Python thread beside the GUI's made the key
+# path 5x slower at p50 beside two CPU hogs (the GIL); 50 Hz cost nothing there.
+DEFAULT_RATE_HZ = 50.0
 MIN_RATE_HZ = 5.0
 MAX_RATE_HZ = 1000.0
 # A period longer than this many nominal periods is an overrun.

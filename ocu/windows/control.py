@@ -1,7 +1,7 @@
 """The window's control core: the console model on the control thread, and the GUI's side of it.
 
 `ConsoleControl` puts a `ConsoleModel` under a `ControllerManager` (ocu.core.manager: the
-"ocu-control" thread at `control_hz`, 100 Hz by default) and gives the window:
+"ocu-control" thread at `control_hz`, 50 Hz by default) and gives the window:
 
 - `model`: the GUI's handle on it (ocu.core.guard: each call and read under the model's lock;
   each call also a sign of life of the GUI thread);
