@@ -98,6 +98,8 @@ def plug(qtbot: QtBot, console: MainWindow, pad: VirtualPad) -> None:
     """Plug the pad in and wait until the console has it."""
     pad.attach()
     qtbot.waitUntil(lambda: console.teleop.status is PadStatus.READY, timeout=DEADLINE_MS)
+    # The poll thread changed the teleop; its event reaches the views on this thread after.
+    qtbot.waitUntil(lambda: console.pad_indicator.text() == "PAD ready", timeout=DEADLINE_MS)
 
 
 def centre_stick(qtbot: QtBot, console: MainWindow, pad: VirtualPad) -> None:
