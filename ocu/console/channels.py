@@ -7,8 +7,9 @@ Shared by the model (ocu.console.model) and its parts (driving.py, clicktrack.py
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from enum import Enum
+from typing import ClassVar
 
 from ocu.console.events import Event
 from ocu.console.tracking import TrackView
@@ -17,26 +18,70 @@ from ocu.protocol.extended import CameraRequest
 from ocu.records import CommandError
 
 
-class Source(Enum):
-    """What set a channel's velocity."""
+class Source:
+    """What set a channel's velocity: one per row of the input mux's table (ocu/control/mux.md).
 
-    NONE = "none"
-    SLIDER = "slider"
-    TEXT = "text"
-    HOTKEY = "hotkey"
-    SWITCH = "switch"
-    POSITION = "position"
+    The built-in ones are attributes; a new source is `Source.define("name")` beside its row.
+    Each name has one instance, so sources compare with `is`.
+    """
+
+    __slots__ = ("value",)
+    _known: ClassVar[dict[str, Source]] = {}
+
+    NONE: ClassVar[Source]
+    SLIDER: ClassVar[Source]
+    TEXT: ClassVar[Source]
+    HOTKEY: ClassVar[Source]
+    SWITCH: ClassVar[Source]
+    POSITION: ClassVar[Source]
     # A planner through the ROS bridge: any manual input on the channel overrides it.
-    ROS = "ros"
+    ROS: ClassVar[Source]
     # The arm in Cartesian space (ocu.console.arm): jogs, pose goals, stored poses.
-    ARM = "arm"
+    ARM: ClassVar[Source]
     # The operator's game controller (ocu.gamepad): a stick or a button held, deadman held.
-    GAMEPAD = "gamepad"
+    GAMEPAD: ClassVar[Source]
     # An assisted mode (linear shuttle, path following): any operator input ends it.
-    ASSIST = "assist"
+    ASSIST: ClassVar[Source]
     # Click-to-track (ocu.console.tracking): the pan and tilt joints keep an object centred;
     # any operator input ends it.
-    TRACK = "track"
+    TRACK: ClassVar[Source]
+
+    value: str
+
+    def __new__(cls, value: str) -> Source:
+        try:
+            return cls._known[value]
+        except KeyError:
+            raise ValueError(f"{value!r} is not a source ({', '.join(cls._known)})") from None
+
+    @classmethod
+    def define(cls, value: str) -> Source:
+        """The source of this name, made on the first call."""
+        known = cls._known.get(value)
+        if known is None:
+            known = object.__new__(cls)
+            object.__setattr__(known, "value", value)
+            cls._known[value] = known
+        return known
+
+    @classmethod
+    def all(cls) -> tuple[Source, ...]:
+        """Every source defined so far."""
+        return tuple(cls._known.values())
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError("a Source cannot be changed")
+
+    def __repr__(self) -> str:
+        return f"Source({self.value!r})"
+
+    def __reduce__(self) -> tuple[Callable[[str], Source], tuple[str]]:
+        return (Source.define, (self.value,))
+
+
+_BUILT_IN = ("none", "slider", "text", "hotkey", "switch", "position", "ros", "arm", "gamepad")
+for _name in (*_BUILT_IN, "assist", "track"):
+    setattr(Source, _name.upper(), Source.define(_name))
 
 
 MANUAL_SOURCES = (Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH, Source.GAMEPAD)

@@ -182,7 +182,7 @@ class Driving(ModelPart):
         linear_name, turn_name = self._drive
         for name, value in ((linear_name, command.linear_m_s), (turn_name, command.angular_rad_s)):
             # A channel the operator holds stays the operator's.
-            if self._requested(name).source in (Source.NONE, Source.ASSIST):
+            if self.mux.may_take(Source.ASSIST.value, self._requested(name).source.value):
                 self._drive_request[name] = ChannelCommand(
                     float(value), Source.ASSIST if value else Source.NONE
                 )

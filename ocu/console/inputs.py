@@ -108,33 +108,72 @@ class InputSources(ModelPart):
         A channel the operator holds (a key, a slider, a typed value, a switch, a position
         target) stays the operator's: the latest manual input wins.
         """
-        checked = {}
-        for channel, raw in values.items():
-            self._check_channel(channel)
-            checked[channel] = check_finite(channel, raw)
-        applied: dict[str, float] = {}
-        for channel, wanted in checked.items():
-            if self._requested(channel).source not in (Source.NONE, Source.ROS):
-                continue
-            # The drive pair is bounded together when it is composed (turn radius kept).
-            drive = channel in self._drive_request
-            value = wanted if drive else self.limits.clamp(channel, wanted)
-            self._set_channel(channel, value, Source.ROS if value else Source.NONE)
-            applied[channel] = self._channels[channel].velocity
-        self._publish()
-        return applied
+        return self.set_source_velocities(Source.ROS, values)
 
     def clear_external(self) -> None:
         """The planner lost control: every channel it drives stops."""
-        for channel in self._channels:
-            if self._requested(channel).source is Source.ROS:
-                self._set_channel(channel, 0.0, Source.NONE)
-        self._publish()
+        self.clear_source(Source.ROS)
 
     @property
     def external_channels(self) -> list[str]:
         """Channels a planner drives now."""
-        return [c for c in self._channels if self._requested(c).source is Source.ROS]
+        return self.source_channels(Source.ROS)
+
+    # ---- any source of the mux's table (a planner, a remote client) ------------------------
+
+    def set_source_velocities(
+        self, source: Source, values: Mapping[str, float]
+    ) -> dict[str, float]:
+        """Velocities from `source`, bounded like every input; what was applied.
+
+        A channel goes to the source only when the mux's table lets it take the channel from
+        whoever holds it (ocu/control/mux.md: the priorities); the others are left out of the
+        result. A source with a timeout in seconds stops that long after this call unless
+        called again. For the manual sources use their own methods.
+        """
+        rule = self.mux.rule(source.value)
+        if rule.manual:
+            raise ValueError(f"set_source_velocities takes no manual source ({source.value})")
+        checked = {}
+        for channel, raw in values.items():
+            self._check_channel(channel)
+            checked[channel] = check_finite(channel, raw)
+        self._fed_at[source] = self.clock()
+        applied: dict[str, float] = {}
+        for channel, wanted in checked.items():
+            if not self.mux.may_take(source.value, self._requested(channel).source.value):
+                continue
+            # The drive pair is bounded together when it is composed (turn radius kept).
+            drive = channel in self._drive_request
+            value = wanted if drive else self.limits.clamp(channel, wanted)
+            self._set_channel(channel, value, source if value else Source.NONE)
+            applied[channel] = self._channels[channel].velocity
+        self._publish()
+        return applied
+
+    def clear_source(self, source: Source, reason: str = "") -> None:
+        """Every channel `source` drives stops."""
+        for channel in self._channels:
+            if self._requested(channel).source is source:
+                self._set_channel(channel, 0.0, Source.NONE)
+        self._fed_at.pop(source, None)
+        self._publish()
+        if reason:
+            self.events.message.emit(f"{source.value} stopped: {reason}")
+
+    def source_channels(self, source: Source) -> list[str]:
+        """Channels `source` drives now."""
+        return [c for c in self._channels if self._requested(c).source is source]
+
+    def _expire_sources(self, now: float) -> None:
+        """Sources with a timeout in seconds stop that long after their last input."""
+        for name, timeout_s in self.mux.timed():
+            source = Source(name)
+            fed_at = self._fed_at.get(source)
+            if fed_at is not None and now - fed_at > timeout_s:
+                del self._fed_at[source]
+                if self.source_channels(source):
+                    self.clear_source(source, f"no input for {timeout_s:g} s")
 
     # ---- the arm (ocu.console.arm calls these) ---------------------------------------------
 

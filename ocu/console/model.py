@@ -61,6 +61,7 @@ from ocu.console.tracking import TrackSession
 from ocu.console.video import VideoRequest
 from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
+from ocu.control.mux import OPERATOR, InputMux, MuxError
 from ocu.control.position import PositionController, PositionError
 from ocu.control.tracking import TrackingOptions
 from ocu.kinematics.arm import ArmError, ArmKinematics
@@ -92,6 +93,7 @@ __all__ = [
 log = logging.getLogger("ocu.console")
 
 DEFAULT_FINE_FACTOR = 0.25
+OPERATOR_TOOK_OVER = "operator took over"
 
 
 class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
@@ -106,6 +108,7 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
         clock: Callable[[], float] = time.monotonic,
         arm: ArmKinematics | None = None,
         arm_poses_path: Path | None = None,
+        mux: InputMux | None = None,
     ) -> None:
         if not 0.0 < fine_factor <= 1.0:
             raise ValueError(f"fine_factor must be in (0, 1], got {fine_factor!r}")
@@ -187,6 +190,18 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
             else:
                 self.arm = ArmConsole(controller, self, arm_poses_path)
                 self.arm.events.message.connect(self.events.message.emit, direct=True)
+        # Who may command a channel and what stops whom: the table ocu/control/mux.md
+        # (docs/console.md, "Who commands a channel"); each source registers its stop.
+        self.mux = mux if mux is not None else InputMux.shipped()
+        self._fed_at: dict[Source, float] = {}
+        self._pad_background = False
+        for zeroed in (Source.SLIDER, Source.TEXT, Source.SWITCH, Source.GAMEPAD, Source.ROS):
+            self.mux.register(zeroed.value, self._zeroer(zeroed))
+        self.mux.register(Source.HOTKEY.value, self._release_held)
+        self.mux.register(Source.POSITION.value, self._stop_position)
+        self.mux.register(Source.ARM.value, self._arm_stop)
+        self.mux.register(Source.ASSIST.value, self._end_assist)
+        self.mux.register(Source.TRACK.value, self._end_tracking)
 
     # ---- state -----------------------------------------------------------------------------
 
@@ -459,7 +474,7 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
         """Link e-stop at once, everything to zero, targets cancelled, latched until acted."""
         self.events.operator_acted.emit()
         self.events.estop_requested.emit(reason)
-        self._zero_all(reason=f"EMERGENCY STOP ({reason})")
+        self._zero_all(lock="e-stop", reason=f"EMERGENCY STOP ({reason})")
         self._estop_reason = reason
         if not self._estopped:
             self._estopped = True
@@ -467,13 +482,16 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
         self._publish()
         self.events.message.emit(f"EMERGENCY STOP ({reason})")
 
-    def halt(self, reason: str, *, keep_external: bool = False, keep_gamepad: bool = False) -> bool:
-        """Stop all motion without the e-stop burst; True if anything was moving or held.
+    def halt(self, reason: str, *, lock: str | None = None, pad_background: bool = False) -> bool:
+        """Stop motion without the e-stop burst; True if anything was moving or held.
 
-        With `keep_external`, channels a planner drives (ROS) go on: the console losing focus
-        stops the operator's input, not a planner the operator may be watching in rviz. With
-        `keep_gamepad`, so do the channels the game controller drives (its deadman is held,
-        and it reads the pad whatever window has the focus: docs/gamepad.md).
+        `lock` names a column of the mux's table (ocu/control/mux.md): "focus lost" (a
+        planner the operator watches in rviz goes on, and so does the pad when
+        `pad_background`: its deadman is held and its mapping lets it drive in the
+        background, docs/gamepad.md), "GUI silent" (what the GUI feeds stops; position
+        targets, the arm's moves, the pad and planners go on), "LINK LOST". None: every
+        source stops (the window hidden or closed, a disconnect, a stalled control thread,
+        the link's own stops).
         """
         active = (
             bool(self.held_keys)
@@ -481,7 +499,7 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
             or bool(self._targets)
             or self._tracking is not None
         )
-        self._zero_all(keep_external=keep_external, keep_gamepad=keep_gamepad, reason=reason)
+        self._zero_all(lock=lock, pad_background=pad_background, reason=reason)
         self._publish()
         if active:
             self.events.message.emit(f"motion stopped: {reason}")
@@ -538,6 +556,7 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
     def update(self, now: float | None = None) -> None:
         """One position-control step: merge the controller's velocities into the channels."""
         now = self.clock() if now is None else now
+        self._expire_sources(now)
         self._assist_tick(now)
         self._tracking_tick(now)
         # The robot moves, scans come: the zones judge the drive command again.
@@ -564,17 +583,65 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
             raise CommandError(f"unknown velocity channel {channel!r}")
 
     def _operator_acted(self, *, keep_arm: bool = False) -> None:
-        if not keep_arm and self.arm is not None and self.arm.controller.moving_to is not None:
-            # A move is automatic: any operator motion input stops it.
-            self._stop_arm("operator input")
+        """A motion input of the operator: the sources the mux's table says stop for it
+        stop (a planner, an assisted mode, tracking, an arm moving to a goal), the e-stop
+        latch lets go."""
         self.events.operator_acted.emit()
-        self._end_tracking("operator took over")
-        # The operator's input wins over a planner's and an assisted mode, at once.
-        for channel in self._channels:
-            if self._requested(channel).source is Source.ROS:
-                self._set_channel(channel, 0.0, Source.NONE)
-        self._end_assist("operator took over")
+        stopped = self.mux.stopped_by(OPERATOR, self._holds)
+        if keep_arm and Source.ARM.value in stopped:
+            stopped.remove(Source.ARM.value)
+        self._stop_sources(stopped, OPERATOR_TOOK_OVER)
         self.release_estop()
+
+    def _stop_sources(self, stopped: list[str], reason: str) -> None:
+        """Stop these sources (their registered stops, in the table's order), and zero
+        whatever channel one of them still holds."""
+        for source in stopped:
+            self.mux.stop(source, reason)
+        for channel in self._channels:
+            if self._requested(channel).source.value in stopped:
+                self._set_channel(channel, 0.0, Source.NONE)
+
+    def _holds(self, source: str, condition: str) -> bool:
+        """Whether a `keeps if <condition>` of the mux's table holds now."""
+        if condition == "background":
+            return self._pad_background
+        if condition == "external":
+            return self.nav.assist_external
+        moving_to = self.arm.controller.moving_to if self.arm is not None else None
+        if condition == "a move":
+            return moving_to is not None
+        if condition == "a jog":
+            return moving_to is None
+        raise MuxError(f"{self.mux.origin}: the model knows no condition {condition!r}")
+
+    def _zeroer(self, source: Source) -> Callable[[str], None]:
+        """A source's stop that zeroes the channels it commands."""
+
+        def zero(_reason: str) -> None:
+            for channel in self._channels:
+                if self._requested(channel).source is source:
+                    self._set_channel(channel, 0.0, Source.NONE)
+
+        return zero
+
+    def _release_held(self, _reason: str) -> None:
+        """The hotkeys' stop: every held key is let go (the caller tells the views)."""
+        channels = {channel for channel, _ in self._held.values()}
+        self._held.clear()
+        for channel in channels:
+            self._apply_hotkeys(channel)
+        self._zeroer(Source.HOTKEY)(_reason)
+
+    def _arm_stop(self, reason: str) -> None:
+        """The arm's stop (a move stops for operator input as "operator input")."""
+        self._stop_arm("operator input" if reason == OPERATOR_TOOK_OVER else reason)
+
+    def _stop_position(self, _reason: str) -> None:
+        """Position control's stop: every target cancelled, its channels zeroed."""
+        self.controller.cancel()
+        self._sync_targets()
+        self._zeroer(Source.POSITION)(_reason)
 
     def release_estop(self) -> None:
         """The operator acts again: the e-stop latch lets commands through once more."""
@@ -657,25 +724,18 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
             self.events.channel_changed.emit(channel, command)
 
     def _zero_all(
-        self, *, keep_external: bool = False, keep_gamepad: bool = False, reason: str = "stopped"
+        self, *, lock: str | None = None, pad_background: bool = False, reason: str = "stopped"
     ) -> None:
         had_keys = bool(self.held_keys)
-        self._held.clear()
-        self._end_tracking(reason)
-        self._stop_arm(reason)
+        self._pad_background = pad_background
+        try:
+            stopped = (
+                self.mux.stopped_by(lock, self._holds) if lock is not None else self.mux.sources
+            )
+        finally:
+            self._pad_background = False
+        self._stop_sources(list(stopped), reason)
         self.nav.cancel_override()
-        if not (keep_external and self.nav.assist_external):
-            self._end_assist(reason)
-        self.controller.cancel()
-        self._sync_targets()
-        for channel in self._channels:
-            source = self._requested(channel).source
-            if (
-                keep_external
-                and (source is Source.ROS or (source is Source.ASSIST and self.nav.assist_external))
-            ) or (keep_gamepad and source is Source.GAMEPAD):
-                continue
-            self._set_channel(channel, 0.0, Source.NONE)
         if had_keys:
             self.events.held_changed.emit(self.held_keys)
 

@@ -18,6 +18,7 @@ from ocu.console.channels import ChannelCommand, ConsoleEvents, PadWish, Source
 from ocu.console.robot import RobotState
 from ocu.console.tracking import TrackSession
 from ocu.control.commands import VelocityLimits
+from ocu.control.mux import InputMux
 from ocu.control.position import PositionController
 from ocu.control.tracking import TrackingOptions
 from ocu.nav.navigator import Navigator
@@ -34,6 +35,8 @@ class ModelPart:
     robot: RobotState
     limits: VelocityLimits
     controller: PositionController
+    mux: InputMux
+    _fed_at: dict[Source, float]
     nav: Navigator
     arm: ArmConsole | None
     arm_error: str

@@ -190,7 +190,7 @@ class ControllerManager:
             gui_silent_s = self._gui_silent(now)
             if gui_silent_s is not None:
                 self._gui_moving = False
-                model.halt(f"GUI thread silent for {gui_silent_s:.2f} s")
+                model.halt(f"GUI thread silent for {gui_silent_s:.2f} s", lock="GUI silent")
             model.update(now)
         if self.hardware is not None:
             self.hardware.heartbeat()

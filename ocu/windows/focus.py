@@ -38,12 +38,12 @@ class FocusStops(QMainWindow):
 
     def _check_focus(self) -> None:
         if not self._focused():
-            # A planner the operator watches in another window (rviz) goes on, and so does
-            # a pad whose deadman is held, if its mapping allows the background.
+            # The mux's table (ocu/control/mux.md) says what goes on: a planner the operator
+            # watches in another window (rviz), a pad whose mapping allows the background.
             self.model.halt(
                 "console lost focus",
-                keep_external=True,
-                keep_gamepad=self.teleop.mapping.background,
+                lock="focus lost",
+                pad_background=self.teleop.mapping.background,
             )
         self._apply_pad_policy()
 
@@ -66,8 +66,8 @@ class FocusStops(QMainWindow):
         if state != Qt.ApplicationState.ApplicationActive:
             self.model.halt(
                 "application inactive",
-                keep_external=True,
-                keep_gamepad=self.teleop.mapping.background,
+                lock="focus lost",
+                pad_background=self.teleop.mapping.background,
             )
         self._apply_pad_policy()
 

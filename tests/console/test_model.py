@@ -424,7 +424,7 @@ def test_a_planner_drives_free_channels_and_the_operator_always_wins(
     with pytest.raises(CommandError):
         model.set_external_velocities({"waist": math.nan})
     # Focus lost (halt keeping the planner): the operator's motion stops, the planner's not.
-    model.halt("focus lost", keep_external=True)
+    model.halt("focus lost", lock="focus lost")
     assert model.velocities() == {"waist": model.limits.get("waist")}
     # Any manual input overrides the planner on every channel at once.
     model.hotkey_down("Y", "shoulder", 1)
@@ -509,7 +509,7 @@ def test_halt_keeps_the_pad_only_when_asked_and_the_pad_waits_for_rest(
 ) -> None:
     model.set_gamepad({"neck": 0.5}, {"flippers": 1})
     model.hotkey_down("W", "drive_linear", 1)
-    assert model.halt("console lost focus", keep_gamepad=True)
+    assert model.halt("console lost focus", lock="focus lost", pad_background=True)
     assert set(model.velocities()) == {"neck", "flippers"}
     assert model.velocities()["flippers"] == model.hotkey_speed("flippers")
     model.halt("window hidden")
