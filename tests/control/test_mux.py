@@ -39,8 +39,7 @@ def with_cell(source: str, column: str, value: str, text: str = SHIPPED) -> str:
         cells = [c.strip() for c in row.strip("|").split("|")]
         if cells[0] == source:
             cells[index] = value
-            row = "| " + " | ".join(cells) + " |"
-        out.append(row)
+        out.append("| " + " | ".join(cells) + " |")
     return "\n".join(out) + "\n"
 
 
@@ -58,12 +57,17 @@ def test_the_shipped_rules() -> None:
     assert mux.sources == tuple(s.value for s in built_in)
     # The latest manual input wins; automatic sources and planners never take a channel
     # from the operator; a planner yields to everything, an automatic source to no planner.
-    assert mux.may_take("slider", "hotkey") and mux.may_take("gamepad", "slider")
-    assert mux.may_take("hotkey", "position") and mux.may_take("switch", "ros")
-    assert not mux.may_take("ros", "position") and not mux.may_take("ros", "slider")
-    assert not mux.may_take("assist", "hotkey") and mux.may_take("assist", "ros")
+    assert mux.may_take("slider", "hotkey")
+    assert mux.may_take("gamepad", "slider")
+    assert mux.may_take("hotkey", "position")
+    assert mux.may_take("switch", "ros")
+    assert not mux.may_take("ros", "position")
+    assert not mux.may_take("ros", "slider")
+    assert not mux.may_take("assist", "hotkey")
+    assert mux.may_take("assist", "ros")
     assert not mux.may_take("position", "arm")
-    assert mux.may_take("ros", "none") and mux.may_take("ros", "ros")
+    assert mux.may_take("ros", "none")
+    assert mux.may_take("ros", "ros")
     never = lambda source, condition: False  # noqa: E731
     always = lambda source, condition: True  # noqa: E731
     assert mux.stopped_by("e-stop", always) == list(mux.sources)
@@ -93,7 +97,7 @@ def test_the_shipped_rules() -> None:
         (with_cell("slider", OPERATOR, "stops"), r"'slider', column any operator input"),
         (with_cell("ros", "timeout", "-1"), r"'ros', column timeout: gui, pad, ros, - or"),
         (with_cell("ros", "timeout", "nan"), r"'ros', column timeout"),
-        (SHIPPED + "| ros | planner | 1 | ros | stops | keeps | keeps | stops | stops |\n", "second"),
+        (SHIPPED + "| ros | planner | 1 | ros | stops | keeps | keeps | stops | stops |", "second"),
         (SHIPPED + "| x | planner | 1 | ros | stops |\n", r"table row 11: 5 cells"),
     ],
 )
@@ -194,7 +198,8 @@ def test_a_new_source_plugs_in_with_a_row_and_a_registration(profile: RobotProfi
     model.halt("console lost focus", lock="focus lost")
     assert model.velocities() == {"drive_linear": 0.2}
     model.emergency_stop()
-    assert model.velocities() == {} and model.channel("drive_linear").velocity == 0.0
+    assert model.velocities() == {}
+    assert model.channel("drive_linear").velocity == 0.0
     # A source without a row is refused when it registers.
     with pytest.raises(MuxError, match="no row for the source 'remote'"):
         RemoteTeleop(ConsoleModel(profile))
