@@ -22,20 +22,15 @@ from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
-from PySide6.QtCore import QElapsedTimer, QPointF, Qt, QTimer, Signal, Slot
+from PySide6.QtCore import QPointF, Qt, QTimer, Signal, Slot
 from PySide6.QtGui import (
     QContextMenuEvent,
     QGuiApplication,
     QImage,
     QKeyEvent,
     QMouseEvent,
-    QPainter,
-    QPaintEvent,
-    QResizeEvent,
-    QSurfaceFormat,
     QWheelEvent,
 )
-from PySide6.QtOpenGLWidgets import QOpenGLWidget
 from PySide6.QtWidgets import QMenu, QVBoxLayout, QWidget
 
 from ocu.model.mesh import MeshData
@@ -47,9 +42,9 @@ from ocu.render.camera import VIEW_KEYS, VIEWS, OrbitCamera
 from ocu.render.overlays import arrow_mesh, axes_mesh, marker_mesh
 from ocu.render.platform import GlMode, choose_gl_platform, configure_gl_platform
 from ocu.render.scene import OverlayDraw, RenderFrame, build_frame, model_bounds
+from ocu.widgets.model3d_surfaces import GlSurface, SoftwareSurface
 
 FRESHNESS_CHECK_MS = 250
-SOFTWARE_FRAME_INTERVAL_MS = 33  # at most ~30 OSMesa frames per second
 WORKSPACE_ALPHA = 0.13
 # The jog arrow: this long at the jog's full speed, never shorter than the minimum.
 ARROW_M_PER_M_S = 3.0
@@ -144,7 +139,7 @@ class Model3DWidget(QWidget):
 
         wanted = gl_mode or choose_gl_platform(qt_platform=QGuiApplication.platformName())
         self.gl_mode: GlMode = configure_gl_platform(wanted)
-        surface: _Surface = _GlSurface(self) if self.gl_mode == "native" else _SoftwareSurface(self)
+        surface: _Surface = GlSurface(self) if self.gl_mode == "native" else SoftwareSurface(self)
         self._surface = surface
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
@@ -308,7 +303,12 @@ class Model3DWidget(QWidget):
         self._overlay_meshes[name] = (mesh, mode)
         renderer = getattr(self._surface, "renderer", None)
         if renderer is not None:
-            renderer.set_overlay_mesh(name, mesh, mode)
+            lock = getattr(self._surface, "render_lock", None)
+            if lock is None:
+                renderer.set_overlay_mesh(name, mesh, mode)
+            else:
+                with lock:  # the render thread reads the renderer's pending meshes
+                    renderer.set_overlay_mesh(name, mesh, mode)
 
     def install_overlays(self, renderer: Any) -> None:
         """Give a new renderer every helper mesh."""
@@ -515,160 +515,6 @@ def _arrow(tool: Matrix, twist: npt.NDArray[np.float64]) -> Matrix:
     result[:3, 2] = up * length
     result[:3, 3] = tool[:3, 3]
     return result
-
-
-def _gl_surface_format() -> QSurfaceFormat:
-    fmt = QSurfaceFormat()
-    fmt.setRenderableType(QSurfaceFormat.RenderableType.OpenGL)
-    fmt.setVersion(3, 3)
-    fmt.setProfile(QSurfaceFormat.OpenGLContextProfile.CoreProfile)
-    fmt.setDepthBufferSize(24)
-    fmt.setSamples(4)
-    return fmt
-
-
-class _GlSurface(QOpenGLWidget):
-    """Native path: the renderer draws into Qt's framebuffer in paintGL."""
-
-    def __init__(self, owner: Model3DWidget) -> None:
-        super().__init__(owner)
-        from ocu.render.renderer import ModelRenderer  # after the platform choice
-
-        self._owner = owner
-        self.setFormat(_gl_surface_format())
-        self.renderer = ModelRenderer(owner.model)
-        owner.install_overlays(self.renderer)
-        self.frames_rendered = 0
-        self.error: str | None = None
-
-    def initializeGL(self) -> None:
-        from ocu.render.renderer import RenderError
-
-        context = self.context()
-        if context is None or not context.isValid():
-            self.error = "3D view unavailable: no OpenGL context"
-            return
-        fmt = context.format()
-        if (fmt.majorVersion(), fmt.minorVersion()) < (3, 3):
-            self.error = (
-                f"3D view unavailable: OpenGL 3.3 needed, got "
-                f"{fmt.majorVersion()}.{fmt.minorVersion()}"
-            )
-            return
-        try:
-            self.renderer.initialize()
-        except RenderError as err:
-            self.error = f"3D view unavailable: {err}"
-            return
-        context.aboutToBeDestroyed.connect(self.release)
-
-    def paintGL(self) -> None:
-        if self.error is not None or not self.renderer.initialized:
-            return
-        ratio = self.devicePixelRatioF()
-        width = round(self.width() * ratio)
-        height = round(self.height() * ratio)
-        self.renderer.render(self._owner.build_frame(width, height), width, height)
-        self.frames_rendered += 1
-        self._owner._surface_rendered()
-
-    def request_render(self) -> None:
-        self.update()
-
-    def render_now(self) -> None:
-        self.repaint()
-
-    def release(self) -> None:
-        if self.renderer.initialized and self.context() is not None:
-            self.makeCurrent()
-            self.renderer.release()
-            self.doneCurrent()
-
-
-class _SoftwareSurface(QWidget):
-    """OSMesa path: render offscreen on a rate-limited timer, paint the image."""
-
-    def __init__(self, owner: Model3DWidget) -> None:
-        super().__init__(owner)
-        self._owner = owner
-        self._image = QImage()
-        self._offscreen: Any = None
-        self.renderer: Any = None
-        self.frames_rendered = 0
-        self.error: str | None = None
-        self._since_last = QElapsedTimer()
-        self._timer = QTimer(self)
-        self._timer.setSingleShot(True)
-        self._timer.timeout.connect(self.render_now)
-        self.setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent)
-
-    def _ensure_context(self) -> bool:
-        if self._offscreen is not None:
-            return True
-        if self.error is not None:
-            return False
-        try:
-            from ocu.render.offscreen import OffscreenRenderer
-            from ocu.render.renderer import ModelRenderer
-
-            self.renderer = ModelRenderer(self._owner.model)
-            self._owner.install_overlays(self.renderer)
-            width, height = self._pixel_size()
-            self._offscreen = OffscreenRenderer(self.renderer, width, height)
-        except Exception as err:  # no OSMesa, or a GL failure: show why instead of crashing
-            self.error = f"3D view unavailable: {err}"
-            self.update()
-            return False
-        return True
-
-    def _pixel_size(self) -> tuple[int, int]:
-        ratio = self.devicePixelRatioF()
-        return max(round(self.width() * ratio), 1), max(round(self.height() * ratio), 1)
-
-    def request_render(self) -> None:
-        if self._timer.isActive():
-            return
-        elapsed = self._since_last.elapsed() if self._since_last.isValid() else 1 << 30
-        self._timer.start(max(0, SOFTWARE_FRAME_INTERVAL_MS - int(elapsed)))
-
-    def render_now(self) -> None:
-        self._timer.stop()
-        if not self._ensure_context():
-            return
-        width, height = self._pixel_size()
-        rgba = self._offscreen.render(self._owner.build_frame(width, height), width, height)
-        image = QImage(rgba.data, width, height, width * 4, QImage.Format.Format_RGBA8888)
-        self._image = image.copy()  # own the pixels: rgba is reused by the next render
-        self._image.setDevicePixelRatio(self.devicePixelRatioF())
-        self._since_last.start()
-        self.frames_rendered += 1
-        self.update()
-        self._owner._surface_rendered()
-
-    def paintEvent(self, event: QPaintEvent) -> None:
-        painter = QPainter(self)
-        if self._image.isNull() or self.error is not None:
-            painter.fillRect(self.rect(), Qt.GlobalColor.darkGray)
-            if self.error is not None:
-                painter.setPen(Qt.GlobalColor.white)
-                painter.drawText(
-                    self.rect(),
-                    Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap,
-                    self.error,
-                )
-        else:
-            painter.drawImage(0, 0, self._image)
-        painter.end()
-
-    def resizeEvent(self, event: QResizeEvent) -> None:
-        super().resizeEvent(event)
-        self.request_render()
-
-    def release(self) -> None:
-        self._timer.stop()
-        if self._offscreen is not None:
-            self._offscreen.close()
-            self._offscreen = None
 
 
 def image_array(image: QImage) -> np.ndarray[Any, np.dtype[np.uint8]]:
