@@ -206,6 +206,7 @@ class SoftwareSurface(QWidget):
         self._applied = 0
         self._busy = False  # a frame is being rendered: the next waits for it
         self._pending = False  # asked for while busy: rendered when the current one is shown
+        self._released = False
 
     @property
     def _offscreen(self) -> Any:
@@ -218,7 +219,7 @@ class SoftwareSurface(QWidget):
         return OffscreenRenderer(self.renderer, width, height)
 
     def _ensure_thread(self) -> bool:
-        if self.error is not None:
+        if self.error is not None or self._released:
             return False
         if self._thread is None:
             try:
@@ -230,7 +231,11 @@ class SoftwareSurface(QWidget):
                 self.error = f"3D view unavailable: {err}"
                 self.update()
                 return False
-            self._thread = RenderThread(self._make, to_gui(self._apply))
+            thread = RenderThread(self._make, to_gui(self._apply))
+            # A view deleted without release() ends its thread too (a plain callable: the
+            # surface's Python side may be gone by then).
+            self.destroyed.connect(thread.close)
+            self._thread = thread
         return True
 
     @property
@@ -322,6 +327,7 @@ class SoftwareSurface(QWidget):
 
     def release(self) -> None:
         self._timer.stop()
+        self._released = True
         thread, self._thread = self._thread, None
         if thread is not None:
             thread.close()

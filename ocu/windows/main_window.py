@@ -557,6 +557,7 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self.save_layout()
         self.control.shutdown()
         self._view_timer.stop()
+        self.model_view.release()  # the 3D view's render thread ends with the window
         app = QApplication.instance()
         if isinstance(app, QApplication):
             if self.key_filter is not None:
