@@ -200,6 +200,37 @@ def _lock_waits() -> LockWaits | None:
     return WAITS
 
 
+class GuiSampler:
+    """Samples the GUI thread's Python stack every millisecond (started on the GUI thread)."""
+
+    def __init__(self, period_s: float = 0.001) -> None:
+        self.ident = threading.get_ident()
+        self.counts: dict[str, int] = {}
+        self.samples = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(period_s,), daemon=True)
+        self._thread.start()
+
+    def _run(self, period_s: float) -> None:
+        while not self._stop.wait(period_s):
+            frame = sys._current_frames().get(self.ident)
+            names = []
+            while frame is not None and len(names) < 3:
+                code = frame.f_code
+                names.append(f"{Path(code.co_filename).name}:{code.co_name}")
+                frame = frame.f_back
+            key = " < ".join(names)
+            self.counts[key] = self.counts.get(key, 0) + 1
+            self.samples += 1
+
+    def report(self, top: int = 25) -> None:
+        self._stop.set()
+        self._thread.join()
+        print(f"GUI thread, {self.samples} samples (innermost Python frames):")
+        for key, count in sorted(self.counts.items(), key=lambda kv: -kv[1])[:top]:
+            print(f"  {100 * count / max(self.samples, 1):5.1f} %  {key}")
+
+
 def hogs(count: int) -> list[subprocess.Popen[bytes]]:
     return [subprocess.Popen([sys.executable, "-c", HOG]) for _ in range(count)]
 
@@ -239,9 +270,12 @@ def measure(args: argparse.Namespace) -> list[Phase]:
         )
         redraw = QTimer()
         redraw.setInterval(1000 // FPS)
-        redraw.timeout.connect(window.model_view.update)
+        # A new frame of the 3D view each tick (the arm moving), not only a repaint of the
+        # last one.
+        redraw.timeout.connect(window.model_view.request_render)
         redraw.start()
         wait(app, args.warmup)
+        sampler = GuiSampler() if args.sample_gui else None
         phases.append(run_phase(app, window, probe, "idle", trials=args.trials, seed=1))
         procs = hogs(args.hogs)
         try:
@@ -254,6 +288,8 @@ def measure(args: argparse.Namespace) -> list[Phase]:
                 proc.kill()
                 proc.wait()
         redraw.stop()
+        if sampler is not None:
+            sampler.report()
         window.close()
         window.shutdown()
         app.processEvents()
@@ -280,6 +316,12 @@ def main() -> int:
     parser.add_argument("--control-hz", type=float, help="the control thread's rate (default)")
     parser.add_argument("--json", help="write the phases here (the baseline's child run)")
     parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
+    parser.add_argument(
+        "--sample-gui",
+        action="store_true",
+        help="also sample the GUI thread's Python stack every ms and print where its time goes "
+        "(a diagnosis: the sampler takes the GIL too, so its latency figures are not the run's)",
+    )
     args = parser.parse_args()
     print(f"{os.cpu_count()} cores; load {os.getloadavg()[0]:.1f} before the run")
     phases = measure(args)
