@@ -38,6 +38,7 @@ from ocu.nav.odometry import Odometry
 from ocu.nav.tracking import Trajectory, ellipse
 from ocu.nav.world import World, load_world
 from ocu.profile import RobotProfile, load_profile
+from ocu.protocol.mapping import scan_frame
 from ocu.records import CommandSent, LinkEvent, LinkState, TelemetryFrame
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, SimState, StateRecorder
@@ -487,7 +488,6 @@ def bench_gui_cost(profile: RobotProfile, seconds: float = 10.0) -> None:
     from PySide6.QtGui import QImage
     from PySide6.QtWidgets import QApplication
 
-    from ocu.records import ScanFrame
     from ocu.sim.rangefinder import RangeSensor
     from ocu.widgets.map_view import MapPanel
 
@@ -508,7 +508,7 @@ def bench_gui_cost(profile: RobotProfile, seconds: float = 10.0) -> None:
             now = time.monotonic()
             if with_map and tick % 2 == 0:
                 pose = Pose(0.05 * tick / 20, 0.0, 0.0)
-                model.on_scan(ScanFrame.from_packet(sensor.sweep(pose, 0), now, 0.0))
+                model.on_scan(scan_frame(sensor.sweep(pose, 0), now, 0.0))
                 panel.view.render(image)
             model.update(now)
         return (time.process_time() - started) / seconds

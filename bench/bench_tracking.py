@@ -48,8 +48,7 @@ from ocu.model.urdf import load_urdf
 from ocu.nav.geometry import Pose
 from ocu.nav.world import parse_world
 from ocu.profile import CameraSettings, RobotProfile, load_profile
-from ocu.protocol.extended import CameraRequest
-from ocu.records import LinkEvent, LinkState, VideoFrame
+from ocu.records import CameraRequest, LinkEvent, LinkState, VideoFrame
 from ocu.sim.faults import FaultConfig
 from ocu.sim.scene import CameraLinks, camera_position, camera_rotation
 from ocu.sim.simulator import RobotSimulator, SimState, StateRecorder

@@ -13,8 +13,7 @@ from enum import Enum
 from ocu.console.events import Event
 from ocu.console.tracking import TrackView
 from ocu.nav.navigator import ZoneState
-from ocu.protocol.extended import CameraRequest
-from ocu.records import CommandError
+from ocu.records import CameraRequest, CommandError
 
 
 class Source(Enum):

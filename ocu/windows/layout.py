@@ -15,9 +15,7 @@ from PySide6.QtWidgets import QDockWidget, QMainWindow, QWidget
 
 from ocu.console.model import ConsoleModel
 from ocu.profile import RobotProfile
-from ocu.protocol import ProtocolError
-from ocu.protocol.extended import CameraRequest
-from ocu.records import CommandError
+from ocu.records import CameraRequest, CommandError
 from ocu.widgets.link_graphs import LinkGraphsPanel
 from ocu.widgets.model3d import Model3DWidget
 from ocu.windows.settings_file import SettingsStatus
@@ -42,7 +40,7 @@ def parse_stream_setting(text: str) -> CameraRequest:
         width, height = size.lower().split("x", 1)
         request = CameraRequest(int(camera), int(width), int(height), int(fps))
         request.check()
-    except (ValueError, ProtocolError) as err:
+    except ValueError as err:
         raise ValueError(f"not CAMERA:WIDTHxHEIGHT@FPS: {text!r} ({err})") from err
     return request
 

@@ -10,11 +10,11 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from ocu.console.model import ConsoleModel
-from ocu.control.commands import CommandMapper
 from ocu.headless import HeadlessConsole
 from ocu.link.live import UdpLink
 from ocu.nav.world import load_world
 from ocu.profile import RobotProfile
+from ocu.protocol.mapping import CommandMapper
 from ocu.records import LinkState
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, SimState
