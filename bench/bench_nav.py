@@ -31,6 +31,7 @@ import numpy as np
 
 from ocu.console.model import ConsoleModel
 from ocu.control.drive import DriveBounds, scale_drive
+from ocu.hardware.engineer import engineer_component
 from ocu.headless import HeadlessConsole
 from ocu.link.live import UdpLink
 from ocu.nav.geometry import Pose
@@ -117,7 +118,10 @@ def console(
             sim.extension.stop_camera(camera)
     sim.start()
     model = ConsoleModel(console_profile or profile)
-    headless = HeadlessConsole(model, UdpLink(profile, sim.address, extension=extended))
+    headless = HeadlessConsole(
+        model,
+        engineer_component(UdpLink(profile, sim.address, extension=extended), extension=extended),
+    )
     headless.start()
     try:
         wait(

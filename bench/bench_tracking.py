@@ -41,6 +41,7 @@ import numpy as np
 from ocu.console.model import ConsoleModel
 from ocu.console.tracking import camera_axes
 from ocu.control.tracking import TrackingOptions
+from ocu.hardware.engineer import engineer_component
 from ocu.headless import HeadlessConsole
 from ocu.kinematics.arm import ArmKinematics
 from ocu.link.live import UdpLink
@@ -252,7 +253,7 @@ def run(
     model = ConsoleModel(profile)
     model.tracking_options = options
     link = UdpLink(profile, sim.address, extension=True)
-    headless = HeadlessConsole(model, link)
+    headless = HeadlessConsole(model, engineer_component(link))
     feed = FrameFeed(headless, camera)
     link.subscribe(feed.on_event)
     messages: list[str] = []
