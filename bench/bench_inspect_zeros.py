@@ -25,10 +25,9 @@ from pathlib import Path
 
 from ocu.link.live import UdpLink
 from ocu.profile import load_profile
-from ocu.protocol.extended import CameraRequest
 from ocu.record.reader import Recording
 from ocu.record.recorder import Recorder
-from ocu.records import LinkEvent, TelemetryFrame
+from ocu.records import CameraRequest, LinkEvent, TelemetryFrame
 from ocu.sim.simulator import RobotSimulator
 
 SPARSE_BYTES = 2 * 1024**3

@@ -31,6 +31,7 @@ import numpy as np
 
 from ocu.console.model import ConsoleModel
 from ocu.control.drive import DriveBounds, scale_drive
+from ocu.hardware.engineer import engineer_component
 from ocu.headless import HeadlessConsole
 from ocu.link.live import UdpLink
 from ocu.nav.geometry import Pose
@@ -38,6 +39,7 @@ from ocu.nav.odometry import Odometry
 from ocu.nav.tracking import Trajectory, ellipse
 from ocu.nav.world import World, load_world
 from ocu.profile import RobotProfile, load_profile
+from ocu.protocol.mapping import scan_frame
 from ocu.records import CommandSent, LinkEvent, LinkState, TelemetryFrame
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, SimState, StateRecorder
@@ -116,7 +118,10 @@ def console(
             sim.extension.stop_camera(camera)
     sim.start()
     model = ConsoleModel(console_profile or profile)
-    headless = HeadlessConsole(model, UdpLink(profile, sim.address, extension=extended))
+    headless = HeadlessConsole(
+        model,
+        engineer_component(UdpLink(profile, sim.address, extension=extended), extension=extended),
+    )
     headless.start()
     try:
         wait(
@@ -487,7 +492,6 @@ def bench_gui_cost(profile: RobotProfile, seconds: float = 10.0) -> None:
     from PySide6.QtGui import QImage
     from PySide6.QtWidgets import QApplication
 
-    from ocu.records import ScanFrame
     from ocu.sim.rangefinder import RangeSensor
     from ocu.widgets.map_view import MapPanel
 
@@ -508,7 +512,7 @@ def bench_gui_cost(profile: RobotProfile, seconds: float = 10.0) -> None:
             now = time.monotonic()
             if with_map and tick % 2 == 0:
                 pose = Pose(0.05 * tick / 20, 0.0, 0.0)
-                model.on_scan(ScanFrame.from_packet(sensor.sweep(pose, 0), now, 0.0))
+                model.on_scan(scan_frame(sensor.sweep(pose, 0), now, 0.0))
                 panel.view.render(image)
             model.update(now)
         return (time.process_time() - started) / seconds

@@ -41,6 +41,7 @@ import numpy as np
 from ocu.console.model import ConsoleModel
 from ocu.console.tracking import camera_axes
 from ocu.control.tracking import TrackingOptions
+from ocu.hardware.engineer import engineer_component
 from ocu.headless import HeadlessConsole
 from ocu.kinematics.arm import ArmKinematics
 from ocu.link.live import UdpLink
@@ -48,8 +49,7 @@ from ocu.model.urdf import load_urdf
 from ocu.nav.geometry import Pose
 from ocu.nav.world import parse_world
 from ocu.profile import CameraSettings, RobotProfile, load_profile
-from ocu.protocol.extended import CameraRequest
-from ocu.records import LinkEvent, LinkState, VideoFrame
+from ocu.records import CameraRequest, LinkEvent, LinkState, VideoFrame
 from ocu.sim.faults import FaultConfig
 from ocu.sim.scene import CameraLinks, camera_position, camera_rotation
 from ocu.sim.simulator import RobotSimulator, SimState, StateRecorder
@@ -253,7 +253,7 @@ def run(
     model = ConsoleModel(profile)
     model.tracking_options = options
     link = UdpLink(profile, sim.address, extension=True)
-    headless = HeadlessConsole(model, link)
+    headless = HeadlessConsole(model, engineer_component(link))
     feed = FrameFeed(headless, camera)
     link.subscribe(feed.on_event)
     messages: list[str] = []

@@ -3,18 +3,18 @@
 Everything that talks to the robot speaks these: the link implementations (UDP, virtual,
 replay) emit `LinkEvent`s to their listeners, the console model and the ROS bridge turn
 operator and planner input into `Command`s. A listener is any callable taking one event; it
-looks at the types it cares about and ignores the rest.
+looks at the types it cares about and ignores the rest. They belong to no robot's protocol:
+a link turns its wire's packets into them (the Engineer's: ocu.protocol.mapping), and nothing
+above the links imports a wire's types (import-linter contracts in pyproject.toml).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum
-
-from ocu.protocol import TelemetryPacket
-from ocu.protocol.extended import SCAN_INVALID, SCAN_NO_RETURN, ScanPacket, StatusPacket
+from typing import Protocol
 
 # ---- commands ----------------------------------------------------------------------------
 
@@ -66,7 +66,112 @@ class Command:
         return replace(self, velocities={})
 
 
+# ---- video streams ------------------------------------------------------------------------
+
+
+class StreamRequestError(ValueError):
+    """A camera stream request holds a value out of its range."""
+
+
+def _check_range(name: str, value: int, low: int, high: int) -> None:
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise StreamRequestError(f"{name}={value!r} is not an integer")
+    if not low <= value <= high:
+        raise StreamRequestError(f"{name}={value} out of range [{low}, {high}]")
+
+
+@dataclass(frozen=True)
+class CameraRequest:
+    """What the OCU asks of one camera; fps 0 switches it off, quality 0 follows the command."""
+
+    camera: int
+    width_px: int
+    height_px: int
+    fps: int
+    quality: int = 0
+
+    def check(self) -> None:
+        """StreamRequestError unless every field is in its range."""
+        _check_range("camera", self.camera, 0, 254)
+        _check_range("width_px", self.width_px, 1, 65535)
+        _check_range("height_px", self.height_px, 1, 65535)
+        _check_range("fps", self.fps, 0, 255)
+        _check_range("quality", self.quality, 0, 100)
+
+
+@dataclass(frozen=True)
+class StreamRequest:
+    """The per-camera streams a link asks of the robot, and the largest datagram it takes."""
+
+    cameras: tuple[CameraRequest, ...] = ()
+    max_datagram_bytes: int = 1472
+
+
+@dataclass(frozen=True)
+class VideoStats:
+    """Counters of a link's video frame reassembly; `frames_held`, `bytes_held` are current.
+
+    truncated: partial frames given up with fragments missing (superseded by a newer frame
+    of the camera, or evicted by the bounds); expired: partial frames that timed out;
+    out_of_order: frames (or their fragments) older than the newest delivered for the camera;
+    inconsistent: fragments whose header contradicts the rest of their frame.
+    """
+
+    fragments: int = 0
+    completed: int = 0
+    duplicates: int = 0
+    truncated: int = 0
+    evicted: int = 0
+    expired: int = 0
+    out_of_order: int = 0
+    inconsistent: int = 0
+    restarts: int = 0
+    frames_held: int = 0
+    bytes_held: int = 0
+
+
 # ---- telemetry ---------------------------------------------------------------------------
+
+
+class RawMotor(Protocol):
+    """One motor's record as the robot sent it (raw units), whatever the wire."""
+
+    @property
+    def device_id(self) -> int: ...
+    @property
+    def state(self) -> int: ...
+    @property
+    def mode(self) -> int: ...
+    @property
+    def position(self) -> int: ...
+    @property
+    def status(self) -> int: ...
+
+
+class RawTelemetry(Protocol):
+    """A telemetry frame as the robot sent it: the robot's tick and its motor records."""
+
+    @property
+    def tick(self) -> int: ...
+    @property
+    def motors(self) -> Sequence[RawMotor]: ...
+
+
+class RawStatus(Protocol):
+    """A status report as the robot sent it (None: not measured)."""
+
+    @property
+    def voltage_mv(self) -> int | None: ...
+    @property
+    def charge_permille(self) -> int | None: ...
+    @property
+    def headlight_on(self) -> bool | None: ...
+    @property
+    def roll_mrad(self) -> int | None: ...
+    @property
+    def pitch_mrad(self) -> int | None: ...
+    @property
+    def yaw_mrad(self) -> int | None: ...
 
 
 @dataclass(frozen=True)
@@ -95,14 +200,14 @@ class JointReading:
 
 @dataclass(frozen=True)
 class TelemetryFrame:
-    """One decoded telemetry packet with its SI readings and arrival times.
+    """One decoded telemetry frame (`packet`: as the robot sent it) with its SI readings.
 
     Readings the OCU does not believe carry their `fault`. `delay_s` is the round trip this
     packet took by the link's measurement (ocu.link.delay): the reading was taken when the
     commands sent `delay_s` before `received_at` had reached the robot. None: not known.
     """
 
-    packet: TelemetryPacket
+    packet: RawTelemetry
     readings: dict[str, JointReading]
     received_at: float
     wall_time: float
@@ -133,9 +238,9 @@ class VideoFrame:
 
 @dataclass(frozen=True)
 class StatusFrame:
-    """One extension status packet in SI units (None = the robot did not measure it)."""
+    """One status report in SI units (None = the robot did not measure it)."""
 
-    packet: StatusPacket
+    packet: RawStatus
     received_at: float
     wall_time: float
 
@@ -198,26 +303,6 @@ class ScanFrame:
     source: str = SCAN_FROM_ROBOT
     sequence: int | None = None
     capture_time_us: int | None = None
-
-    @classmethod
-    def from_packet(cls, packet: ScanPacket, received_at: float, wall_time: float) -> ScanFrame:
-        """The scan a robot sent, in metres and radians."""
-        ranges = tuple(
-            math.inf if raw == SCAN_NO_RETURN else math.nan if raw == SCAN_INVALID else raw / 1e3
-            for raw in packet.ranges_mm
-        )
-        return cls(
-            angle_min_rad=packet.angle_min_urad / 1e6,
-            angle_increment_rad=packet.angle_increment_urad / 1e6,
-            range_min_m=packet.range_min_mm / 1e3,
-            range_max_m=packet.range_max_mm / 1e3,
-            ranges_m=ranges,
-            received_at=received_at,
-            wall_time=wall_time,
-            source=SCAN_FROM_ROBOT,
-            sequence=packet.sequence,
-            capture_time_us=packet.capture_time_us,
-        )
 
 
 # ---- the link ----------------------------------------------------------------------------

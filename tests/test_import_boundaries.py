@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
 from pathlib import Path
@@ -80,3 +81,44 @@ def test_import_linter_contracts_kept() -> None:
         cwd=REPO_ROOT,
     )
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+# The core and the views speak the neutral records (ocu.records), never the Engineer's wire
+# (also an import-linter contract in pyproject.toml, run by `./dev test`).
+PROTOCOL_FREE = ("records", "control", "console", "core", "widgets", "windows", "qt", "headless")
+
+
+def _protocol_imports(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    found: list[str] = []
+    for node in ast.walk(tree):
+        names = (
+            [alias.name for alias in node.names]
+            if isinstance(node, ast.Import)
+            else [node.module or ""]
+            if isinstance(node, ast.ImportFrom)
+            else []
+        )
+        found.extend(n for n in names if n == "ocu.protocol" or n.startswith("ocu.protocol."))
+    return found
+
+
+def _modules(package: str) -> list[Path]:
+    root = REPO_ROOT / "ocu"
+    single = root / f"{package}.py"
+    return [single] if single.exists() else sorted((root / package).rglob("*.py"))
+
+
+def test_core_and_views_import_nothing_of_the_protocol() -> None:
+    offenders = {
+        str(path.relative_to(REPO_ROOT)): imports
+        for package in PROTOCOL_FREE
+        for path in _modules(package)
+        if (imports := _protocol_imports(path))
+    }
+    assert offenders == {}
+
+
+def test_protocol_check_would_see_an_import() -> None:
+    # The check must be able to fail: the live link does speak the protocol.
+    assert _protocol_imports(REPO_ROOT / "ocu" / "link" / "live.py")

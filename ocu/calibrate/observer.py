@@ -14,7 +14,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ocu.protocol import MotorRecord
+from ocu.protocol import MotorRecord, TelemetryPacket
 from ocu.records import (
     DatagramReceived,
     LinkEvent,
@@ -75,7 +75,8 @@ class TelemetryLog:
     def __call__(self, event: LinkEvent) -> None:
         """The link listener (the link's threads)."""
         with self._condition:
-            if isinstance(event, TelemetryFrame):
+            # The Engineer's link: its frames carry the vendor's packets, raw motor records.
+            if isinstance(event, TelemetryFrame) and isinstance(event.packet, TelemetryPacket):
                 packet = event.packet
                 self._samples.append(
                     Sample(

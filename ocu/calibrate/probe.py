@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 
 from ocu.calibrate.guard import StopSignal
 from ocu.calibrate.observer import Datagram, Sample, TelemetryLog
-from ocu.control.commands import ticks_to_rad
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
+from ocu.protocol.mapping import ticks_to_rad
 from ocu.protocol.packets import (
     JPEG_SOI,
     MOTOR_SIZE,

@@ -14,8 +14,7 @@ from typing import ClassVar
 from ocu.console.events import Event
 from ocu.console.tracking import TrackView
 from ocu.nav.navigator import ZoneState
-from ocu.protocol.extended import CameraRequest
-from ocu.records import CommandError
+from ocu.records import CameraRequest, CommandError
 
 
 class Source:

@@ -68,8 +68,8 @@ from ocu.kinematics.arm import ArmError, ArmKinematics
 from ocu.model.urdf import UrdfError, load_urdf
 from ocu.nav.navigator import Navigator
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest
 from ocu.records import (
+    CameraRequest,
     Command,
     CommandError,
     LinkState,

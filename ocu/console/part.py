@@ -23,7 +23,7 @@ from ocu.control.position import PositionController
 from ocu.control.tracking import TrackingOptions
 from ocu.nav.navigator import Navigator
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest
+from ocu.records import CameraRequest
 
 
 class ModelPart:

@@ -7,8 +7,7 @@ from __future__ import annotations
 import math
 
 from ocu.console.part import ModelPart
-from ocu.protocol.extended import CameraRequest
-from ocu.records import CommandError
+from ocu.records import CameraRequest, CommandError
 
 
 class VideoRequest(ModelPart):

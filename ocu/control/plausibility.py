@@ -22,8 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ocu.profile import Motor, RobotProfile
-from ocu.protocol import TelemetryPacket
-from ocu.records import JointReading
+from ocu.records import JointReading, RawTelemetry
 
 DEFAULT_MARGIN_DEG = 5.0
 DEFAULT_SPEED_FACTOR = 2.0
@@ -59,9 +58,7 @@ class PlausibilityChecker:
         """Forget the last plausible readings (the robot restarted, the link was lost)."""
         self._baseline.clear()
 
-    def check(
-        self, packet: TelemetryPacket, readings: Mapping[str, JointReading]
-    ) -> dict[str, str]:
+    def check(self, packet: RawTelemetry, readings: Mapping[str, JointReading]) -> dict[str, str]:
         """Joint name to the reason it is implausible, for the implausible joints only."""
         raw_by_device = {record.device_id: record.position for record in packet.motors}
         faults: dict[str, str] = {}

@@ -8,14 +8,21 @@ the zones - docs/console.md) and the controllers (position control, synchronized
 Cartesian jogs, the assisted modes, tracking). One cycle, in this order, under the model's
 lock:
 
-1. read: what the hardware reported since the last cycle goes into the model (the commands
-   the link sent, then the newest telemetry frame: the joints' predictors need both, in order);
+1. read: what the hardware component (ocu.core.hardware) reported since the last cycle goes
+   into the model (the commands the link sent, then the newest telemetry frame: the joints'
+   predictors need both, in order);
 2. watch: a GUI thread silent past its limit while motion is commanded halts the model (the
    operator's keys and sliders cannot be released through a frozen GUI); so does a gap in this
    thread's own cycles longer than the link's alive timeout (the link has zeroed by then);
 3. update: the model's control step at this cycle's time (controllers, assisted modes, zones);
-4. write: a changed command reaches the link from the model's `command_changed` event
-   (connected `direct`, so on this thread), and the link hears this thread is alive.
+4. write: the model's command to the hardware (written only when it changed: the link's own
+   safety zeroing stands until the model's command changes), still under the lock; then the
+   hardware hears this thread is alive.
+
+A changed command does not wait for the next cycle: `attach` connects the model's
+`command_changed`, `estop_requested` and `stream_request_changed` events `direct` to the
+hardware, so whichever thread changed the command (this one, the GUI's, the pad's) writes it
+at once, under the model's lock.
 
 The GUI posts operator input by calling the model through a `Guarded` handle (ocu.core.guard:
 the same lock, held for one call) and paints from what the model's events hand it on the GUI
@@ -32,11 +39,12 @@ import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 from ocu.console.stall import StallWatch
+from ocu.records import CameraRequest, Command
 
 if TYPE_CHECKING:
     from ocu.console.model import ConsoleModel
@@ -55,7 +63,19 @@ JOIN_TIMEOUT_S = 2.0
 
 
 class Hardware(Protocol):
-    """What the manager needs of the robot's link."""
+    """What the manager needs of the robot (ocu.core.hardware.HardwareComponent)."""
+
+    def read(self, model: ConsoleModel) -> None:
+        """What the robot reported since the last call, into the model (its lock held)."""
+
+    def write(self, command: Command) -> bool:
+        """Command the robot (at once when the command changed); False: refused (read-only)."""
+
+    def emergency_stop(self, reason: str = "operator") -> bool:
+        """Zero all motion at once; False: nothing to stop (read-only)."""
+
+    def set_stream_request(self, cameras: Sequence[CameraRequest]) -> bool:
+        """Ask for these camera streams; False: refused."""
 
     def heartbeat(self) -> None:
         """This thread is alive (the link zeroes motion when it stops hearing it)."""
@@ -92,8 +112,7 @@ class ControllerManager:
         model: ConsoleModel,
         lock: threading.RLock,
         *,
-        read: Callable[[ConsoleModel], None],
-        hardware: Hardware | None,
+        hardware: Hardware | None = None,
         rate_hz: float = DEFAULT_RATE_HZ,
         alive_timeout_s: float = 0.5,
         gui_timeout_s: float | None = None,
@@ -105,8 +124,7 @@ class ControllerManager:
             )
         self.model = model
         self.lock = lock
-        self.read = read
-        self.hardware = hardware
+        self.hardware: Hardware | None = None
         self.rate_hz = rate_hz
         self.period_s = 1.0 / rate_hz
         self.gui_timeout_s = gui_timeout_s
@@ -124,6 +142,49 @@ class ControllerManager:
         self.error: BaseException | None = None
         self.failures = 0  # cycles that raised (logged; the thread goes on)
         self._last_wait_s = 0.0  # how long the last cycle waited for the model's lock
+        if hardware is not None:
+            self.attach(hardware)
+
+    # ---- the hardware ------------------------------------------------------------------------
+
+    def attach(self, hardware: Hardware) -> None:
+        """Read and write `hardware` from now on (its events subscribed before it starts)."""
+        self.detach()
+        events = self.model.events
+        with self.lock:
+            self.hardware = hardware
+            events.command_changed.connect(self._write_now, direct=True)
+            events.estop_requested.connect(self._estop_now, direct=True)
+            events.stream_request_changed.connect(self._streams_now, direct=True)
+            hardware.write(self.model.command())
+            hardware.set_stream_request(self.model.stream_request)
+
+    def detach(self) -> None:
+        """Stop reading and writing the current hardware (idempotent)."""
+        events = self.model.events
+        with self.lock:
+            hardware, self.hardware = self.hardware, None
+            if hardware is None:
+                return
+            events.command_changed.disconnect(self._write_now)
+            events.estop_requested.disconnect(self._estop_now)
+            events.stream_request_changed.disconnect(self._streams_now)
+
+    def _write_now(self) -> None:
+        # The thread that changed the command, the model's lock held: at once, no cycle waited.
+        hardware = self.hardware
+        if hardware is not None:
+            hardware.write(self.model.command())
+
+    def _estop_now(self, reason: str) -> None:
+        hardware = self.hardware
+        if hardware is not None:
+            hardware.emergency_stop(reason)
+
+    def _streams_now(self, cameras: tuple[CameraRequest, ...]) -> None:
+        hardware = self.hardware
+        if hardware is not None:
+            hardware.set_stream_request(cameras)
 
     # ---- the thread --------------------------------------------------------------------------
 
@@ -181,7 +242,9 @@ class ControllerManager:
         asked = time.perf_counter()
         with self.lock:
             self._last_wait_s = time.perf_counter() - asked
-            self.read(model)
+            hardware = self.hardware
+            if hardware is not None:
+                hardware.read(model)
             self._stall.alive(now, model.is_moving)
             stalled_s = self._stall.take_stall()
             if stalled_s is not None:
@@ -192,8 +255,10 @@ class ControllerManager:
                 self._gui_moving = False
                 model.halt(f"GUI thread silent for {gui_silent_s:.2f} s", lock="GUI silent")
             model.update(now)
-        if self.hardware is not None:
-            self.hardware.heartbeat()
+            if hardware is not None:
+                hardware.write(model.command())
+        if hardware is not None:
+            hardware.heartbeat()
 
     # ---- the GUI's sign of life ------------------------------------------------------------------
 

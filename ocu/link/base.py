@@ -14,10 +14,17 @@ import threading
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
-from ocu.link.reassembly import ReassemblyStats
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest, HelloPacket
-from ocu.records import Command, LinkEvent, LinkState, LinkStats, Listener
+from ocu.records import (
+    CameraRequest,
+    Command,
+    LinkEvent,
+    LinkState,
+    LinkStats,
+    Listener,
+    StreamRequest,
+    VideoStats,
+)
 
 log = logging.getLogger("ocu.link")
 
@@ -103,7 +110,7 @@ class Link(ABC):
 
     @property
     @abstractmethod
-    def stream_request(self) -> HelloPacket:
+    def stream_request(self) -> StreamRequest:
         """What the OCU asks of an extended robot's cameras."""
 
     @abstractmethod
@@ -136,7 +143,7 @@ class Link(ABC):
         """Counters and rates now."""
 
     @abstractmethod
-    def video_stats(self) -> ReassemblyStats:
+    def video_stats(self) -> VideoStats:
         """Counters of the extension's fragment reassembly."""
 
     # ---- life ------------------------------------------------------------------------------

@@ -20,9 +20,7 @@ import weakref
 from collections.abc import Callable, Sequence
 from typing import TypedDict, Unpack
 
-from ocu.control.commands import CommandMapper
 from ocu.link.base import Link, LinkError
-from ocu.link.reassembly import ReassemblyStats
 from ocu.link.receiver import Receiver
 from ocu.link.stats import RateMeter
 from ocu.net.loop import SelectLoop
@@ -36,18 +34,14 @@ from ocu.net.transport import (
     resolve,
 )
 from ocu.profile import ExtensionSettings, RobotProfile
-from ocu.protocol.extended import (
-    MIN_DATAGRAM,
-    SEQUENCE_MODULUS,
-    CameraRequest,
-    HelloPacket,
-    SequencedRcp,
-)
+from ocu.protocol.extended import MIN_DATAGRAM, SEQUENCE_MODULUS, HelloPacket, SequencedRcp
+from ocu.protocol.mapping import CommandMapper
 from ocu.protocol.packets import MAX_DATAGRAM, RemoteControlPacket
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import (
     HELLO,
     RCP,
+    CameraRequest,
     Command,
     CommandSent,
     DatagramSent,
@@ -56,6 +50,8 @@ from ocu.records import (
     LinkStats,
     Listener,
     SafetyEvent,
+    StreamRequest,
+    VideoStats,
 )
 
 log = logging.getLogger("ocu.link")
@@ -324,10 +320,11 @@ class LiveLink(Link):
         return self.receiver.extension_active
 
     @property
-    def stream_request(self) -> HelloPacket:
-        """The hello sent to probe for the extension, with the per-camera stream request."""
+    def stream_request(self) -> StreamRequest:
+        """What the hello sent to probe for the extension asks: the per-camera streams."""
         with self._lock:
-            return self._hello
+            hello = self._hello
+        return StreamRequest(cameras=hello.cameras, max_datagram_bytes=hello.max_datagram_bytes)
 
     def set_stream_request(self, cameras: Sequence[CameraRequest]) -> None:
         """Ask an extended robot for these per-camera streams; sent at once if it changed."""
@@ -341,7 +338,7 @@ class LiveLink(Link):
             self._hello = hello
         self._send_hello()
 
-    def video_stats(self) -> ReassemblyStats:
+    def video_stats(self) -> VideoStats:
         """Counters of the extension's fragment reassembly."""
         return self.receiver.video_stats()
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ocu.protocol.extended import VideoFragment
+from ocu.records import VideoStats
 
 SEQUENCE_MODULUS = 2**32
 HALF_RANGE = SEQUENCE_MODULUS // 2
@@ -35,29 +36,6 @@ class CompleteFrame:
     fragments: int
     first_at: float
     completed_at: float
-
-
-@dataclass(frozen=True)
-class ReassemblyStats:
-    """Counters of the reassembler; `frames_held` and `bytes_held` are current values.
-
-    truncated: partial frames given up with fragments missing (superseded by a newer frame
-    of the camera, or evicted by the bounds); expired: partial frames that timed out;
-    out_of_order: frames (or their fragments) older than the newest delivered for the camera;
-    inconsistent: fragments whose header contradicts the rest of their frame.
-    """
-
-    fragments: int = 0
-    completed: int = 0
-    duplicates: int = 0
-    truncated: int = 0
-    evicted: int = 0
-    expired: int = 0
-    out_of_order: int = 0
-    inconsistent: int = 0
-    restarts: int = 0
-    frames_held: int = 0
-    bytes_held: int = 0
 
 
 class _Partial:
@@ -115,9 +93,9 @@ class Reassembler:
         self._inconsistent = 0
         self._restarts = 0
 
-    def stats(self) -> ReassemblyStats:
+    def stats(self) -> VideoStats:
         """The counters now."""
-        return ReassemblyStats(
+        return VideoStats(
             fragments=self._fragments,
             completed=self._completed,
             duplicates=self._duplicates,

@@ -21,19 +21,18 @@ from collections.abc import Callable
 from dataclasses import replace
 from enum import Enum
 
-from ocu.control.commands import CommandMapper, commanded_motor_speeds, read_telemetry
 from ocu.control.plausibility import PlausibilityChecker
 from ocu.link.delay import DelayEstimator
-from ocu.link.reassembly import Reassembler, ReassemblyStats
+from ocu.link.reassembly import Reassembler
 from ocu.link.stats import JitterMeter, LossEstimator, RateMeter, UplinkLossEstimator
 from ocu.profile import RobotProfile
 from ocu.protocol import ProtocolError, RemoteControlPacket, TelemetryPacket, VideoFramePacket
-from ocu.protocol.extended import (
-    HelloPacket,
-    ScanPacket,
-    SequencedRcp,
-    StatusPacket,
-    VideoFragment,
+from ocu.protocol.extended import HelloPacket, ScanPacket, SequencedRcp, StatusPacket, VideoFragment
+from ocu.protocol.mapping import (
+    CommandMapper,
+    commanded_motor_speeds,
+    read_telemetry,
+    scan_frame,
 )
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import (
@@ -52,6 +51,7 @@ from ocu.records import (
     StatusFrame,
     TelemetryFrame,
     VideoFrame,
+    VideoStats,
 )
 
 log = logging.getLogger("ocu.link")
@@ -325,7 +325,7 @@ class Receiver:
             elif isinstance(packet, ScanPacket):
                 self.scans += 1
                 self._scan_rate.add(at)
-                event = ScanFrame.from_packet(packet, at, wall)
+                event = scan_frame(packet, at, wall)
         if became_active:
             log.info("robot speaks the protocol extension")
             self.emit(ExtensionChanged(True, "extension packets from the robot"))
@@ -414,7 +414,7 @@ class Receiver:
                 frame_age_s=tuple(None if at is None else now - at for at in self._frame_at),
             )
 
-    def video_stats(self) -> ReassemblyStats:
+    def video_stats(self) -> VideoStats:
         """Counters of the extension's fragment reassembly."""
         with self._lock:
             return self._reassembler.stats()

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 from ocu.protocol.errors import ProtocolError
 from ocu.protocol.packets import JPEG_EOI, JPEG_SOI, MAX_DATAGRAM, RCP_SIZE, RemoteControlPacket
+from ocu.records import CameraRequest, StreamRequestError
 
 MAGIC = b"OCUX"
 VERSION = 1
@@ -103,25 +104,6 @@ def _check_header(magic: bytes, version: int, what: str) -> None:
 
 
 @dataclass(frozen=True)
-class CameraRequest:
-    """What the OCU asks of one camera; fps 0 switches it off, quality 0 follows the RCP."""
-
-    camera: int
-    width_px: int
-    height_px: int
-    fps: int
-    quality: int = 0
-
-    def check(self) -> None:
-        """ProtocolError unless every field fits its wire type and range."""
-        _check("camera", self.camera, (0, MAX_CAMERAS - 1))
-        _check("width_px", self.width_px, (1, 65535))
-        _check("height_px", self.height_px, (1, 65535))
-        _check("fps", self.fps, _U8)
-        _check("quality", self.quality, (0, 100))
-
-
-@dataclass(frozen=True)
 class HelloPacket:
     """OCU -> robot: the extension probe and per-camera stream request."""
 
@@ -136,7 +118,10 @@ class HelloPacket:
         if len({c.camera for c in self.cameras}) != len(self.cameras):
             raise ProtocolError("a camera is requested twice")
         for request in self.cameras:
-            request.check()
+            try:
+                request.check()
+            except StreamRequestError as err:
+                raise ProtocolError(str(err)) from err
 
     def encode(self, frame_type: int) -> bytes:
         """9 + 7 x camera-count bytes."""

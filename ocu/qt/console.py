@@ -17,9 +17,8 @@ from PySide6.QtCore import QObject, QTimer, SignalInstance
 
 from ocu.console.events import Event
 from ocu.console.model import ConsoleModel
-from ocu.protocol.extended import CameraRequest
 from ocu.qt.link import QtLink
-from ocu.records import CommandSent, LinkState, LinkStats, ScanFrame, StatusFrame
+from ocu.records import CameraRequest, CommandSent, LinkState, LinkStats, ScanFrame, StatusFrame
 
 # Telemetry reaches the model at most this often (about 30 Hz).
 VIEW_PERIOD_MS = 33

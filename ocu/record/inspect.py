@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass, field
 from ocu.link.receiver import Receiver
 from ocu.link.stats import UplinkLossEstimator, tick_loss
 from ocu.profile import ProfileError, RobotProfile, load_profile
+from ocu.protocol.extended import StatusPacket
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.reader import Recording
@@ -152,7 +153,7 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
         if isinstance(event, DatagramReceived) and event.kind == TELEMETRY:
             assert event.robot_time_s is not None
             ticks.append(round(event.robot_time_s * tick_hz))
-        elif isinstance(event, StatusFrame):
+        elif isinstance(event, StatusFrame) and isinstance(event.packet, StatusPacket):
             echo = event.packet
             if echo.rcp_sequence is not None and echo.rcp_received is not None:
                 uplink.add(echo.rcp_sequence, echo.rcp_received, event.received_at)

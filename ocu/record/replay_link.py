@@ -25,14 +25,13 @@ from pathlib import Path
 from typing import Any
 
 from ocu.link.base import Link, LinkError
-from ocu.link.reassembly import ReassemblyStats
 from ocu.link.receiver import Receiver
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest, HelloPacket
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.reader import RecordedMessage, Recording
 from ocu.records import (
+    CameraRequest,
     Command,
     CommandSent,
     ExtensionChanged,
@@ -41,6 +40,8 @@ from ocu.records import (
     LinkStateChanged,
     LinkStats,
     SafetyEvent,
+    StreamRequest,
+    VideoStats,
 )
 
 log = logging.getLogger("ocu.record")
@@ -122,7 +123,7 @@ class ReplayLink(Link):
         self._extension_active = False
         self._last_stats: LinkStats | None = None
         self._command = Command()
-        self._stream_request = HelloPacket()
+        self._stream_request = StreamRequest()
         self.start_ns = recording.start_ns
         self.end_ns = recording.end_ns
         self._cond = threading.Condition()
@@ -174,13 +175,13 @@ class ReplayLink(Link):
         """Nothing to keep alive."""
 
     @property
-    def stream_request(self) -> HelloPacket:
+    def stream_request(self) -> StreamRequest:
         """The last stream request the console made (never sent)."""
         return self._stream_request
 
     def set_stream_request(self, cameras: Sequence[CameraRequest]) -> None:
         """Remember the request; nothing is sent."""
-        self._stream_request = HelloPacket(
+        self._stream_request = StreamRequest(
             cameras=tuple(cameras), max_datagram_bytes=self._stream_request.max_datagram_bytes
         )
 
@@ -208,7 +209,7 @@ class ReplayLink(Link):
         stats = self._last_stats
         return stats if stats is not None else LinkStats.empty(self.rate_hz)
 
-    def video_stats(self) -> ReassemblyStats:
+    def video_stats(self) -> VideoStats:
         """Counters of the replay's fragment reassembly."""
         return self.receiver.video_stats()
 

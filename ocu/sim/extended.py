@@ -37,13 +37,8 @@ import numpy.typing as npt
 
 from ocu.nav.geometry import Pose
 from ocu.profile import CameraCalibration, CameraSettings, RobotProfile
-from ocu.protocol.extended import (
-    CameraRequest,
-    ExtendedCodec,
-    HelloPacket,
-    StatusPacket,
-    fragment_frame,
-)
+from ocu.protocol.extended import ExtendedCodec, HelloPacket, StatusPacket, fragment_frame
+from ocu.records import CameraRequest
 from ocu.sim.rangefinder import RangeSensor
 from ocu.sim.scene import WorldView
 from ocu.sim.video import MAX_FRAME_SIDE_PX, MIN_FRAME_SIDE_PX

@@ -19,10 +19,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ocu.control.commands import track_speeds
 from ocu.nav.geometry import Pose, advance
 from ocu.nav.world import EMPTY_WORLD, World
 from ocu.profile import Motor, RobotProfile
+from ocu.protocol.mapping import track_speeds
 from ocu.records import Command
 
 log = logging.getLogger("ocu.sim")

@@ -32,7 +32,6 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ocu.control.commands import CommandMapper, rad_to_ticks, speed_to_raw
 from ocu.nav.geometry import Pose
 from ocu.net.transport import Address
 from ocu.profile import Motor, RobotProfile
@@ -44,6 +43,7 @@ from ocu.protocol import (
     VideoFramePacket,
 )
 from ocu.protocol.extended import HelloPacket, SequencedRcp, sequence_newer
+from ocu.protocol.mapping import CommandMapper, rad_to_ticks, speed_to_raw
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.sim.extended import ExtendedServer
 from ocu.sim.physics import MotorReading, RobotPhysics

@@ -8,7 +8,6 @@ from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import QHeaderView, QTableWidget, QTableWidgetItem, QWidget
 
 from ocu.profile import RobotProfile
-from ocu.protocol import MOTOR_SLOTS
 from ocu.records import TelemetryFrame
 
 COLUMNS = (
@@ -35,10 +34,10 @@ def _deg(angle_rad: float | None) -> str:
 
 
 class TelemetryTable(QTableWidget):
-    """Ten rows, one per motor slot of the telemetry packet."""
+    """One row per motor record of the telemetry frame: the profile's motors, more if sent."""
 
     def __init__(self, profile: RobotProfile, parent: QWidget | None = None) -> None:
-        super().__init__(MOTOR_SLOTS, len(COLUMNS), parent)
+        super().__init__(0, len(COLUMNS), parent)
         self.profile = profile
         self.setObjectName("telemetry_table")
         self.setHorizontalHeaderLabels(list(COLUMNS))
@@ -46,7 +45,12 @@ class TelemetryTable(QTableWidget):
         self.verticalHeader().setVisible(False)
         self.verticalHeader().setDefaultSectionSize(22)
         self.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
-        for row in range(MOTOR_SLOTS):
+        self._grow(len(profile.motors))
+
+    def _grow(self, rows: int) -> None:
+        """At least `rows` rows (a frame may carry devices the profile does not know)."""
+        for row in range(self.rowCount(), rows):
+            self.insertRow(row)
             for column in range(len(COLUMNS)):
                 self.setItem(row, column, QTableWidgetItem("—"))
 
@@ -62,6 +66,7 @@ class TelemetryTable(QTableWidget):
         cell's own signal made the contents-sized header measure every section again (110
         times a frame, most of the GUI thread's telemetry cost).
         """
+        self._grow(len(frame.packet.motors))  # before the signals are held: the view must see it
         model = self.model()
         was_blocked = model.blockSignals(True)
         changed = False
@@ -76,7 +81,7 @@ class TelemetryTable(QTableWidget):
 
     def _fill(self, frame: TelemetryFrame) -> bool:
         changed = False
-        for row in range(MOTOR_SLOTS):
+        for row in range(self.rowCount()):
             values = ["—"] * len(COLUMNS)
             fault: str | None = None
             if row < len(frame.packet.motors):

@@ -34,9 +34,8 @@ from PySide6.QtWidgets import (
 )
 
 from ocu.console.model import ConsoleModel
-from ocu.protocol.extended import CameraRequest
 from ocu.qt.link import QtLink
-from ocu.records import CommandError, LinkState, StatusFrame
+from ocu.records import CameraRequest, CommandError, LinkState, StatusFrame
 from ocu.video.correction import CorrectionSettings
 from ocu.widgets.video_status import AttitudeIndicator, BatteryGauge, HeadlightIndicator
 from ocu.widgets.video_view import (

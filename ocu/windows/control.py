@@ -7,8 +7,9 @@
   each call also a sign of life of the GUI thread);
 - the model's events handed to the GUI thread (ocu.console.events.hand_over), so views are
   only ever called there;
-- `attach(link)` / `detach()`: the current link fed to the model by the control thread
-  (ocu.core.feed) and told by it that the controls are alive;
+- `attach(hardware)` / `detach()`: the current hardware component (ocu.core.hardware) read
+  into the model and written by the control thread, and told by it that the controls are
+  alive; a changed command, an e-stop and a stream request reach it at once;
 - the GUI thread's heartbeat (a timer): silent past the link's alive timeout less one period
   while motion is commanded, and the control thread halts the model - the operator's keys
   and sliders cannot be released through a frozen GUI;
@@ -24,10 +25,9 @@ from PySide6.QtCore import QObject, QTimer
 
 from ocu.console.events import hand_over
 from ocu.console.model import ConsoleModel
-from ocu.core.feed import LinkFeed
 from ocu.core.guard import Guarded
+from ocu.core.hardware import HardwareComponent
 from ocu.core.manager import DEFAULT_RATE_HZ, TIMING_WINDOW_S, ControllerManager
-from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.qt.link import HEARTBEAT_PERIOD_MS
 from ocu.widgets.elided_label import ElidedLabel
@@ -56,14 +56,11 @@ class ConsoleControl(QObject):
             groups.append(model.arm.events)
         hand_over(*groups)
         self.lock = threading.RLock()
-        self._feed: LinkFeed | None = None
-        self._link: Link | None = None
+        self.hardware: HardwareComponent | None = None
         gui_limit_s = profile.link.gui_alive_timeout_s - HEARTBEAT_PERIOD_MS / 1000.0
         self.manager = ControllerManager(
             model,
             self.lock,
-            read=self._read,
-            hardware=self,
             rate_hz=control_hz,
             alive_timeout_s=profile.link.gui_alive_timeout_s,
             gui_timeout_s=max(gui_limit_s, HEARTBEAT_PERIOD_MS / 1000.0),
@@ -102,31 +99,20 @@ class ConsoleControl(QObject):
         self.manager.stop()
         self.detach()
 
-    # ---- the link ----------------------------------------------------------------------------
+    # ---- the hardware --------------------------------------------------------------------------
 
-    def attach(self, link: Link) -> None:
-        """Feed this link to the model from now on (subscribe before any datagram flows)."""
+    def attach(self, hardware: HardwareComponent) -> None:
+        """Read and write this hardware from now on (made before any datagram flows)."""
         self.detach()
-        self._feed = LinkFeed(link)
-        self._link = link
+        self.hardware = hardware
+        self.manager.attach(hardware)
 
     def detach(self) -> None:
-        """Stop feeding the current link; what it still had queued is dropped."""
-        feed, self._feed, self._link = self._feed, None, None
-        if feed is not None:
-            feed.close()
-
-    def _read(self, model: ConsoleModel) -> None:
-        # The control thread, under the model's lock: what the current link reported.
-        feed = self._feed
-        if feed is not None:
-            feed.read(model)
-
-    def heartbeat(self) -> None:
-        """The control thread is alive: the link keeps commanded motion going."""
-        link = self._link
-        if link is not None:
-            link.heartbeat()
+        """Stop reading and writing the current hardware; what it still had queued is dropped."""
+        hardware, self.hardware = self.hardware, None
+        self.manager.detach()
+        if hardware is not None:
+            hardware.feed.close()
 
     # ---- timing --------------------------------------------------------------------------------
 

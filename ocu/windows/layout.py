@@ -15,9 +15,7 @@ from PySide6.QtWidgets import QDockWidget, QMainWindow, QWidget
 
 from ocu.console.model import ConsoleModel
 from ocu.profile import RobotProfile
-from ocu.protocol import ProtocolError
-from ocu.protocol.extended import CameraRequest
-from ocu.records import CommandError
+from ocu.records import CameraRequest, CommandError
 from ocu.widgets.link_graphs import LinkGraphsPanel
 from ocu.widgets.model3d import Model3DWidget
 from ocu.windows.settings_file import SettingsStatus
@@ -42,7 +40,7 @@ def parse_stream_setting(text: str) -> CameraRequest:
         width, height = size.lower().split("x", 1)
         request = CameraRequest(int(camera), int(width), int(height), int(fps))
         request.check()
-    except (ValueError, ProtocolError) as err:
+    except ValueError as err:
         raise ValueError(f"not CAMERA:WIDTHxHEIGHT@FPS: {text!r} ({err})") from err
     return request
 
@@ -62,9 +60,9 @@ class DockLayout(QMainWindow):
     max_dock: QDockWidget
     joint_dock: QDockWidget
     log_dock: QDockWidget
-    video_dock: QDockWidget
+    _video_dock: QDockWidget | None  # only with cameras
     gamepad_dock: QDockWidget
-    map_dock: QDockWidget
+    _map_dock: QDockWidget | None  # only with a chassis that drives
     robot_check_dock: QDockWidget
     calibration_dock: QDockWidget
     arm_dock: QDockWidget | None
@@ -93,9 +91,12 @@ class DockLayout(QMainWindow):
         """The default layout of the docks made so far, with the 3D model and Link docks."""
         # Left: the operator's controls over the 3D model (Max velocity and Events as tabs
         # behind it); right: the cameras over the joints. Fits 1600x1000 with every dock.
+        # The Video and Map docks exist only where the hardware has cameras, a chassis.
         self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.velocity_dock)
-        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.video_dock)
-        self.splitDockWidget(self.video_dock, self.joint_dock, Qt.Orientation.Vertical)
+        right = self._video_dock or self.joint_dock
+        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, right)
+        if self._video_dock is not None:
+            self.splitDockWidget(self._video_dock, self.joint_dock, Qt.Orientation.Vertical)
         self.model_dock = add_model_dock(self)
         self.tabifyDockWidget(self.model_dock, self.max_dock)
         self.tabifyDockWidget(self.max_dock, self.log_dock)
@@ -106,13 +107,15 @@ class DockLayout(QMainWindow):
         self.link_dock = self._dock("link_dock", "Link", self.link_graphs)
         self.tabifyDockWidget(self.robot_check_dock, self.link_dock)
         # The map beside the 3D model: the robot's pose in the room, its arm in the other.
-        self.tabifyDockWidget(self.model_dock, self.map_dock)
+        if self._map_dock is not None:
+            self.tabifyDockWidget(self.model_dock, self._map_dock)
         self.model_dock.raise_()
-        self.resizeDocks(
-            [self.velocity_dock, self.video_dock], [500, 1100], Qt.Orientation.Horizontal
-        )
+        self.resizeDocks([self.velocity_dock, right], [500, 1100], Qt.Orientation.Horizontal)
         self.resizeDocks([self.velocity_dock, self.model_dock], [440, 490], Qt.Orientation.Vertical)
-        self.resizeDocks([self.video_dock, self.joint_dock], [480, 450], Qt.Orientation.Vertical)
+        if self._video_dock is not None:
+            self.resizeDocks(
+                [self._video_dock, self.joint_dock], [480, 450], Qt.Orientation.Vertical
+            )
 
     def _arrange_joint_tabs(self) -> None:
         """The Arm dock (if any) and the Calibration dock as tabs behind Joint position."""

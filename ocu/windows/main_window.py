@@ -24,6 +24,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 from PySide6.QtCore import QSettings, Qt, QTimer
 from PySide6.QtGui import QAction, QCloseEvent
@@ -42,17 +43,18 @@ from ocu import hotkeys
 from ocu.console.arm import ArmGoal
 from ocu.console.model import ConsoleModel
 from ocu.console.poses import ARM_POSES_NAME, PoseError
+from ocu.core.hardware import HardwareComponent
 from ocu.core.manager import DEFAULT_RATE_HZ
 from ocu.gamepad.calibration import CalibrationError, CalibrationStore, PadCalibration
 from ocu.gamepad.mapping import PadMapping, load_pad_mapping
 from ocu.gamepad.pad import PadInfo
 from ocu.gamepad.teleop import GamepadTeleop, Stopper
+from ocu.hardware.engineer import engineer_capabilities, engineer_component
 from ocu.hotkeys import KeyMap
 from ocu.kinematics.arm import ArmError
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.qt.collector import pin_garbage_collection
-from ocu.qt.console import ConsoleBinding
 from ocu.qt.gamepad import QtGamepad
 from ocu.qt.inbox import to_gui
 from ocu.qt.link import QtLink
@@ -113,7 +115,23 @@ DEFAULT_SIZE = (1560, 960)
 MINIMUM_SIZE = (800, 560)
 REPLAY_DISABLED_TIP = "Replay: commands are disabled"
 
+
+class MissingCapabilityError(LookupError):
+    """A view asked for that the hardware's capabilities did not bring."""
+
+
+W = TypeVar("W")
+
+
+def _present(view: W | None, capability: str, what: str) -> W:
+    if view is None:
+        raise MissingCapabilityError(f"the hardware has no {capability!r}: no {what}")
+    return view
+
+
 LinkFactory = Callable[[], Link]
+# How a link becomes the hardware component the control thread reads and writes.
+HardwareFor = Callable[[Link], HardwareComponent]
 # The GUI thread shares the GIL with the link and decoder threads: at Python's default 5 ms
 # switch interval a key press could wait that long for it behind a JPEG being corrected
 # (bench_console_video: key p99 5.4 ms at 5 ms, 3.9 ms at 1 ms, same CPU).
@@ -147,6 +165,8 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         calibration_link: CalibrationLinkFactory | None = None,
         settings_status: SettingsStatus | None = None,
         control_hz: float = DEFAULT_RATE_HZ,
+        hardware_for: HardwareFor = engineer_component,
+        capabilities: frozenset[str] | None = None,
         parent: QWidget | None = None,
     ) -> None:
         sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_INTERVAL_S))
@@ -161,6 +181,14 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self.replay = replay
         self.recorder = recorder if replay is None else None
         self.settings = settings
+        # Each link becomes a hardware component (ocu.core.hardware); the views the window
+        # builds are those its capabilities ask for (the Engineer's: every one).
+        self.hardware_for = hardware_for
+        self.capabilities = (
+            capabilities
+            if capabilities is not None
+            else engineer_capabilities(profile, extension=profile.extension is not None)
+        )
         # Whether the layout may be saved (ocu.windows.settings_file: never over a file that
         # could not be read, not in a folder that cannot be written).
         self.settings_status = settings_status or SettingsStatus(Path(settings.fileName()))
@@ -190,10 +218,10 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
                 f"ocu — REPLAY {replay.path.name} — {profile.name} — commands disabled"
             )
 
-        self.velocity_panel = VelocityPanel(self.model)
+        self.velocity_panel = VelocityPanel(self.model, torch="torch" in self.capabilities)
         self.max_panel = MaxVelocityPanel(self.model)
         self.joint_panel = JointPositionPanel(self.model)
-        self.video_panel = VideoPanel(self.model)
+        self._video_panel = VideoPanel(self.model) if "cameras" in self.capabilities else None
         # The pad's teleop is a part of the model: under its lock, its events on this thread.
         self.teleop = self.control.adopt(
             GamepadTeleop(
@@ -205,7 +233,7 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self._log_from_any_thread = to_gui(self.log_event)
         self.teleop.register_hook("pose", self._pad_pose)
         self.gamepad_panel = GamepadPanel(self.teleop, pad_calibrations)
-        self.map_panel = MapPanel(self.model)
+        self._map_panel = MapPanel(self.model) if "drive" in self.capabilities else None
         self.event_log = QListWidget()
         self.event_log.setObjectName("event_log")
         self.event_log.setFocusPolicy(Qt.FocusPolicy.NoFocus)
@@ -217,9 +245,15 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self.max_dock = self._dock("max_velocity_dock", "Max velocity", self.max_panel)
         self.joint_dock = self._dock("joint_position_dock", "Joint position", self.joint_panel)
         self.log_dock = self._dock("event_log_dock", "Events", self.event_log)
-        self.video_dock = self._dock("video_dock", "Video", self.video_panel)
+        self._video_dock = (
+            None
+            if self._video_panel is None
+            else self._dock("video_dock", "Video", self._video_panel)
+        )
         self.gamepad_dock = self._dock("gamepad_dock", "Gamepad", self.gamepad_panel)
-        self.map_dock = self._dock("map_dock", "Map", self.map_panel)
+        self._map_dock = (
+            None if self._map_panel is None else self._dock("map_dock", "Map", self._map_panel)
+        )
         self.robot_check = RobotCheckPanel(profile)
         self.robot_check_dock = self._dock("robot_check_dock", "Robot check", self.robot_check)
         self.calibration_panel = CalibrationPanel(
@@ -301,9 +335,10 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         events.operator_acted.connect(self._on_operator_acted)
         events.message.connect(self.log_event)
         events.position_message.connect(self.log_event)
-        video = self.video_panel
-        video.snapshot_saved.connect(lambda path: self.log_event(f"snapshot saved: {path}"))
-        video.snapshot_failed.connect(self.log_event)
+        video = self._video_panel
+        if video is not None:
+            video.snapshot_saved.connect(lambda path: self.log_event(f"snapshot saved: {path}"))
+            video.snapshot_failed.connect(self.log_event)
         self.model.robot.events.extension_changed.connect(
             lambda active, _reason: self.log_event(
                 "robot speaks the protocol extension" if active else "vendor protocol"
@@ -325,7 +360,6 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             self.link_status.add_indicator(self.settings_label)
 
         self.control.start()
-        self.binding: ConsoleBinding | None = None
         self.model.robot.events.telemetry_changed.connect(self.model_view.show_reading)
         self._view_timer = QTimer(self)
         self._view_timer.setInterval(VIEW_PERIOD_MS)
@@ -388,11 +422,38 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         for widget in disabled:
             widget.setEnabled(False)
             widget.setToolTip(REPLAY_DISABLED_TIP)
-        self.map_panel.set_replay()
+        if self._map_panel is not None:
+            self._map_panel.set_replay()
         # Odometry integrates recorded motion: at 4x, four robot seconds pass in one.
         self.model.nav.set_time_scale(source.speed)
         source.speed_changed.connect(self.model.nav.set_time_scale)
         self.link_status.set_replay()
+
+    # ---- the views a capability brings ----------------------------------------------------
+
+    def has(self, capability: str) -> bool:
+        """Whether the window was built for hardware with this capability."""
+        return capability in self.capabilities
+
+    @property
+    def video_panel(self) -> VideoPanel:
+        """The Video dock's panel (hardware with cameras only)."""
+        return _present(self._video_panel, "cameras", "Video panel")
+
+    @property
+    def video_dock(self) -> QDockWidget:
+        """The Video dock (hardware with cameras only)."""
+        return _present(self._video_dock, "cameras", "Video dock")
+
+    @property
+    def map_panel(self) -> MapPanel:
+        """The Map dock's panel (hardware that drives only)."""
+        return _present(self._map_panel, "drive", "Map panel")
+
+    @property
+    def map_dock(self) -> QDockWidget:
+        """The Map dock (hardware that drives only)."""
+        return _present(self._map_dock, "drive", "Map dock")
 
     # ---- link ------------------------------------------------------------------------------
 
@@ -413,15 +474,16 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             if self.recorder is not None:
                 self.recorder.attach(link)
             self.ros.link_started(link)
-        # The control thread tells the link it is alive and takes its telemetry.
+        # The control thread reads and writes the robot as a hardware component, tells it it
+        # is alive and takes its telemetry; QtLink hands its video and events to the views.
         qt = QtLink(link, self, heartbeat=False)
         self.model.robot.on_link_state(LinkState.CONNECTING, "connecting")
-        self.control.attach(link)  # subscribed before any datagram flows
-        self.binding = ConsoleBinding(self.model, qt, self, control_thread=True)
+        self.control.attach(self.hardware_for(link))  # subscribed before any datagram flows
         qt.link_state_changed.connect(self._on_link_state)
         qt.safety_event.connect(self._on_safety_event)
         self.link = qt
-        self.video_panel.set_link(qt)
+        if self._video_panel is not None:
+            self._video_panel.set_link(qt)
         self.robot_check.attach(link)  # subscribed before any datagram flows
         self.link_graphs.attach(link)  # and the operator's command rate applied
         qt.start()
@@ -436,16 +498,14 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         qt, self.link = self.link, None
         if qt is None:
             return
-        self.video_panel.set_link(None)
+        if self._video_panel is not None:
+            self._video_panel.set_link(None)
         self.robot_check.attach(None)
         self.link_graphs.attach(None)
         if not qt.read_only:
             self.ros.link_stopping()  # ROS lets go (zeroing what it moved) before the zeros
         qt.shutdown()  # zeros last
         self.control.detach()
-        if self.binding is not None:
-            self.binding.unbind()
-            self.binding = None
         if self.recorder is not None:
             self.recorder.detach(qt.link)
         self.model.robot.on_link_state(LinkState.CLOSED, "disconnected by the operator")

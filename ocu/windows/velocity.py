@@ -58,7 +58,9 @@ def channel_title(name: str) -> str:
 class VelocityPanel(QWidget):
     """Writes the operator's velocity input to the model; shows the model's commands."""
 
-    def __init__(self, model: ConsoleModel, parent: QWidget | None = None) -> None:
+    def __init__(
+        self, model: ConsoleModel, parent: QWidget | None = None, *, torch: bool = True
+    ) -> None:
         super().__init__(parent)
         self.setObjectName("velocity_panel")
         # The panel itself takes the keyboard first (it is first in the focus chain), so the
@@ -163,6 +165,10 @@ class VelocityPanel(QWidget):
         bottom.addWidget(self.connect_button)
         bottom.addWidget(self.torch_box)
         bottom.addWidget(self.headlight)
+        # A robot without a torch (the hardware's capabilities) shows neither.
+        for widget in (self.torch_box, self.headlight):
+            widget.setVisible(torch)
+            widget.setEnabled(torch)
         bottom.addStretch(1)
         bottom.addWidget(self.stop_button)
         layout.addLayout(bottom)

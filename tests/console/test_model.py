@@ -442,7 +442,7 @@ def test_a_planner_drives_free_channels_and_the_operator_always_wins(
 
 
 def test_stream_requests_are_the_models_and_checked(model: ConsoleModel) -> None:
-    from ocu.protocol.extended import CameraRequest
+    from ocu.records import CameraRequest
 
     seen: list[tuple[CameraRequest, ...]] = []
     model.events.stream_request_changed.connect(seen.append)

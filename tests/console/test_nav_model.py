@@ -14,6 +14,7 @@ from ocu.nav.navigator import ZONES_BLIND, ZONES_CLEAR, ZONES_OFF_NO_DATA, ZoneS
 from ocu.nav.world import parse_world
 from ocu.profile import RobotProfile
 from ocu.protocol import TelemetryPacket
+from ocu.protocol.mapping import scan_frame
 from ocu.records import Command, JointReading, LinkState, ScanFrame, TelemetryFrame
 from ocu.sim.rangefinder import RangeSensor, RangeSensorConfig
 
@@ -48,7 +49,7 @@ def wall_scan(clock: Clock, gap_m: float) -> ScanFrame:
         {"wall": [{"from_m": [0.62 + gap_m + 0.05, -4.0], "to_m": [0.67 + gap_m, 4.0]}]}
     )
     sensor = RangeSensor(world, RangeSensorConfig(noise_m=0.0))
-    return ScanFrame.from_packet(sensor.sweep(Pose(0.0, 0.0, 0.0), 0), clock.now, 0.0)
+    return scan_frame(sensor.sweep(Pose(0.0, 0.0, 0.0), 0), clock.now, 0.0)
 
 
 def tracks(clock: Clock, speed_m_s: float = 0.0) -> TelemetryFrame:

@@ -8,16 +8,16 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ocu.control.commands import (
+from ocu.control.commands import VelocityLimits
+from ocu.profile import Motor, load_profile, load_profile_data, parse_profile
+from ocu.protocol import Codec, MotorRecord, RemoteControlPacket, TelemetryPacket
+from ocu.protocol.mapping import (
     CommandMapper,
-    VelocityLimits,
     rad_to_ticks,
     read_motor,
     read_telemetry,
     ticks_to_rad,
 )
-from ocu.profile import Motor, load_profile, load_profile_data, parse_profile
-from ocu.protocol import Codec, MotorRecord, RemoteControlPacket, TelemetryPacket
 from ocu.protocol.wire import make_codec
 from ocu.records import Command, CommandError
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import math
 
-from ocu.control.commands import rad_to_ticks, read_telemetry
 from ocu.control.plausibility import PlausibilityChecker
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket
+from ocu.protocol.mapping import rad_to_ticks, read_telemetry
 
 SHOULDER_ID = 5
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Sequence
 
 import pytest
 
@@ -12,6 +13,7 @@ from ocu.console.model import ConsoleModel
 from ocu.core.guard import Guarded, unguarded
 from ocu.core.manager import ControllerManager
 from ocu.profile import RobotProfile
+from ocu.records import CameraRequest, Command
 
 DEADLINE_S = 10.0
 
@@ -27,12 +29,34 @@ class Clock:
 
 
 class Beats:
-    """The hardware: counts the control thread's signs of life."""
+    """The hardware: records the cycle's calls (and whether the model's lock was held)."""
 
-    def __init__(self) -> None:
+    def __init__(self, lock: threading.RLock | None = None) -> None:
         self.count = 0
+        self.lock = lock
+        self.calls: list[tuple[str, bool]] = []
+        self.written: list[Command] = []
+
+    def _held(self) -> bool:
+        return self.lock is not None and bool(self.lock._is_owned())  # type: ignore[attr-defined]
+
+    def read(self, model: ConsoleModel) -> None:
+        self.calls.append(("read", self._held()))
+
+    def write(self, command: Command) -> bool:
+        self.calls.append(("write", self._held()))
+        self.written.append(command)
+        return True
+
+    def emergency_stop(self, reason: str = "operator") -> bool:
+        self.calls.append(("estop", self._held()))
+        return True
+
+    def set_stream_request(self, cameras: Sequence[CameraRequest]) -> bool:
+        return True
 
     def heartbeat(self) -> None:
+        self.calls.append(("heartbeat", self._held()))
         self.count += 1
 
 
@@ -117,20 +141,32 @@ def test_events_hand_callbacks_to_the_thread_that_connected_them() -> None:
         register_dispatcher(view_thread[0], None)
 
 
-def test_a_cycle_reads_then_steps_then_beats(profile: RobotProfile) -> None:
-    clock, beats, order = Clock(), Beats(), []
+def test_a_cycle_reads_then_steps_then_writes_then_beats(profile: RobotProfile) -> None:
+    clock = Clock()
     model = ConsoleModel(profile)
     lock = threading.RLock()
-    manager = ControllerManager(
-        model,
-        lock,
-        read=lambda m: order.append(("read", lock._is_owned())),  # type: ignore[attr-defined]
-        hardware=beats,
-        clock=clock,
-    )
+    beats = Beats(lock)
+    manager = ControllerManager(model, lock, hardware=beats, clock=clock)
+    assert beats.calls == [("write", True)]  # attached: the model's command at once
+    beats.calls.clear()
     manager.cycle()
-    assert order == [("read", True)]
+    assert beats.calls == [("read", True), ("write", True), ("heartbeat", False)]
     assert beats.count == 1
+    # A changed command reaches the hardware at once, on the thread that changed it.
+    beats.calls.clear()
+    with lock:
+        model.set_velocity("waist", 0.2)
+    assert beats.calls == [("write", True)]
+    assert beats.written[-1].velocity("waist") == pytest.approx(0.2)
+    with lock:
+        model.emergency_stop("test")
+    assert ("estop", True) in beats.calls
+    manager.detach()
+    beats.calls.clear()
+    manager.cycle()
+    with lock:
+        model.set_velocity("waist", 0.1)
+    assert beats.calls == []
 
 
 def test_a_silent_gui_with_motion_commanded_halts_the_model(profile: RobotProfile) -> None:
@@ -139,7 +175,6 @@ def test_a_silent_gui_with_motion_commanded_halts_the_model(profile: RobotProfil
     manager = ControllerManager(
         model,
         threading.RLock(),
-        read=lambda m: None,
         hardware=beats,
         gui_timeout_s=0.4,
         clock=clock,
@@ -166,9 +201,7 @@ def test_a_silent_gui_with_motion_commanded_halts_the_model(profile: RobotProfil
 def test_a_gap_in_the_control_threads_own_cycles_halts_the_model(profile: RobotProfile) -> None:
     clock = Clock()
     model = ConsoleModel(profile)
-    manager = ControllerManager(
-        model, threading.RLock(), read=lambda m: None, hardware=None, clock=clock
-    )
+    manager = ControllerManager(model, threading.RLock(), hardware=None, clock=clock)
     model.set_velocity("neck", 0.3)
     manager.cycle()
     clock.now += 0.01
@@ -183,7 +216,7 @@ def test_the_thread_keeps_its_rate_and_counts_what_it_missed(profile: RobotProfi
     model = ConsoleModel(profile)
     beats = Beats()
     lock = threading.RLock()
-    manager = ControllerManager(model, lock, read=lambda m: None, hardware=beats, rate_hz=200)
+    manager = ControllerManager(model, lock, hardware=beats, rate_hz=200)
     manager.start()
     try:
         wait_for(lambda: manager.timing().cycles >= 20, "20 cycles")
@@ -201,4 +234,4 @@ def test_the_thread_keeps_its_rate_and_counts_what_it_missed(profile: RobotProfi
         manager.stop()
     assert not manager.running
     with pytest.raises(ValueError, match="control rate"):
-        ControllerManager(model, lock, read=lambda m: None, hardware=None, rate_hz=0.5)
+        ControllerManager(model, lock, hardware=None, rate_hz=0.5)

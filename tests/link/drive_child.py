@@ -15,6 +15,7 @@ import sys
 import threading
 
 from ocu.console.model import ConsoleModel
+from ocu.hardware.engineer import engineer_component
 from ocu.headless import HeadlessConsole
 from ocu.link.guard import ExitGuard
 from ocu.link.live import UdpLink
@@ -28,7 +29,7 @@ def main() -> None:
     profile = load_profile()
     link = UdpLink(profile, (host, port))
     model = ConsoleModel(profile)
-    console = HeadlessConsole(model, link)
+    console = HeadlessConsole(model, engineer_component(link))
     if mode == "crash":
         ExitGuard().install()
     console.start()

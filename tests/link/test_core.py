@@ -10,12 +10,12 @@ from typing import Any
 
 import pytest
 
-from ocu.control.commands import CommandMapper
 from ocu.link.base import LinkError
 from ocu.link.live import UdpLink
 from ocu.link.stats import LossEstimator, RateMeter, tick_loss
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket, VideoFramePacket
+from ocu.protocol.mapping import CommandMapper
 from ocu.protocol.wire import make_codec
 from ocu.records import (
     Command,

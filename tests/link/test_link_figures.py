@@ -10,8 +10,7 @@ import pytest
 
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest
-from ocu.records import LinkState, LinkStats
+from ocu.records import CameraRequest, LinkState, LinkStats
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator
 from tests.link.test_core import Recorder

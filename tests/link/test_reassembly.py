@@ -19,7 +19,8 @@ from ocu.link.reassembly import (
     sequence_newer,
 )
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest, VideoFragment, fragment_frame
+from ocu.protocol.extended import VideoFragment, fragment_frame
+from ocu.records import CameraRequest
 from ocu.sim.extended import jpeg_comment
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator

@@ -9,10 +9,10 @@ from collections.abc import Iterator
 
 import pytest
 
-from ocu.control.commands import rad_to_ticks
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket
+from ocu.protocol.mapping import rad_to_ticks
 from ocu.records import LinkState
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator

@@ -11,6 +11,7 @@ from collections.abc import Iterator
 import pytest
 
 from ocu.console.model import ConsoleModel
+from ocu.hardware.engineer import engineer_component
 from ocu.headless import HeadlessConsole
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
@@ -31,7 +32,7 @@ def sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
 def console(profile: RobotProfile, sim: RobotSimulator) -> Iterator[HeadlessConsole]:
     # The slowest periodic rate (1 Hz): the repeats cannot be mistaken for periodic ticks.
     link = UdpLink(profile, sim.address, send_rate_hz=profile.link.send_rate_min_hz)
-    headless = HeadlessConsole(ConsoleModel(profile), link)
+    headless = HeadlessConsole(ConsoleModel(profile), engineer_component(link))
     headless.start()
     yield headless
     headless.stop()

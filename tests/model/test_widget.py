@@ -15,9 +15,9 @@ from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication, QWidget
 from pytestqt.qtbot import QtBot
 
-from ocu.control.commands import rad_to_ticks, read_telemetry
 from ocu.profile import RobotProfile
 from ocu.protocol import MotorRecord, TelemetryPacket
+from ocu.protocol.mapping import rad_to_ticks, read_telemetry
 from ocu.records import Command, JointReading
 from ocu.render.platform import offscreen_gl_mode
 from ocu.widgets.model3d import Model3DWidget, image_array

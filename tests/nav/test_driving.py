@@ -10,11 +10,12 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from ocu.console.model import ConsoleModel
-from ocu.control.commands import CommandMapper
+from ocu.hardware.engineer import engineer_component
 from ocu.headless import HeadlessConsole
 from ocu.link.live import UdpLink
 from ocu.nav.world import load_world
 from ocu.profile import RobotProfile
+from ocu.protocol.mapping import CommandMapper
 from ocu.records import LinkState
 from ocu.sim.faults import FaultConfig
 from ocu.sim.simulator import RobotSimulator, SimState
@@ -49,7 +50,9 @@ def field_sim(profile: RobotProfile) -> Iterator[RobotSimulator]:
 @pytest.fixture
 def console(profile: RobotProfile, field_sim: RobotSimulator) -> Iterator[HeadlessConsole]:
     model = ConsoleModel(profile)
-    headless = HeadlessConsole(model, UdpLink(profile, field_sim.address, extension=True))
+    headless = HeadlessConsole(
+        model, engineer_component(UdpLink(profile, field_sim.address, extension=True))
+    )
     headless.start()
     wait(lambda: headless.call(lambda: model.nav.zones.text) != "", "zones")
     wait(lambda: headless.call(lambda: model.robot.link_state) is LinkState.CONNECTED, "link")

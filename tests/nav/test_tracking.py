@@ -14,7 +14,7 @@ from ocu.nav.grid import OccupancyGrid
 from ocu.nav.tracking import Reference, along_path, ellipse, samson, samson_gains
 from ocu.nav.world import load_world
 from ocu.profile import AssistSettings
-from ocu.records import ScanFrame
+from ocu.protocol.mapping import scan_frame
 from ocu.sim.rangefinder import RangeSensor
 
 ASSIST = AssistSettings()
@@ -124,7 +124,7 @@ def test_the_grid_marks_walls_occupied_and_the_room_free() -> None:
     sensor = RangeSensor(world, seed=3)
     grid = OccupancyGrid()
     for pose in (Pose(0.0, 0.0, 0.0), Pose(1.0, -1.0, 1.0)):
-        scan = ScanFrame.from_packet(sensor.sweep(pose, 0), 0.0, 0.0)
+        scan = scan_frame(sensor.sweep(pose, 0), 0.0, 0.0)
         for _ in range(4):
             grid.integrate(scan, pose, (0.0, 0.0))
 

@@ -9,13 +9,13 @@ from hypothesis import strategies as st
 from ocu.protocol import ProtocolError
 from ocu.protocol.extended import (
     FRAGMENT_HEADER_SIZE,
-    CameraRequest,
     ExtendedCodec,
     HelloPacket,
     StatusPacket,
     VideoFragment,
     fragment_frame,
 )
+from ocu.records import CameraRequest
 
 CODEC = ExtendedCodec(hello_type=0x10, fragment_type=0x11, status_type=0x12)
 JPEG = b"\xff\xd8\xff\xe0" + bytes(range(256)) * 20 + b"\xff\xd9"

@@ -16,7 +16,8 @@ from ocu.protocol.extended import (
     ScanPacket,
     StatusPacket,
 )
-from ocu.records import ScanFrame, StatusFrame
+from ocu.protocol.mapping import scan_frame
+from ocu.records import StatusFrame
 
 CODEC = ExtendedCodec(hello_type=0x10, fragment_type=0x11, status_type=0x12, scan_type=0x13)
 
@@ -58,7 +59,7 @@ def test_status_version_2_carries_the_heading_and_version_1_still_decodes() -> N
 
 
 def test_a_scan_in_si_units() -> None:
-    frame = ScanFrame.from_packet(SCAN, received_at=1.0, wall_time=2.0)
+    frame = scan_frame(SCAN, received_at=1.0, wall_time=2.0)
     assert frame.angle_min_rad == pytest.approx(-math.pi, abs=1e-6)
     assert frame.angle_increment_rad == pytest.approx(math.pi / 2, abs=1e-6)
     assert frame.ranges_m[0] == 1.0

@@ -7,12 +7,7 @@ import struct
 import pytest
 
 from ocu.protocol import ProtocolError, RemoteControlPacket
-from ocu.protocol.extended import (
-    SEQUENCED_RCP_SIZE,
-    ExtendedCodec,
-    SequencedRcp,
-    sequence_newer,
-)
+from ocu.protocol.extended import SEQUENCED_RCP_SIZE, ExtendedCodec, SequencedRcp, sequence_newer
 
 RCP_TYPE = 0x14
 AXES = (1000, -2000) + (0,) * 14

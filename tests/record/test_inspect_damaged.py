@@ -16,10 +16,10 @@ import pytest
 
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile, load_profile
-from ocu.protocol.extended import CameraRequest
 from ocu.record.inspect import main, summarize
 from ocu.record.reader import Recording
 from ocu.record.recorder import Recorder
+from ocu.records import CameraRequest
 from ocu.sim.simulator import RobotSimulator
 from tests.record.helpers import Collector
 

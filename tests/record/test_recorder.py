@@ -19,18 +19,17 @@ from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 
-from ocu.control.commands import read_telemetry
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.protocol import TelemetryPacket
-from ocu.protocol.extended import CameraRequest
+from ocu.protocol.mapping import read_telemetry
 from ocu.protocol.wire import make_codec
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.inspect import main as inspect_main
 from ocu.record.reader import Recording
 from ocu.record.recorder import Recorder
-from ocu.records import Command, DatagramSent, LinkEvent, SafetyEvent, TelemetryFrame
+from ocu.records import CameraRequest, Command, DatagramSent, LinkEvent, SafetyEvent, TelemetryFrame
 from ocu.sim.simulator import RobotSimulator
 from tests.record.helpers import Collector, assert_monotonic, poll_until, read_finished
 

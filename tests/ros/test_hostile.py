@@ -21,10 +21,11 @@ from typing import Any
 
 import pytest
 
-from ocu.control.commands import CommandMapper, VelocityLimits
+from ocu.control.commands import VelocityLimits
 from ocu.nav.geometry import Pose
 from ocu.nav.world import parse_world
 from ocu.profile import RobotProfile
+from ocu.protocol.mapping import CommandMapper, scan_frame
 from ocu.records import ScanFrame
 from ocu.ros.master import RosMaster
 from ocu.ros.node import EXIT_MASTER_RESTARTED
@@ -240,15 +241,13 @@ def test_a_second_scan_publisher_cannot_hide_a_wall(
     streams: list[Streamer] = []
 
     def true_scan() -> Any:
-        return laser_message(ScanFrame.from_packet(sensor.sweep(Pose(*sim.state().pose), 0), 0, 0))
+        return laser_message(scan_frame(sensor.sweep(Pose(*sim.state().pose), 0), 0, 0))
 
     try:
         process.wait_connected(scan_pub)
         process.wait_connected(cmd_vel)
         # A scan in a frame nobody placed is refused, with the reason.
-        scan_pub.publish(
-            laser_message(ScanFrame.from_packet(sensor.sweep(Pose(0, 0, 0), 0), 0, 0), "nowhere")
-        )
+        scan_pub.publish(laser_message(scan_frame(sensor.sweep(Pose(0, 0, 0), 0), 0, 0), "nowhere"))
         assert wait_for(lambda: "frame 'nowhere' is unknown" in process.output(), 5.0)
         # The robot's laser (this node) and a second node that sees nothing, both base_link.
         streams.append(Streamer(scan_pub.publish, true_scan, 0.1))

@@ -13,11 +13,11 @@ from typing import Any
 
 import pytest
 
-from ocu.control.commands import CommandMapper
 from ocu.nav.geometry import Pose
 from ocu.nav.navigator import ZONES_BLIND, ZONES_OFF_NO_DATA, Navigator
 from ocu.nav.world import load_world, parse_world
 from ocu.profile import RobotProfile
+from ocu.protocol.mapping import CommandMapper, scan_frame
 from ocu.records import ScanFrame
 from ocu.ros.master import RosMaster
 from ocu.ros.navigation import (
@@ -112,7 +112,7 @@ def test_the_guarded_sink_slows_a_steady_command_as_the_wall_nears(profile: Robo
         x = 0.67 + gap_m
         world = parse_world({"wall": [{"from_m": [x, -3.0], "to_m": [x, 3.0]}]})
         packet = RangeSensor(world, RangeSensorConfig(noise_m=0.0)).sweep(Pose(0, 0, 0), 0)
-        return ScanFrame.from_packet(packet, now[0], 0.0)
+        return scan_frame(packet, now[0], 0.0)
 
     navigator.on_scan(wall(2.0))
     guarded.set_velocities(drive_linear=0.45, drive_turn=0.0, waist=0.1)
@@ -133,7 +133,7 @@ def wall_scan(gap_m: float, at: float) -> ScanFrame:
     x = 0.67 + gap_m
     world = parse_world({"wall": [{"from_m": [x, -3.0], "to_m": [x, 3.0]}]})
     packet = RangeSensor(world, RangeSensorConfig(noise_m=0.0)).sweep(Pose(0, 0, 0), 0)
-    return ScanFrame.from_packet(packet, at, 0.0)
+    return scan_frame(packet, at, 0.0)
 
 
 def clear_scan(at: float) -> ScanFrame:
@@ -361,7 +361,7 @@ def test_a_vendor_robot_takes_scan_from_another_node_for_the_zones(
     def publish_scan() -> None:
         # Another node's laser on the robot: what it sees from where the robot truly is.
         packet = sensor.sweep(Pose(*sim.state().pose), 0)
-        frame = ScanFrame.from_packet(packet, 0.0, 0.0)
+        frame = scan_frame(packet, 0.0, 0.0)
         message = LaserScan()
         message.header.frame_id = "base_link"
         message.header.stamp = rospy.Time.now()

@@ -11,17 +11,12 @@ import cv2
 import numpy as np
 import pytest
 
-from ocu.control.commands import CommandMapper
 from ocu.link.reassembly import Reassembler
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import (
-    CameraRequest,
-    HelloPacket,
-    StatusPacket,
-    VideoFragment,
-)
+from ocu.protocol.extended import HelloPacket, StatusPacket, VideoFragment
+from ocu.protocol.mapping import CommandMapper
 from ocu.protocol.wire import make_codec, make_extension_codec
-from ocu.records import Command
+from ocu.records import CameraRequest, Command
 from ocu.sim.cli import build_parser
 from ocu.sim.extended import jpeg_comment
 from ocu.sim.simulator import RobotSimulator

@@ -14,10 +14,10 @@ from collections.abc import Iterator
 
 import pytest
 
-from ocu.control.commands import CommandMapper
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.protocol.extended import SequencedRcp, sequence_newer
+from ocu.protocol.mapping import CommandMapper
 from ocu.protocol.wire import make_codec, make_extension_codec
 from ocu.records import Command
 from ocu.sim.faults import FaultConfig

@@ -13,9 +13,9 @@ from typing import IO
 
 import pytest
 
-from ocu.control.commands import CommandMapper
 from ocu.profile import RobotProfile, load_profile
 from ocu.protocol import TelemetryPacket
+from ocu.protocol.mapping import CommandMapper
 from ocu.protocol.wire import make_codec
 from ocu.records import Command
 from ocu.sim.cli import build_parser, main

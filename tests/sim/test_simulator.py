@@ -14,10 +14,10 @@ from typing import Any, TypeVar
 import pytest
 from PIL import Image, ImageChops
 
-from ocu.control.commands import CommandMapper, read_telemetry
 from ocu.net.transport import VIRTUAL_OCU, VIRTUAL_ROBOT, VirtualWire
 from ocu.profile import RobotProfile, load_profile
 from ocu.protocol import Codec, MotorRecord, Packet, TelemetryPacket, VideoFramePacket
+from ocu.protocol.mapping import CommandMapper, read_telemetry
 from ocu.protocol.wire import make_codec
 from ocu.records import Command
 from ocu.sim import FaultConfig, RobotSimulator, SimState

@@ -12,9 +12,9 @@ from pytestqt.qtbot import QtBot
 from ocu.console.model import ConsoleModel
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest
 from ocu.qt.console import ConsoleBinding
 from ocu.qt.link import DecodedVideoFrame, QtLink
+from ocu.records import CameraRequest
 from ocu.sim.extended import jpeg_comment
 from ocu.sim.simulator import RobotSimulator
 from ocu.sim.video import parse_comment, quality_for_bitrate

@@ -11,8 +11,7 @@ import time
 
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
-from ocu.protocol.extended import CameraRequest
-from ocu.records import VideoFrame
+from ocu.records import CameraRequest, VideoFrame
 from ocu.sim.simulator import RobotSimulator
 from tests.link.test_core import Recorder
 

@@ -10,8 +10,8 @@ from PySide6.QtCore import Qt
 from PySide6.QtTest import QTest
 from pytestqt.qtbot import QtBot
 
-from ocu.control.commands import CommandMapper
 from ocu.profile import RobotProfile
+from ocu.protocol.mapping import CommandMapper
 from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
 from ocu.widgets.video import LIVE

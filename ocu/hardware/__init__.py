@@ -1,0 +1,1 @@
+"""Hardware plug-ins: each robot as a hardware component (ocu.core.hardware), by name."""

@@ -1,0 +1,11 @@
+"""The hardware plug-ins by name: one registration line each (docs/hardware.md)."""
+
+from __future__ import annotations
+
+from ocu.core.hardware import HardwareRegistry
+from ocu.hardware import engineer
+
+HARDWARE = HardwareRegistry()
+HARDWARE.register("engineer", engineer.over_udp)
+HARDWARE.register("engineer-sim", engineer.simulated)
+HARDWARE.register("engineer-recording", engineer.recording)
