@@ -214,7 +214,7 @@ class GuiSampler:
     def _run(self, period_s: float) -> None:
         while not self._stop.wait(period_s):
             frame = sys._current_frames().get(self.ident)
-            names = []
+            names: list[str] = []
             while frame is not None and len(names) < 3:
                 code = frame.f_code
                 names.append(f"{Path(code.co_filename).name}:{code.co_name}")

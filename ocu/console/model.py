@@ -43,6 +43,7 @@ import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
+from ocu.console.arbitration import Arbitration
 from ocu.console.arm import ArmConsole
 from ocu.console.channels import (
     MANUAL_SOURCES,
@@ -61,7 +62,7 @@ from ocu.console.tracking import TrackSession
 from ocu.console.video import VideoRequest
 from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
-from ocu.control.mux import OPERATOR, InputMux, MuxError
+from ocu.control.mux import InputMux
 from ocu.control.position import PositionController, PositionError
 from ocu.control.tracking import TrackingOptions
 from ocu.kinematics.arm import ArmError, ArmKinematics
@@ -93,10 +94,9 @@ __all__ = [
 log = logging.getLogger("ocu.console")
 
 DEFAULT_FINE_FACTOR = 0.25
-OPERATOR_TOOK_OVER = "operator took over"
 
 
-class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
+class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoRequest):
     """The command (channels, switches, camera, bit-rate, streams), e-stop latch, targets,
     hotkeys and Shift, the velocity limits, and the robot's state."""
 
@@ -190,18 +190,8 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
             else:
                 self.arm = ArmConsole(controller, self, arm_poses_path)
                 self.arm.events.message.connect(self.events.message.emit, direct=True)
-        # Who may command a channel and what stops whom: the table ocu/control/mux.md
-        # (docs/console.md, "Who commands a channel"); each source registers its stop.
-        self.mux = mux if mux is not None else InputMux.shipped()
-        self._fed_at: dict[Source, float] = {}
-        self._pad_background = False
-        for zeroed in (Source.SLIDER, Source.TEXT, Source.SWITCH, Source.GAMEPAD, Source.ROS):
-            self.mux.register(zeroed.value, self._zeroer(zeroed))
-        self.mux.register(Source.HOTKEY.value, self._release_held)
-        self.mux.register(Source.POSITION.value, self._stop_position)
-        self.mux.register(Source.ARM.value, self._arm_stop)
-        self.mux.register(Source.ASSIST.value, self._end_assist)
-        self.mux.register(Source.TRACK.value, self._end_tracking)
+        # Who may command a channel and what stops whom: the table ocu/control/mux.md.
+        self._init_mux(mux)
 
     # ---- state -----------------------------------------------------------------------------
 
@@ -582,67 +572,6 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
         if channel not in self._channels:
             raise CommandError(f"unknown velocity channel {channel!r}")
 
-    def _operator_acted(self, *, keep_arm: bool = False) -> None:
-        """A motion input of the operator: the sources the mux's table says stop for it
-        stop (a planner, an assisted mode, tracking, an arm moving to a goal), the e-stop
-        latch lets go."""
-        self.events.operator_acted.emit()
-        stopped = self.mux.stopped_by(OPERATOR, self._holds)
-        if keep_arm and Source.ARM.value in stopped:
-            stopped.remove(Source.ARM.value)
-        self._stop_sources(stopped, OPERATOR_TOOK_OVER)
-        self.release_estop()
-
-    def _stop_sources(self, stopped: list[str], reason: str) -> None:
-        """Stop these sources (their registered stops, in the table's order), and zero
-        whatever channel one of them still holds."""
-        for source in stopped:
-            self.mux.stop(source, reason)
-        for channel in self._channels:
-            if self._requested(channel).source.value in stopped:
-                self._set_channel(channel, 0.0, Source.NONE)
-
-    def _holds(self, source: str, condition: str) -> bool:
-        """Whether a `keeps if <condition>` of the mux's table holds now."""
-        if condition == "background":
-            return self._pad_background
-        if condition == "external":
-            return self.nav.assist_external
-        moving_to = self.arm.controller.moving_to if self.arm is not None else None
-        if condition == "a move":
-            return moving_to is not None
-        if condition == "a jog":
-            return moving_to is None
-        raise MuxError(f"{self.mux.origin}: the model knows no condition {condition!r}")
-
-    def _zeroer(self, source: Source) -> Callable[[str], None]:
-        """A source's stop that zeroes the channels it commands."""
-
-        def zero(_reason: str) -> None:
-            for channel in self._channels:
-                if self._requested(channel).source is source:
-                    self._set_channel(channel, 0.0, Source.NONE)
-
-        return zero
-
-    def _release_held(self, _reason: str) -> None:
-        """The hotkeys' stop: every held key is let go (the caller tells the views)."""
-        channels = {channel for channel, _ in self._held.values()}
-        self._held.clear()
-        for channel in channels:
-            self._apply_hotkeys(channel)
-        self._zeroer(Source.HOTKEY)(_reason)
-
-    def _arm_stop(self, reason: str) -> None:
-        """The arm's stop (a move stops for operator input as "operator input")."""
-        self._stop_arm("operator input" if reason == OPERATOR_TOOK_OVER else reason)
-
-    def _stop_position(self, _reason: str) -> None:
-        """Position control's stop: every target cancelled, its channels zeroed."""
-        self.controller.cancel()
-        self._sync_targets()
-        self._zeroer(Source.POSITION)(_reason)
-
     def release_estop(self) -> None:
         """The operator acts again: the e-stop latch lets commands through once more."""
         if self._estopped:
@@ -722,22 +651,6 @@ class ConsoleModel(Driving, ClickToTrack, InputSources, VideoRequest):
         if command != self._channels[channel]:
             self._channels[channel] = command
             self.events.channel_changed.emit(channel, command)
-
-    def _zero_all(
-        self, *, lock: str | None = None, pad_background: bool = False, reason: str = "stopped"
-    ) -> None:
-        had_keys = bool(self.held_keys)
-        self._pad_background = pad_background
-        try:
-            stopped = (
-                self.mux.stopped_by(lock, self._holds) if lock is not None else self.mux.sources
-            )
-        finally:
-            self._pad_background = False
-        self._stop_sources(list(stopped), reason)
-        self.nav.cancel_override()
-        if had_keys:
-            self.events.held_changed.emit(self.held_keys)
 
     def _sync_targets(self) -> None:
         targets = self.controller.targets

@@ -47,6 +47,7 @@ class ModelPart:
     _targets: dict[str, float]
     _pad: dict[str, PadWish]
     _pad_blocked: set[str]
+    _held: dict[str, tuple[str, int]]
     _waypoints: tuple[tuple[float, float], ...]
     _shuttle: tuple[tuple[float, float], ...]
     _zone_text: str
@@ -59,6 +60,19 @@ class ModelPart:
     if TYPE_CHECKING:
 
         def hotkey_speed(self, channel: str) -> float: ...
+
+        @property
+        def held_keys(self) -> frozenset[str]: ...
+
+        def release_estop(self) -> None: ...
+
+        def _apply_hotkeys(self, channel: str) -> None: ...
+
+        def _end_assist(self, reason: str) -> bool: ...
+
+        def _end_tracking(self, reason: str, *, quiet: bool = False) -> bool: ...
+
+        def _stop_arm(self, reason: str) -> None: ...
 
         def _check_channel(self, channel: str) -> None: ...
 
