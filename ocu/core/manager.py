@@ -11,9 +11,10 @@ lock:
 1. read: what the hardware component (ocu.core.hardware) reported since the last cycle goes
    into the model (the commands the link sent, then the newest telemetry frame: the joints'
    predictors need both, in order);
-2. watch: a GUI thread silent past its limit while motion is commanded halts the model (the
-   operator's keys and sliders cannot be released through a frozen GUI); so does a gap in this
-   thread's own cycles longer than the link's alive timeout (the link has zeroed by then);
+2. watch: a GUI thread silent past its limit while motion is commanded stops what the GUI
+   feeds (the input mux's "GUI silent" lock: the operator's keys and sliders cannot be
+   released through a frozen GUI); a gap in this thread's own cycles longer than the link's
+   alive timeout halts everything (the link has zeroed by then);
 3. update: the model's control step at this cycle's time (controllers, assisted modes, zones);
 4. write: the model's command to the hardware (written only when it changed: the link's own
    safety zeroing stands until the model's command changes), still under the lock; then the
