@@ -262,6 +262,32 @@ def xdotool(env: dict[str, str], *args: str) -> str:
     return result.stdout
 
 
+def find_window(env: dict[str, str], name_pattern: str, timeout_s: float = 30.0) -> str:
+    """The first visible window whose name matches, waited for until a deadline.
+
+    `xdotool search --sync` alone was not enough: beside two CPU hogs it once exited 1 while
+    the console was starting (an X error during the search, most likely a window that went
+    away while it looked; its stderr was not kept). The search is asked again until found.
+    """
+    deadline = time.monotonic() + timeout_s
+    last = ""
+    while time.monotonic() < deadline:
+        result = subprocess.run(
+            [XDOTOOL or "", "search", "--onlyvisible", "--name", name_pattern],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=timeout_s,
+            check=False,
+        )
+        windows = result.stdout.split()
+        if result.returncode == 0 and windows:
+            return windows[0]
+        last = result.stderr.strip()
+        time.sleep(0.05)  # polling the X server for a window to appear
+    raise AssertionError(f"no visible window named {name_pattern!r} in {timeout_s} s ({last})")
+
+
 def x_env(display: str, tmp_path: Path) -> dict[str, str]:
     env = {**os.environ, "DISPLAY": display, "QT_QPA_PLATFORM": "xcb"}
     env["OCU_CONFIG_DIR"] = str(tmp_path)
@@ -325,7 +351,7 @@ def test_sigterm_while_driving_on_a_russian_layout_sends_zeros_last(
     program = start_ocu(env, sim, log_path)
     try:
         assert sim.wait_until(lambda s: s.client is not None, 30.0), "ocu never connected"
-        window = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^ocu").split()[0]
+        window = find_window(env, "^ocu")
         driving = False
         for _ in range(3):  # the window may not have the keyboard focus yet: focus, retry
             xdotool(env, "windowfocus", "--sync", window, "mousemove", "--window", window, "9", "9")
@@ -421,8 +447,8 @@ def test_a_key_held_in_another_window_does_not_drive_when_the_console_gets_the_f
     )
     try:
         assert sim.wait_until(lambda s: s.client is not None, 30.0), "ocu never connected"
-        console = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^ocu").split()[0]
-        window = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^another appl")
+        console = find_window(env, "^ocu")
+        window = find_window(env, "^another appl")
         xdotool(env, "windowfocus", "--sync", window.split()[0])
         xdotool(env, "keydown", "w")
         # Xvfb auto-repeats like any X server (660 ms delay, 25 Hz): wait for the repeats.

@@ -23,7 +23,7 @@ from ocu.link.live import UdpLink
 from ocu.nav.world import default_world_path, load_world
 from ocu.profile import RobotProfile
 from ocu.sim.simulator import RobotSimulator
-from tests.test_safety import XDOTOOL, XVFB, start_ocu, x_env, xdotool
+from tests.test_safety import XDOTOOL, XVFB, find_window, start_ocu, x_env, xdotool
 from tests.windows.console_fixtures import is_zero, sim
 
 __all__ = ["sim"]  # fixture used below
@@ -70,7 +70,7 @@ def x_server() -> Iterator[XServer]:
 def drive_by_key(env: dict[str, str], sim: RobotSimulator, log_path: Path) -> None:
     """W held down in the console's window (real X key events): the robot drives."""
     assert sim.wait_until(lambda s: s.client is not None, 30.0), log_path.read_text()
-    window = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^ocu").split()[0]
+    window = find_window(env, "^ocu")
     for _ in range(3):  # the window may not have the keyboard focus yet: focus, retry
         xdotool(env, "windowfocus", "--sync", window, "mousemove", "--window", window, "9", "9")
         xdotool(env, "keydown", "w")

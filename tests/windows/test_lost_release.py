@@ -18,6 +18,7 @@ from ocu.windows.key_filter import KEYBOARD_GAINED, KEYBOARD_LOST
 from tests.test_safety import (
     OTHER_APPLICATION,
     XDOTOOL,
+    find_window,
     log_shows,
     motion_after,
     read_lines,
@@ -57,8 +58,8 @@ def test_a_key_released_in_another_window_acts_on_its_next_press(
     )
     try:
         assert sim.wait_until(lambda s: s.client is not None, 30.0), "ocu never connected"
-        console = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^ocu").split()[0]
-        window = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^another appl")
+        console = find_window(env, "^ocu")
+        window = find_window(env, "^another appl")
         # W held in the console until X auto-repeats it (Qt now thinks W is repeating) ...
         focus(env, console, log_path, console=True)
         xdotool(env, "keydown", "w")
@@ -148,8 +149,8 @@ def test_space_released_in_another_window_still_stops_on_its_next_press(
     )
     try:
         assert sim.wait_until(lambda s: s.client is not None, 30.0), "ocu never connected"
-        console = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^ocu").split()[0]
-        window = xdotool(env, "search", "--sync", "--onlyvisible", "--name", "^another appl")
+        console = find_window(env, "^ocu")
+        window = find_window(env, "^another appl")
         focus(env, console, log_path, console=True)
         xdotool(env, "keydown", "space")
         assert log_shows(log_path, "ocu.link EMERGENCY STOP (Space)", 5.0), log_path.read_text()
