@@ -205,10 +205,11 @@ class UrArm:
         """Advance the arm by one control period."""
         self.q_actual = list(self.q)  # the actual position lags the target by one period
         self.qd_actual = list(self.qd)
-        wanted, accel = self._wanted_speeds(now_s)
+        wanted, accels = self._wanted_speeds(now_s)
         for i, joint in enumerate(self.profile.joints):
             target = max(-joint.max_speed_rad_s, min(joint.max_speed_rad_s, wanted[i]))
-            change = max(-accel * dt, min(accel * dt, target - self.qd[i]))
+            step = accels[i] * dt
+            change = max(-step, min(step, target - self.qd[i]))
             previous = self.qd[i]
             self.qd[i] = previous + change
             self.qdd[i] = change / dt
@@ -216,19 +217,20 @@ class UrArm:
         self._check_limits()
         self._end_program_at_rest(now_s)
 
-    def _wanted_speeds(self, now_s: float) -> tuple[list[float], float]:
+    def _wanted_speeds(self, now_s: float) -> tuple[list[float], list[float]]:
+        """Each joint's wanted speed (rad/s) and the acceleration (rad/s²) to get there."""
         program = self.program
-        cap = self.profile.max_acceleration_rad_s2
+        cap = [self.profile.max_acceleration_rad_s2] * JOINTS
+        zeros = [0.0] * JOINTS
         if program is None:
-            return [0.0] * JOINTS, cap
+            return zeros, cap
         command = program.command
+        shared = [program.accel] * JOINTS
         if program.stopping or now_s >= program.deadline_s:
             program.stopping = True
-            if command.name == "servoj":
-                return [0.0] * JOINTS, cap
-            return [0.0] * JOINTS, program.accel
+            return zeros, cap if command.name == "servoj" else shared
         if command.name == "speedj" and command.qd is not None:
-            return list(command.qd), program.accel
+            return list(command.qd), shared
         if command.name == "servoj" and command.q is not None:
             horizon = max(command.lookahead_time, 1e-3)
             return [(command.q[i] - self.q[i]) / horizon for i in range(JOINTS)], cap
@@ -236,15 +238,19 @@ class UrArm:
             errors = [command.q[i] - self.q[i] for i in range(JOINTS)]
             largest = max(abs(e) for e in errors)
             if largest < SETTLED_RAD:
-                return [0.0] * JOINTS, program.accel
-            speeds = []
+                return zeros, shared
+            speeds: list[float] = []
+            accels: list[float] = []
             for error in errors:
-                # Every joint scaled to arrive together; the braking speed for the distance left.
+                # Every joint's speed and acceleration scaled by its share of the longest
+                # move, so that all arrive together; the braking speed for the distance left.
                 share = abs(error) / largest
-                limit = math.sqrt(2.0 * program.accel * share * abs(error))
+                accel = max(program.accel * share, 1e-9)
+                limit = math.sqrt(2.0 * accel * abs(error))
                 speeds.append(math.copysign(min(command.v * share, limit), error))
-            return speeds, program.accel
-        return [0.0] * JOINTS, cap
+                accels.append(accel)
+            return speeds, accels
+        return zeros, cap
 
     def _check_limits(self) -> None:
         for i, joint in enumerate(self.profile.joints):
@@ -753,7 +759,7 @@ def _version(text: str) -> tuple[int, int, int]:
 def build_parser() -> argparse.ArgumentParser:
     """The UR simulator's command line."""
     parser = argparse.ArgumentParser(
-        prog="python -m ocu.sim.ur",
+        prog="ocu-sim --profile UR_PROFILE",
         description="A Universal Robots controller simulator: ports 30001-30003 over TCP. "
         "SIGUSR1 drops every connection and refuses new ones, SIGUSR2 accepts again.",
     )
@@ -773,8 +779,24 @@ def build_parser() -> argparse.ArgumentParser:
         "--controller-version", type=_version, default=None, help="e.g. 3.2.0 or 5.10.0"
     )
     parser.add_argument("--latency-ms", type=float, default=0.0, help="one-way delay, each way")
+    parser.add_argument(
+        "--exit-with-parent",
+        action="store_true",
+        help="stop when standard input (a pipe from the parent) closes",
+    )
     parser.add_argument("--log-level", default="INFO")
     return parser
+
+
+def is_ur_profile(argv: Sequence[str]) -> bool:
+    """Whether a command line's --profile names a shipped UR profile (ocu-sim dispatches)."""
+    names = shipped_ur_profiles()
+    for index, arg in enumerate(argv):
+        if arg == "--profile" and index + 1 < len(argv):
+            return argv[index + 1] in names
+        if arg.startswith("--profile="):
+            return arg.split("=", 1)[1] in names
+    return False
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -809,11 +831,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1, signal.SIGUSR2):
         signal.signal(signum, on_signal)
+    if args.exit_with_parent:
+
+        def wait_for_parent() -> None:
+            while sys.stdin.buffer.read(4096):
+                pass
+            stop.set()
+
+        threading.Thread(target=wait_for_parent, name="ur-sim-stdin", daemon=True).start()
     simulator.start()
     ports_text = " ".join(f"{kind}={port}" for kind, port in simulator.ports.items())
     print(f"ocu-sim ur listening on {args.host} {ports_text}", flush=True)
-    while not stop.wait(0.5):
-        pass
+    stop.wait()
     simulator.stop()
     return 0
 

@@ -6,7 +6,10 @@ are checked against the controller time in the packets, so a loaded machine cann
 from __future__ import annotations
 
 import itertools
+import re
 import socket
+import subprocess
+import sys
 import time
 import warnings
 from collections.abc import Callable, Iterator
@@ -26,7 +29,9 @@ from ocu.protocol.ur import (
     StreamSplitter,
     VersionMessage,
     decode_primary,
+    movej,
     realtime_size,
+    servoj,
     speedj,
     stopj,
 )
@@ -467,3 +472,75 @@ def test_shipped_profiles_and_forward_kinematics(tmp_path: Path) -> None:
         load_ur_profile(bad)
     with pytest.raises(ProfileError, match="not a shipped name"):
         load_ur_profile("ur99")
+
+
+def test_movej_brings_every_joint_there_together(make_sim: Callable[..., UrSimulator]) -> None:
+    sim = make_sim("ur5e")
+    client = realtime_client(sim)
+    start = client.next().state.q_actual
+    goal = [start[0] + 0.4, start[1] - 0.2, start[2] + 0.1, start[3], start[4], start[5]]
+    client.send(movej(goal, 2.0, 0.5))
+    moving = client.until(lambda s: any(v != 0.0 for v in s.qd_actual), "moving")
+    arrived = client.until(
+        lambda s: (
+            all(abs(s.q_actual[i] - goal[i]) < 1e-4 for i in range(6))
+            and all(v == 0.0 for v in s.qd_actual)
+        ),
+        "at the goal and at rest",
+    )
+    # Synchronised: the joints' progress fractions stay together all the way.
+    for received in arrived[::10]:
+        fractions = [
+            (received.state.q_actual[i] - start[i]) / (goal[i] - start[i]) for i in range(3)
+        ]
+        assert max(fractions) - min(fractions) < 0.02
+    assert max(abs(r.state.qd_actual[0]) for r in arrived) <= 0.5 + 1e-9
+    assert moving
+    wait_for(lambda: sim.snapshot().program is None, "the movej program ended")
+
+
+def test_streamed_servoj_follows_and_stops_when_the_stream_stops(
+    make_sim: Callable[..., UrSimulator],
+) -> None:
+    sim = make_sim("ur5")  # CB3: 125 Hz
+    client = realtime_client(sim)
+    first = client.next().state
+    q0 = list(first.q_actual)
+    t, lookahead = 0.008, 0.03
+    last_sent = first
+    target = list(q0)
+    while last_sent.time_s - first.time_s < 0.5:
+        target[5] = q0[5] + 0.4 * (last_sent.time_s - first.time_s)  # 0.4 rad/s ramp
+        client.send(servoj(target, t, lookahead, 300))
+        last_sent = client.next().state
+    rest = client.until(lambda s: s.qd_actual[5] == 0.0, "at rest")
+    moved = rest[-1].state.q_actual[5] - q0[5]
+    assert moved == pytest.approx(0.2, abs=0.03)  # followed the ramp, with the lookahead's lag
+    assert rest[-1].state.time_s - last_sent.time_s <= t + lookahead + 0.4 / 15.0 + 0.02
+    client.close()
+
+
+def test_ocu_sim_dispatches_a_ur_profile() -> None:
+    process = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "ocu.sim", "--profile", "ur5", "--port-base", "0"),
+            *("--exit-with-parent", "--log-level", "WARNING"),
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert process.stdout is not None
+        line = process.stdout.readline()
+        match = re.search(r"realtime=(\d+)", line)
+        assert match, line
+        client = RealtimeClient(int(match[1]), 1140)  # the ur5 profile's 3.15 controller
+        assert client.next().state.size == 1140
+        client.close()
+    finally:
+        assert process.stdin is not None
+        process.stdin.close()  # the parent "dies": the simulator stops by itself
+        assert process.wait(timeout=DEADLINE_S) == 0
+        if process.stdout is not None:
+            process.stdout.close()
