@@ -142,7 +142,11 @@ class _Program:
 
 
 class UrArm:
-    """The arm's joint dynamics and safety state; no sockets, no threads (the owner locks)."""
+    """The arm's joint dynamics and safety state; no sockets, no threads (the owner locks).
+
+    Times (`now_s`) are controller time, the packets' `time_s`: the arm is deterministic in
+    it however late the loop thread runs on a loaded machine.
+    """
 
     def __init__(self, profile: UrArmProfile, q: Sequence[float] | None = None) -> None:
         self.profile = profile
@@ -226,7 +230,7 @@ class UrArm:
             return zeros, cap
         command = program.command
         shared = [program.accel] * JOINTS
-        if program.stopping or now_s >= program.deadline_s:
+        if program.stopping or now_s >= program.deadline_s - 1e-9:
             program.stopping = True
             return zeros, cap if command.name == "servoj" else shared
         if command.name == "speedj" and command.qd is not None:
@@ -313,6 +317,8 @@ class UrSimSnapshot:
     program: str | None
     accepted: int
     refused: int
+    #: Controller time (s) at which the last accepted command took effect (nan: none yet).
+    last_command_s: float
     clients: dict[str, int]
     realtime_sent: int
     dropped_clients: int
@@ -360,6 +366,7 @@ class UrSimulator:
         self._start_s = 0.0
         self.accepted = 0
         self.refused = 0
+        self.last_command_s = math.nan
         self.realtime_sent = 0
         self.dropped_clients = 0
         self.ports: dict[str, int] = {}
@@ -483,6 +490,7 @@ class UrSimulator:
                 program=arm.program.command.name if arm.program else None,
                 accepted=self.accepted,
                 refused=self.refused,
+                last_command_s=self.last_command_s,
                 clients={kind: counts.get(kind, 0) for kind in PORT_KINDS},
                 realtime_sent=self.realtime_sent,
                 dropped_clients=self.dropped_clients,
@@ -516,7 +524,7 @@ class UrSimulator:
             if now - next_tick > MAX_CATCH_UP_S:
                 next_tick = now
             while now >= next_tick:
-                self._tick(next_tick)
+                self._tick()
                 next_tick += self.period_s
             self._flush_due(now)
             self._flush_pending()
@@ -586,9 +594,12 @@ class UrSimulator:
                 self._refuse(str(err))
                 continue
             with self._lock:
-                reason = self.arm.run(command, now)
+                # The arm runs on controller time: a command takes effect at the next cycle.
+                effective_s = (self._ticks + 1) * self.period_s
+                reason = self.arm.run(command, effective_s)
                 if reason is None:
                     self.accepted += 1
+                    self.last_command_s = effective_s
             if reason is not None:
                 self._refuse(reason)
 
@@ -597,10 +608,10 @@ class UrSimulator:
             self.refused += 1
         log.warning("URScript refused: %s", reason)
 
-    def _tick(self, tick_s: float) -> None:
+    def _tick(self) -> None:
         with self._lock:
             self._ticks += 1
-            self.arm.step(self.period_s, tick_s)
+            self.arm.step(self.period_s, self._ticks * self.period_s)
             realtime = self._realtime_packet()
             state = self._robot_state() if self._ticks % self._secondary_every == 0 else None
             clients = list(self._clients.values())
