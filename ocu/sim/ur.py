@@ -556,7 +556,8 @@ class UrSimulator:
             self._clients[sock.fileno()] = client
         self._selector.register(sock, selectors.EVENT_READ, client)
         log.info("%s client %s:%d connected", kind, *address[:2])
-        if kind in (PRIMARY, SECONDARY):
+        # The secondary port sends the version message from 3.1 on (seed 004).
+        if kind == PRIMARY or (kind == SECONDARY and self.version >= (3, 1, 0)):
             self._send(client, self._version_message())
 
     def _read(self, client: _Client) -> None:

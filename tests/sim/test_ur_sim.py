@@ -547,3 +547,49 @@ def test_ocu_sim_dispatches_a_ur_profile() -> None:
         assert process.wait(timeout=DEADLINE_S) == 0
         if process.stdout is not None:
             process.stdout.close()
+
+
+def test_emergency_stop_is_reported_and_refuses_motion(
+    make_sim: Callable[..., UrSimulator],
+) -> None:
+    sim = make_sim("ur10e")
+    client = realtime_client(sim)
+    secondary = PrimaryClient(sim.ports["secondary"])
+    client.send(speedj([0.2, 0.0, 0.0, 0.0, 0.0, 0.0], 5.0, 5.0))
+    client.until(lambda s: s.qd_actual[0] > 0.0, "moving")
+    sim.emergency_stop()
+    stopped = client.until(lambda s: s.safety is SafetyMode.ROBOT_EMERGENCY_STOP, "e-stopped")
+    assert client.next().state.qd_actual == (0.0,) * 6
+    assert stopped[-1].state.size == 1220
+    deadline = time.monotonic() + DEADLINE_S
+    while time.monotonic() < deadline:
+        mode = secondary.next_state().robot_mode
+        assert mode is not None
+        if mode.emergency_stopped:
+            break
+    else:
+        raise AssertionError("the secondary port never reported the emergency stop")
+    refused = sim.snapshot().refused
+    client.send(speedj([0.2, 0.0, 0.0, 0.0, 0.0, 0.0], 5.0, 5.0))
+    wait_for(lambda: sim.snapshot().refused == refused + 1, "the speedj refused")
+    sim.emergency_stop(pressed=False)
+    client.send(speedj([0.2, 0.0, 0.0, 0.0, 0.0, 0.0], 5.0, 0.2))
+    assert client.until(lambda s: s.qd_actual[0] > 0.0, "moving again")[-1].state.safety is (
+        SafetyMode.NORMAL
+    )
+
+
+def test_secondary_sends_no_version_message_before_3_1(
+    make_sim: Callable[..., UrSimulator],
+) -> None:
+    sim = make_sim("ur5", controller_version=(3, 0, 0))
+    assert realtime_client(sim).next().state.size == 1044
+    secondary = PrimaryClient(sim.ports["secondary"])
+    assert isinstance(decode_primary(secondary.next_raw()), RobotState)
+    primary = PrimaryClient(sim.ports["primary"])
+    first = decode_primary(primary.next_raw())
+    assert isinstance(first, VersionMessage)
+    assert first.version == (3, 0)
+    mode = secondary.next_state().robot_mode
+    assert mode is not None
+    assert len(mode.encode()) == 38
