@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from ocu.nav.world import DEFAULT_WORLD, WorldError, load_world
 from ocu.net.transport import TransportError
 from ocu.profile import ProfileError, default_profile_path, load_profile_data, parse_profile
+from ocu.sim import ur
 from ocu.sim.extended import DEFAULT_DRAIN_PERCENT_PER_S, DEFAULT_STATUS_HZ
 from ocu.sim.faults import FaultConfig
 from ocu.sim.rangefinder import (
@@ -274,6 +275,8 @@ def _wait_for_signal(noted: list[int]) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the simulator until SIGINT or SIGTERM; returns the exit code."""
+    if ur.is_ur_profile(sys.argv[1:] if argv is None else argv):
+        return ur.main(argv)  # `ocu-sim --profile ur5e`: the UR controller (docs/ur.md)
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.scramble is None and (args.scramble_ids or args.scramble_out):
