@@ -35,7 +35,8 @@ from ocu.protocol.ur import (
     speedj,
     stopj,
 )
-from ocu.sim.ur import UrSimulator, tcp_pose
+from ocu.sim.ur import UrSimulator
+from ocu.sim.ur_arm import tcp_pose
 
 DEADLINE_S = 10.0
 _OPEN: list[socket.socket] = []
@@ -419,8 +420,9 @@ def test_an_independent_reader_parses_the_simulator(
     make_sim: Callable[..., UrSimulator], profile: str, version: tuple[int, int, int]
 ) -> None:
     """python-urx (PyPI `urx` 0.11, not ours) reads the realtime and secondary streams."""
-    urrtmon = pytest.importorskip("urx.urrtmon", reason="urx is in the dev extra")
-    ursecmon = pytest.importorskip("urx.ursecmon", reason="urx is in the dev extra")
+    # In the dev extra (pyproject.toml, requirements.lock): missing, the test fails.
+    from urx import urrtmon, ursecmon
+
     q = [0.1, -1.2, 1.3, -1.4, -1.5, 0.6]
     sim = make_sim(profile, controller_version=version, initial_q=q)
     # urx's realtime monitor connects to port 30003 itself; give it our socket instead and
