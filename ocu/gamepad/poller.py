@@ -228,7 +228,7 @@ class PadPoller:
         if changed or taps:
             self._read(sdl, pad, taps)
 
-    def _read(self, sdl: ModuleType, pad: _OpenPad, taps: set[str]) -> None:
+    def _read(self, sdl: ModuleType, pad: _OpenPad, taps: set[str], *, notify: bool = True) -> None:
         handle = pad.handle
         axes = tuple(sdl.SDL_GameControllerGetAxis(handle, i) for i in range(len(AXES)))
         buttons = tuple(
@@ -249,7 +249,8 @@ class PadPoller:
             self._latest = PadState(pad.info.instance_id, axes, buttons, self._clock())
             self._pressed |= taps | went_down
             self._taken = False
-        self._on_state()
+        if notify:
+            self._on_state()
 
     def _scan(self, sdl: ModuleType) -> bool:
         for index in range(sdl.SDL_NumJoysticks()):
@@ -287,8 +288,11 @@ class PadPoller:
         )
         self._pad = _OpenPad(handle, info, buttons)
         log.info("gamepad opened: %s (%s)", info.name, info.guid)
+        # The first state is there before anyone hears of the pad: a consumer told it is
+        # connected can take it at once.
+        self._read(sdl, self._pad, set(), notify=False)
         self._on_event(PadConnected(info))
-        self._read(sdl, self._pad, set())
+        self._on_state()
         return True
 
     def _lost(self, sdl: ModuleType, reason: str) -> None:

@@ -85,6 +85,32 @@ def silent_s(poller: PadPoller) -> float:
     return time.monotonic() - poller.last_poll_at
 
 
+def test_a_pad_announced_connected_has_its_first_state_already(virtual_pad: VirtualPad) -> None:
+    """Whoever hears PadConnected can take the pad's state at once (CI once saw take() return
+    None right after the event: the state was read after the announcement)."""
+    taken_at_connect: list[object] = []
+    states: list[int] = []
+
+    def on_event(event: PadEvent) -> None:
+        if isinstance(event, PadConnected):
+            # The poll thread itself, at the moment of the announcement.
+            taken_at_connect.append(poller.peek())
+            taken_at_connect.append(len(states))
+
+    poller = PadPoller(200.0, lambda: states.append(1), on_event)
+    poller.start()
+    try:
+        virtual_pad.attach()
+        wait_for(lambda: len(taken_at_connect) == 2, "connected")
+        state, notified_before = taken_at_connect
+        assert state is not None
+        assert notified_before == 0  # no state is announced before the pad is
+        wait_for(lambda: len(states) >= 1, "the first state announced after")
+    finally:
+        poller.stop()
+        virtual_pad.detach()
+
+
 def test_a_poll_thread_blocked_in_sdl_stops_reporting(virtual_pad: VirtualPad) -> None:
     consumer = Consumer()
     poller = consumer.poller
