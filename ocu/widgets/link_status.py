@@ -72,6 +72,9 @@ class LinkStatus(QWidget):
         super().__init__(parent)
         self.model = model
         self.replay = False
+        # What the state label shows: the model's state as of the last refresh on the GUI
+        # thread (the control thread changes the model's first; its event follows).
+        self._shown_state = model.robot.link_state
         layout = QHBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)
         layout.setSpacing(6)
@@ -115,8 +118,8 @@ class LinkStatus(QWidget):
 
     @property
     def state(self) -> LinkState:
-        """The link state shown (the model's)."""
-        return self.model.robot.link_state
+        """The link state shown: the label says this (the model's, as of the last refresh)."""
+        return self._shown_state
 
     @property
     def last_telemetry_at(self) -> float | None:
@@ -233,10 +236,11 @@ class LinkStatus(QWidget):
         self.estop_label.setStyleSheet(style)
 
     def _refresh_state(self) -> None:
-        style = STATE_STYLES[self.state] + BLOCK
+        state = self._shown_state = self.model.robot.link_state
+        style = STATE_STYLES[state] + BLOCK
         if self.state_label.styleSheet() != style:
             self.state_label.setStyleSheet(style)
-        self.state_label.setText(STATE_TEXT[self.state])
+        self.state_label.setText(STATE_TEXT[state])
         age = self.model.robot.telemetry_age()
         if age is None:
             self.age_label.setText("no telemetry yet")
