@@ -379,6 +379,7 @@ class VideoPanel(QWidget):
         self._stats_timer.timeout.connect(self.refresh_counters)
         self._stats_timer.start()
         self._grid_offered = False  # the extension's grid was shown once (_on_extension)
+        self._extension_shown = False
         self._on_extension(model.robot.extension_active, "")
         # Settle the minimum size before any window exists: a top-level panel then has
         # nothing to propagate when shown (Qt's offscreen platform warns about that).
@@ -408,8 +409,9 @@ class VideoPanel(QWidget):
 
     @property
     def extension_active(self) -> bool:
-        """Whether the robot speaks the protocol extension (the model's)."""
-        return self.model.robot.extension_active
+        """Whether the panel shows the robot speaking the protocol extension (the model's, as
+        of the last change the panel applied on the GUI thread)."""
+        return self._extension_shown
 
     @property
     def status(self) -> StatusFrame | None:
@@ -480,6 +482,7 @@ class VideoPanel(QWidget):
             self.view.update()
 
     def _on_extension(self, active: bool, reason: str) -> None:
+        self._extension_shown = active
         if active and not self._grid_offered:
             # The point of the extension: every camera at once. Only the first time: when
             # it comes back after a lost link, the view stays as the operator left it.
