@@ -22,6 +22,14 @@ from ocu.console.poses import CONFIG_DIR_ENV, default_config_dir
 from ocu.core.manager import DEFAULT_RATE_HZ as DEFAULT_CONTROL_HZ
 from ocu.core.manager import MAX_RATE_HZ as MAX_CONTROL_HZ
 from ocu.core.manager import MIN_RATE_HZ as MIN_CONTROL_HZ
+from ocu.priority import (
+    DEFAULT_NICE,
+    NICE_ENV,
+    NICE_MAX,
+    NICE_MIN,
+    nice_from_env,
+    raise_priority,
+)
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.windows.settings_file import SETTINGS_FILE
 
@@ -121,8 +129,28 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"the control thread's rate (default {DEFAULT_CONTROL_HZ:g}; "
         f"{MIN_CONTROL_HZ:g}-{MAX_CONTROL_HZ:g})",
     )
+    parser.add_argument(
+        "--nice",
+        type=nice_value,
+        default=None,
+        metavar="N",
+        help=f"run the console at this nice value where allowed (default ${NICE_ENV} or "
+        f"{DEFAULT_NICE}, ahead of batch jobs; 0 keeps the default priority; needs "
+        "CAP_SYS_NICE or an RLIMIT_NICE allowance, else the console says what it got)",
+    )
     parser.add_argument("--log-level", default="INFO")
     return parser
+
+
+def nice_value(text: str) -> int:
+    """--nice: a nice value, -20 to 19."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if not NICE_MIN <= value <= NICE_MAX:
+        raise argparse.ArgumentTypeError(f"{value} is outside {NICE_MIN}..{NICE_MAX}")
+    return value
 
 
 def control_rate(text: str) -> float:
@@ -176,6 +204,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.replay is not None and (args.robot or args.sim_arg):
         parser.error("--replay plays a file: --robot and --sim-arg do not apply")
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
+    try:
+        nice = nice_from_env() if args.nice is None else args.nice
+    except ValueError as err:
+        parser.error(str(err))
+    # First, before Qt, the link or the control core start a thread: threads inherit it.
+    priority = raise_priority(nice)
+    logging.getLogger("ocu").info("scheduling priority: %s", priority.text)
     try:
         profile = load_profile(args.profile)
     except ProfileError as err:

@@ -25,18 +25,28 @@ class CommandError(ValueError):
 
 @dataclass(frozen=True)
 class Command:
-    """What the OCU asks of the robot: channel velocities (m/s or rad/s) and switches."""
+    """What the OCU asks of the robot: channel velocities (m/s or rad/s) and switches.
+
+    `until` gives some channels an end: the link sends that channel's velocity until the
+    monotonic time given, then zero, whether or not a newer command comes (a position
+    controller's motion ends where the target is even when its next tick is late). A channel
+    without an entry runs until the next command.
+    """
 
     velocities: Mapping[str, float] = field(default_factory=dict)
     torch: bool = False
     camera: int | None = None
     video_bitrate: float = 0.0
+    until: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         # Which channels exist is the profile's business (CommandMapper checks them).
         for name, value in self.velocities.items():
             if not math.isfinite(value):
                 raise CommandError(f"{name}: velocity must be finite, got {value!r}")
+        for name, at in self.until.items():
+            if not math.isfinite(at):
+                raise CommandError(f"{name}: the end of its motion must be finite, got {at!r}")
         if self.camera is not None and not 0 <= self.camera < 255:
             raise CommandError(f"camera index must be in [0, 254], got {self.camera}")
 
@@ -50,20 +60,46 @@ class Command:
         return any(v != 0.0 for v in self.velocities.values())
 
     def with_velocity(self, channel: str, value: float) -> Command:
-        """A copy with one channel changed."""
-        velocities = dict(self.velocities)
-        velocities[channel] = value
-        return replace(self, velocities=velocities)
+        """A copy with one channel changed (and no end: it runs until the next command)."""
+        return self.with_velocities({channel: value})
 
     def with_velocities(self, values: Mapping[str, float]) -> Command:
-        """A copy with several channels changed."""
+        """A copy with several channels changed (those without an end from now on)."""
         velocities = dict(self.velocities)
         velocities.update(values)
-        return replace(self, velocities=velocities)
+        until = {name: at for name, at in self.until.items() if name not in values}
+        return replace(self, velocities=velocities, until=until)
 
     def stopped(self) -> Command:
         """The same switches with every velocity zero (the e-stop command)."""
-        return replace(self, velocities={})
+        return replace(self, velocities={}, until={})
+
+    def expired(self, now: float) -> Command:
+        """This command at `now`: the channels whose end has come are zero (self if none)."""
+        ended = {name for name, at in self.until.items() if at <= now}
+        if not ended:
+            return self
+        return replace(
+            self,
+            velocities={n: v for n, v in self.velocities.items() if n not in ended},
+            until={n: at for n, at in self.until.items() if n not in ended},
+        )
+
+    def same_wire(self, other: Command) -> bool:
+        """Whether the two send the same now (they may differ in when channels end)."""
+        return (
+            {n: v for n, v in self.velocities.items() if v != 0.0}
+            == {n: v for n, v in other.velocities.items() if v != 0.0}
+            and self.torch == other.torch
+            and self.camera == other.camera
+            and self.video_bitrate == other.video_bitrate
+        )
+
+    @property
+    def next_end(self) -> float | None:
+        """The earliest end of a moving channel (None: none ends by itself)."""
+        ends = [at for name, at in self.until.items() if self.velocities.get(name, 0.0) != 0.0]
+        return min(ends, default=None)
 
 
 # ---- video streams ------------------------------------------------------------------------

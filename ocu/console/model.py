@@ -173,6 +173,7 @@ class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoReques
             None,
             self._bitrate,
         )
+        self._published_ends: dict[str, float] = {}
         self._tracking: TrackSession | None = None
         # What of the tracking controller acts (the benchmark's baseline switches parts off).
         self.tracking_options = TrackingOptions()
@@ -211,13 +212,24 @@ class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoReques
         return {name: c.velocity for name, c in self._channels.items() if c.velocity != 0.0}
 
     def command(self) -> Command:
-        """The command for the link: every channel's velocity and the switches."""
+        """The command for the link: every channel's velocity and the switches, and when
+        the link is to end the position controller's motions by itself."""
+        velocities = self.velocities()
         return Command(
-            velocities=self.velocities(),
+            velocities=velocities,
             torch=self._torch,
             camera=self._camera,
             video_bitrate=self._bitrate,
+            until=self._ends(velocities),
         )
+
+    def _ends(self, velocities: Mapping[str, float]) -> dict[str, float]:
+        """The position controller's channels that end by themselves, and when."""
+        return {
+            channel: at
+            for channel, at in self.controller.until.items()
+            if channel in velocities and self._channels[channel].source is Source.POSITION
+        }
 
     @property
     def is_moving(self) -> bool:
@@ -659,9 +671,15 @@ class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoReques
             self.events.targets_changed.emit(dict(targets))
 
     def _publish(self, now: float | None = None) -> None:
-        state = (self.velocities(), self._torch, self._camera, self._bitrate)
+        velocities = self.velocities()
+        state = (velocities, self._torch, self._camera, self._bitrate)
+        ends = self._ends(velocities)
+        if state != self._published or ends != self._published_ends:
+            # The predictor integrates what is sent, whoever sent it, and knows where the
+            # link ends a motion by itself.
+            self._published_ends = ends
+            self.controller.note_sent(self.clock() if now is None else now, velocities, ends)
         if state != self._published:
             self._published = state
-            # The predictor integrates what is sent, whoever sent it.
-            self.controller.note_sent(self.clock() if now is None else now, state[0])
             self.events.command_changed.emit()
+        # A new end alone is written by the control cycle (it writes every cycle).

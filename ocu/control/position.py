@@ -33,10 +33,11 @@ Ticks come late. The command chosen at one tick is what the link keeps sending, 
 rate from its own thread, until the next tick changes it; a caller on a busy thread (the
 console's GUI thread under load) ticks every 50 ms one moment and every 300 ms the next. So
 the speed is bounded by what the *horizon* allows — the error divided by the longest tick
-interval seen lately, with a margin — not by the last interval: the joint must not run past
-the target while the next tick is late. And a joint is never reversed on the prediction alone:
-when the estimate says a joint driven toward its target went past it, the joint stops, and it
-is driven back only once a reading taken after that stop landed shows it is really past.
+interval seen lately, with a margin — not by the last interval. Each motion also carries the
+time the joint reaches the target, and the link ends it then by itself (Command.until): a
+tick later than any horizon finds the joint stopped at the target. A joint is never reversed
+on the prediction alone: when the estimate says a joint went past its target, it stops, and
+it is driven back only once a reading taken after that stop landed shows it is really past.
 """
 
 from __future__ import annotations
@@ -121,11 +122,25 @@ class JointPredictor:
         self.last_received_at: float | None = None
         self.last_taken_at: float | None = None
         self._last_observation: tuple[float, float] | None = None  # (b_obs, A at taken)
+        # When the last command ends by itself (its zero is the last breakpoint), if later
+        # than the last command.
+        self._end_at: float | None = None
 
     # ---- commands --------------------------------------------------------------------------
 
-    def command(self, at: float, velocity: float) -> None:
-        """The velocity sent on the joint's channel from time `at` on."""
+    def command(self, at: float, velocity: float, until: float | None = None) -> None:
+        """The velocity sent from `at` on (to `until`: the link ends it then, Command.until)."""
+        if self._end_at is not None and at < self._end_at:
+            # The pending end was not reached: this command replaces it.
+            self._times.pop()
+            self._points.pop()
+        self._end_at = None
+        self._step_to(at, velocity)
+        if until is not None and velocity != 0.0 and until > max(at, self._times[-1]):
+            self._step_to(until, 0.0)
+            self._end_at = until
+
+    def _step_to(self, at: float, velocity: float) -> None:
         if self._times:
             at = max(at, self._times[-1])
             previous_v = self._points[-1][0]
@@ -271,6 +286,8 @@ class _Track:
     velocity_rad_s: float = 0.0
     # The sign the joint was last driven with (0: not yet): reversing it needs a reading.
     direction: float = 0.0
+    # When the motion last commanded reaches the target (the link ends it then).
+    until: float | None = None
 
 
 class PositionController:
@@ -309,6 +326,8 @@ class PositionController:
         # Whether the last command sent moves the chassis: the robot then refuses to turn
         # its `locked_while_driving` channels (the waist).
         self.driving = False
+        # When the link is to end each channel of the last update's output (Command.until).
+        self.until: dict[str, float] = {}
         self.faults: dict[str, str] = {}
         self._tracks: dict[str, _Track] = {}
         self._messages: list[str] = []
@@ -422,8 +441,15 @@ class PositionController:
 
     # ---- inputs ----------------------------------------------------------------------------
 
-    def note_sent(self, now: float, velocities: Mapping[str, float]) -> None:
-        """The whole command that went to the robot at `now` (channels missing are zero)."""
+    def note_sent(
+        self,
+        now: float,
+        velocities: Mapping[str, float],
+        until: Mapping[str, float] | None = None,
+    ) -> None:
+        """The whole command that went to the robot at `now` (channels missing are zero;
+        `until`: the channels the link ends by itself, and when: Command.until)."""
+        ends = until or {}
         channels = self.profile.channels
         self.driving = any(
             abs(float(velocities.get(name, 0.0))) >= channels[name].min_speed
@@ -437,7 +463,7 @@ class PositionController:
             # Nor does a channel the robot locks while the chassis moves (the waist).
             if self.driving and channels[channel].locked_while_driving:
                 velocity = 0.0
-            self.predictors[joint].command(now, velocity)
+            self.predictors[joint].command(now, velocity, ends.get(channel))
 
     def on_telemetry(
         self,
@@ -513,6 +539,7 @@ class PositionController:
         A joint that finished in this step has no entry: its channel must be zeroed.
         """
         self.note_tick(now)
+        self.until = {}
         output: dict[str, float] = {}
         for name, track in list(self._tracks.items()):
             channel = self.channel_of(name)
@@ -521,6 +548,8 @@ class PositionController:
                 continue  # finished: its channel is no longer the controller's (caller zeroes)
             track.velocity_rad_s = velocity
             output[channel] = velocity
+            if velocity != 0.0 and track.until is not None:
+                self.until[channel] = track.until
         return output
 
     def _step(self, name: str, track: _Track, now: float) -> float:
@@ -600,6 +629,9 @@ class PositionController:
                 self._finish(name, f"{name}: stopped at its limit")
                 return 0.0
         track.direction = direction
+        # The link ends this motion by itself when the joint would reach the target: a late
+        # next tick cannot carry it past (Command.until).
+        track.until = now + abs(error) / speed
         return math.copysign(speed, error)
 
     def may_reverse(self, joint: str) -> bool:

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 from ocu.console.stall import StallWatch
+from ocu.priority import current_nice
 from ocu.records import CameraRequest, Command
 
 if TYPE_CHECKING:
@@ -93,12 +94,14 @@ class ControlTiming:
     worst_cycle_s: float  # the longest time one cycle took (its wait for the lock included)
     worst_wait_s: float  # the longest a cycle waited for the model's lock (the GUI held it)
     overruns: int  # since start
+    nice: int | None = None  # the control thread's nice value (None: not started)
 
     @property
     def text(self) -> str:
         """One line for the status bar and the logs."""
+        at = "" if self.nice is None else f" at nice {self.nice}"
         return (
-            f"control {self.measured_hz:.0f}/{self.rate_hz:.0f} Hz, worst period "
+            f"control {self.measured_hz:.0f}/{self.rate_hz:.0f} Hz{at}, worst period "
             f"{1000 * self.worst_period_s:.1f} ms, cycle {1000 * self.worst_cycle_s:.1f} ms "
             f"(waited {1000 * self.worst_wait_s:.1f} ms for the lock), "
             f"{self.overruns} overrun(s)"
@@ -143,6 +146,7 @@ class ControllerManager:
         self.error: BaseException | None = None
         self.failures = 0  # cycles that raised (logged; the thread goes on)
         self._last_wait_s = 0.0  # how long the last cycle waited for the model's lock
+        self._nice: int | None = None  # the thread's, read when it starts (ocu.priority)
         if hardware is not None:
             self.attach(hardware)
 
@@ -209,13 +213,14 @@ class ControllerManager:
         return self._thread is not None and self._thread.is_alive()
 
     def _run(self) -> None:
+        self._nice = current_nice()
         next_at = self.clock()
         last_at: float | None = None
         try:
             while not self._stop.is_set():
                 started = self.clock()
                 try:
-                    self.cycle(started)
+                    self.cycle()
                 except Exception:  # one bad event or step must not end the robot's control
                     self.failures += 1
                     log.exception("control cycle failed")
@@ -238,11 +243,14 @@ class ControllerManager:
 
     def cycle(self, now: float | None = None) -> None:
         """One control cycle (the thread's; tests may call it directly)."""
-        now = self.clock() if now is None else now
+        given = now
         model = self.model
         asked = time.perf_counter()
         with self.lock:
             self._last_wait_s = time.perf_counter() - asked
+            # The time the commands of this cycle go out at: after the wait for the lock
+            # (the GUI thread held it), not before.
+            now = self.clock() if given is None else given
             hardware = self.hardware
             if hardware is not None:
                 hardware.read(model)
@@ -304,4 +312,5 @@ class ControllerManager:
             worst_cycle_s=max((p[2] for p in periods), default=0.0),
             worst_wait_s=max((p[3] for p in periods), default=0.0),
             overruns=overruns,
+            nice=self._nice,
         )

@@ -190,14 +190,18 @@ class LiveLink(Link):
             return self._state
 
     def set_command(self, command: Command) -> None:
-        """Replace the command; sends it at once when it differs from the current one."""
+        """Replace the command; sends it at once when it differs from the current one on the
+        wire. A channel with an end (`Command.until`) goes to zero then, by this link's loop."""
         with self._lock:
             changed = self._replace_command(command)
+            ends = self._command.next_end is not None
             silenced = self._take_silenced()
         if changed and self.send_on_change:
             self._send_current()
-        if changed:
-            self.loop.wake()  # the zero burst's repeats, if this stopped motion
+        if changed or ends:
+            # The zero burst's repeats if this stopped motion; the loop's next wake-up if a
+            # channel ends by itself.
+            self.loop.wake()
         if silenced:
             self._notify_safety(silenced)
 
@@ -243,7 +247,9 @@ class LiveLink(Link):
             command = command.stopped()
         if command.is_motion:
             self._estop_latched = False
-        if command == self._command:
+        command = command.expired(self.clock())
+        if command.same_wire(self._command):
+            self._command = command  # when channels end may differ: the loop follows it
             return False
         if self._command.is_motion and not command.is_motion:
             self._schedule_zero_repeats()
@@ -370,6 +376,7 @@ class LiveLink(Link):
         # would send is the command from before the freeze (the robot may have stopped on its
         # own watchdog meanwhile and would be restarted by it).
         self._check_watchdogs(now)
+        self._end_channels(now)
         with self._lock:
             tick_due = now >= self._next_tick
             if tick_due:
@@ -386,7 +393,24 @@ class LiveLink(Link):
         due = self._send_due_estops(now)
         with self._lock:
             deadline = min(self._next_tick, self._next_stats)
+            end = self._command.next_end
+        if end is not None:
+            deadline = min(deadline, end)
         return min(deadline, due) if due is not None else deadline
+
+    def _end_channels(self, now: float) -> None:
+        """Zero the channels whose end has come (Command.until) and send that at once."""
+        with self._lock:
+            ended = self._command.expired(now)
+            if ended is self._command:
+                return
+            stopped = self._command.is_motion and not ended.is_motion
+            changed = not ended.same_wire(self._command)
+            self._command = ended
+            if stopped:
+                self._schedule_zero_repeats()
+        if changed:
+            self._send_current()
 
     def _loop_failed(self, err: BaseException) -> bool:
         log.error("link loop failed (%s); sending zeros", err)
@@ -474,14 +498,15 @@ class LiveLink(Link):
     def current_packet_bytes(self) -> bytes:
         """The vendor RCP for the current command (bounded by the hard maxima)."""
         with self._lock:
-            return self._codec.encode(self._mapper.to_packet(self._command))
+            return self._codec.encode(self._mapper.to_packet(self._command.expired(self.clock())))
 
     def _send_current(self) -> None:
         # Built and sent under one lock: a tick that read the command just before the
         # operator stopped must not put its stale motion on the wire after the stop.
         with self._send_lock:
             with self._lock:
-                packet = self._mapper.to_packet(self._command)
+                # A channel whose end has come is zero even if the loop has not run since.
+                packet = self._mapper.to_packet(self._command.expired(self.clock()))
             self._send_rcp(packet)
 
     def _send_zeros(self) -> None:

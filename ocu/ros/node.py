@@ -27,6 +27,7 @@ from types import FrameType
 from typing import Any, Protocol
 
 from ocu.console.poses import ARM_POSES_NAME, default_config_dir
+from ocu.priority import nice_from_env, raise_priority
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.ros.convert import (
     DEFAULT_CMD_VEL_TIMEOUT_S,
@@ -300,6 +301,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if reason is not None:
         print(f"ocu-ros: {reason}", file=sys.stderr)
         return 1
+    try:
+        nice = nice_from_env()
+    except ValueError as err:
+        print(f"ocu-ros: {err}", file=sys.stderr)
+        return 2
+    # First, before rospy and the link start a thread: threads inherit it (ocu.priority).
+    ocu_logger.info("scheduling priority: %s", raise_priority(nice).text)
     stop = SignalStop()
 
     def request_stop(signum: int, _frame: FrameType | None) -> None:

@@ -16,6 +16,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from ocu.priority import reset_for_child
+
 log = logging.getLogger("ocu.sim")
 
 LISTENING_LINE = re.compile(r"ocu-sim listening on (?P<host>[^:\s]+):(?P<port>\d+)")
@@ -46,6 +48,8 @@ class SimulatorProcess:
         if profile_path is not None:
             command += ["--profile", str(profile_path)]
         command += extra_args or []
+        # The simulator stands in for the robot: not at the console's raised priority.
+        command = reset_for_child(command)
         # Nothing is ever written to stdin: the pipe is there to be closed when we die.
         self.process = subprocess.Popen(
             command,

@@ -1,9 +1,15 @@
 """Live plots of every motor's position, speed and current: a view of the robot's history.
 
-The samples live in the console model (ocu.console.robot.RobotState.history); the plots
-redraw from it at most four times a second, and only while they are on screen. The value
+The samples live in the console model (ocu.console.robot.RobotState.history); each plot
+redraws from it at most four times a second, and only while it is on screen. The value
 axes move in steps (a range is kept until the data leaves it or fills less than a quarter of
 it), so the axes — most of a plot's painting cost — are not laid out again at every redraw.
+
+The plots paint on the GUI thread, and a key pressed while they paint waits for them: so the
+three are redrawn in turn, a third of the period apart, each one paint of its own (about a
+third as long as all three at once), with one-pixel cosmetic pens (Qt draws those as one
+polyline; a wider pen makes pyqtgraph build line segments in Python at every paint) and no
+finite check (the samples are filtered before they are handed over).
 """
 
 from __future__ import annotations
@@ -41,7 +47,8 @@ class TelemetryPlots(QWidget):
         self.robot = robot
         profile = robot.profile
         window_s = robot.history_s
-        self._dirty = False
+        self._dirty: set[str] = set()  # the quantities with samples not yet drawn
+        self._turn = 0  # the quantity the next tick redraws
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         self.graphics = pg.GraphicsLayoutWidget()
@@ -73,36 +80,47 @@ class TelemetryPlots(QWidget):
             for name, motor in profile.motors.items():
                 if key == "position" and not motor.has_position:
                     continue
-                curve = plot.plot([], [], pen=pg.mkPen(colours[name], width=2), name=name)
+                pen = pg.mkPen(colours[name], width=1, cosmetic=True)
+                curve = plot.plot([], [], pen=pen, name=name, skipFiniteCheck=True)
                 curve.setClipToView(True)
                 curve.setDownsampling(auto=True, method="peak")
                 self.curves[(key, name)] = curve
             self.plots[key] = plot
         self._ranges: dict[str, tuple[float, float]] = {}
         self._timer = QTimer(self)
-        self._timer.setInterval(REDRAW_PERIOD_MS)
-        self._timer.timeout.connect(self.redraw)
+        self._timer.setInterval(REDRAW_PERIOD_MS // len(QUANTITIES))
+        self._timer.timeout.connect(self._redraw_next)
         self._timer.start()
         robot.events.telemetry_changed.connect(self._on_telemetry)
 
     def _on_telemetry(self, _frame: TelemetryFrame) -> None:
-        self._dirty = True
+        self._dirty = {key for key, _, _ in QUANTITIES}
+
+    def _redraw_next(self) -> None:
+        key = QUANTITIES[self._turn][0]
+        self._turn = (self._turn + 1) % len(QUANTITIES)
+        self.redraw(keys=(key,))
 
     def sample_count(self, name: str) -> int:
         """Samples of one motor in the model's history (bounded by its window)."""
         return len(self.robot.history[name])
 
-    def redraw(self, *, force: bool = False) -> None:
-        """Re-plot the curves if new samples arrived (and the plots are on screen)."""
+    def redraw(self, *, force: bool = False, keys: tuple[str, ...] | None = None) -> None:
+        """Re-plot the curves of `keys` (all: None) that have new samples, when on screen;
+        `force`: whether or not they have, and on screen or not."""
         latest = self.robot.last_telemetry_at
-        if not self._dirty or latest is None:
+        if force:
+            wanted = {key for key, _, _ in QUANTITIES} if keys is None else set(keys)
+        else:
+            wanted = set(self._dirty) if keys is None else self._dirty & set(keys)
+        if not wanted or latest is None:
             return
         # The viewport, not the view: a QGraphicsView's own region is all covered by its
         # opaque viewport child, so the view's visibleRegion() is empty even on screen.
         if not force and self.graphics.viewport().visibleRegion().isEmpty():
             return  # hidden (a closed dock, another tab): drawn when shown again
-        self._dirty = False
-        spans: dict[str, list[float]] = {key: [] for key, _, _ in QUANTITIES}
+        self._dirty -= wanted
+        spans: dict[str, list[float]] = {key: [] for key in wanted}
         for name, series in self.robot.history.items():
             if not series:
                 continue
@@ -113,7 +131,7 @@ class TelemetryPlots(QWidget):
             )
             times = samples[:, 0] - latest
             for index, (key, _, _) in enumerate(QUANTITIES, start=1):
-                curve = self.curves.get((key, name))
+                curve = self.curves.get((key, name)) if key in wanted else None
                 if curve is None:
                     continue
                 values = samples[:, index]

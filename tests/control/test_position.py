@@ -545,3 +545,36 @@ def test_a_reversal_waits_for_a_reading_taken_after_the_stop(
     # A reading taken after the stop landed (0.5 + 0.1 s) shows it past: now it goes back.
     controller.on_telemetry({"elbow": reading("elbow", 0.25)}, 0.85, delay_s=0.2)
     assert controller.update(0.85)["elbow"] < 0.0
+
+
+def test_a_motion_ends_at_the_target_when_the_next_tick_never_comes(
+    controller: PositionController,
+) -> None:
+    # On a loaded machine the next tick may come a second late: the command chosen now says
+    # when the joint reaches the target, the link ends it then (Command.until), and the
+    # prediction knows it - the late tick finds the joint at the target, not past it.
+    controller.on_telemetry({"elbow": reading("elbow", 0.0)}, 0.0, delay_s=0.2)
+    controller.set_target("elbow", 0.2)
+    velocity = controller.update(0.0)["elbow"]
+    until = controller.until["elbow"]
+    assert velocity > 0.0
+    assert velocity * until == pytest.approx(0.2)  # the travel until the end is the error
+    controller.note_sent(0.0, {"elbow": velocity}, controller.until)
+    assert controller.predictors["elbow"].eventual(until + 1.0) == pytest.approx(0.2)
+    assert controller.update(until + 1.0) == {"elbow": 0.0}  # holding: not past, not back
+    controller.note_sent(until + 1.0, {"elbow": 0.0})
+    for k in range(1, 6):  # a few readings where it stopped confirm it
+        controller.on_telemetry({"elbow": reading("elbow", 0.2)}, until + 1.0 + k, delay_s=0.2)
+        controller.update(until + 1.0 + k)
+    assert controller.pop_messages() == ["elbow: reached 11.5°"]
+
+
+def test_a_newer_command_before_the_end_replaces_it_in_the_prediction() -> None:
+    predictor = JointPredictor()
+    predictor.command(0.0, 1.0, until=1.0)
+    assert predictor.integral(5.0) == pytest.approx(1.0)
+    predictor.command(0.5, 1.0)  # the same speed, no end: runs on
+    assert predictor.integral(2.0) == pytest.approx(2.0)
+    predictor.command(2.0, -1.0, until=2.25)
+    assert predictor.integral(5.0) == pytest.approx(1.75)
+    assert predictor.last_change_at == 2.25  # the end is a change: readings must follow it
