@@ -68,7 +68,8 @@ def over_tcp(
     """The UR controller at "HOST" (or "HOST:PORT_BASE") over TCP."""
     arm = _arm_of(profile, arm)
     host, ports = parse_host(target or profile.link.address)
-    link = UrLink(arm, host, profile=profile, ports=ports, **options)
+    options.setdefault("ports", ports)
+    link = UrLink(arm, host, profile=profile, **options)
     return ur_component(link)
 
 

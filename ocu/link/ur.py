@@ -3,7 +3,7 @@
 `UrLink(arm, host)` behaves from above as the Engineer's live link (ocu.link.live) does: a
 `Command`'s channel velocities (one channel per joint, rad/s) go out, `TelemetryFrame`s,
 `LinkStateChanged`, `SafetyEvent`s, `CommandSent` and `LinkStats` come back. One loop thread
-("ur-link") connects (ocu.link.ur_wire), reads, streams `speedj(qd, a, t)` at the send rate
+("ocu-ur-link") connects (ocu.link.ur_wire), reads, streams `speedj(qd, a, t)` at the send rate
 with a short `t` so that the controller itself brakes when the OCU falls silent (crash,
 freeze, cable: the robot-side watchdog), runs the watchdogs and reconnects with backoff.
 
@@ -328,14 +328,14 @@ class UrLink(Link):
     # ---- the loop --------------------------------------------------------------------------
 
     def start(self) -> None:
-        """Run the loop in its named daemon thread ("ur-link")."""
+        """Run the loop in its named daemon thread ("ocu-ur-link")."""
         if self._thread is not None:
             return
         with self._lock:
             now = self.clock()
             self._next_connect = self._next_send = self._last_step = now
             self._next_stats = now + STATS_PERIOD_S
-        self._thread = threading.Thread(target=self._run, name="ur-link", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="ocu-ur-link", daemon=True)
         self._thread.start()
 
     def _wake(self) -> None:
