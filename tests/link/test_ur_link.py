@@ -172,6 +172,12 @@ def test_velocities_are_clamped_to_the_joints_top_speed(rig: Rig) -> None:
     link = rig.link(sim, arm=slow_arm, gui_alive_timeout_s=None)
     link.set_command(Command({WRIST_3: 2.0}))
     wait_for(moves(sim, 5, 0.3), "wrist 3 at its (lowered) top speed")
+    # It stays there (not passing through on its way to 2 rad/s).
+    accepted = sim.snapshot().accepted
+    while sim.snapshot().accepted < accepted + 20:
+        assert sim.snapshot().qd[5] <= 0.3 + 1e-6, "wrist 3 beyond its top speed"
+        time.sleep(0.001)
+    assert sim.snapshot().qd[5] == pytest.approx(0.3, abs=1e-6)
     # The simulator's own limit is 180°/s: the clamp is the link's.
     assert sim.profile.joints[5].max_speed_rad_s > 3.0
 
