@@ -437,6 +437,9 @@ class UrLink(Link):
                 self._next_connect = self.clock() + wait
             log.info("UR controller %s: %s (next attempt in %.1f s)", self.host, err, wait)
             return
+        if self._stop.is_set():  # shut down while connecting: shutdown() did not see it
+            connection.close()
+            return
         assert connection.secondary is not None
         assert connection.realtime is not None
         with self._lock:
