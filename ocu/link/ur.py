@@ -301,13 +301,22 @@ class UrLink(Link):
     def _send_current(self) -> None:
         # Built and sent under one lock: a tick that read the command just before the
         # operator stopped must not put its stale motion on the wire after the stop.
+        frozen = None
         with self._send_lock:
             with self._lock:
                 connection = self._connection if self._state is LinkState.CONNECTED else None
                 if connection is None or self._closed:
                     return
+                # The loop has not run its watchdogs for that long (the process was stopped
+                # and a send was due): no motion from before the gap goes out before they have.
+                last_step = self._last_step
+                gap = None if last_step is None else self.clock() - last_step
+                if gap is not None and gap > FREEZE_LIMIT_S and self._take_motion():
+                    frozen = f"link loop frozen for {gap:.2f} s: motion commands zeroed"
                 data, sent = self._script()
             self._write(connection, data, sent)
+        if frozen:
+            self._notify_safety(frozen)
 
     def _write(self, connection: UrConnection, data: bytes, sent: Command | None) -> bool:
         try:
@@ -415,9 +424,16 @@ class UrLink(Link):
                 messages.append(
                     f"control thread silent for {stalled:.2f} s: motion commands zeroed"
                 )
+            # After a freeze the socket holds what arrived meanwhile: read it before judging.
+            frozen = gap is not None and gap > FREEZE_LIMIT_S
             connected = self._connection is not None
             last = self._last_valid_at if self._last_valid_at is not None else self._connected_at
-            silent = connected and last is not None and now - last > self.link_lost_after_s
+            silent = (
+                not frozen
+                and connected
+                and last is not None
+                and now - last > self.link_lost_after_s
+            )
         if messages:
             self._send_current()
             for message in messages:

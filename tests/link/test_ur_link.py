@@ -38,6 +38,7 @@ from ocu.sim.ur import UrSimSnapshot, UrSimulator
 DEADLINE_S = 10.0
 ROOT = Path(__file__).resolve().parents[2]
 WRIST_3 = "wrist_3_joint"
+FREEZE_S = 0.6
 
 
 def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = DEADLINE_S) -> None:
@@ -302,6 +303,29 @@ def test_protective_and_emergency_stops_are_reported_and_nothing_resumes(rig: Ri
     wait_for(lambda: any("nothing resumed" in m for m in rig.events.safety()), "the SafetyEvent")
 
 
+def test_a_protective_stop_at_a_joint_limit_zeroes_and_nothing_resumes(rig: Rig) -> None:
+    sim = rig.sim(initial_q=[0.0, -1.57, 3.0, -1.57, -1.57, 0.0])
+    link = rig.link(sim, gui_alive_timeout_s=None)
+    toward_the_limit = Command({"elbow_joint": 0.5})
+    link.set_command(toward_the_limit)
+    wait_for(lambda: sim.snapshot().protective_stopped, "the protective stop at the elbow's limit")
+    wait_for(
+        lambda: link.robot_status is not None and link.robot_status.protective_stopped,
+        "the protective stop reported",
+    )
+    assert not link.command.is_motion
+    wait_for(lambda: any("protective stop" in m for m in rig.events.safety()), "the SafetyEvent")
+    sim.unlock_protective_stop()
+    wait_for(lambda: link.robot_status is not None and link.robot_status.may_move, "unlocked")
+    accepted = sim.snapshot().accepted
+    link.set_command(toward_the_limit)
+    while sim.snapshot().accepted < accepted + 30:
+        assert at_rest(sim.snapshot()), "the arm resumed after the protective stop"
+        time.sleep(0.001)
+    link.set_command(Command({"elbow_joint": -0.3}))
+    wait_for(moves(sim, 2, -0.3), "the elbow moving away on a new command")
+
+
 # ---- malformed bytes: a TCP proxy in front of the realtime port -----------------------------
 
 
@@ -392,13 +416,7 @@ def test_malformed_realtime_bytes_are_counted_and_the_link_survives(rig: Rig) ->
 def test_sigkill_of_the_ocu_brings_the_arm_to_rest(rig: Rig) -> None:
     sim = rig.sim(host="127.0.0.3")
     speed = 0.5
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    args = [sys.executable, "-m", "tests.link.ur_child", sim.host]
-    args += [str(sim.ports[k]) for k in ("primary", "secondary", "realtime")]
-    args += [WRIST_3, str(speed)]
-    child = subprocess.Popen(
-        args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, cwd=ROOT, env=env, text=True
-    )
+    child = start_child(sim, speed)
     try:
         assert child.stdout is not None
         line = child.stdout.readline()  # the child prints within its own 10 s deadline
@@ -411,12 +429,7 @@ def test_sigkill_of_the_ocu_brings_the_arm_to_rest(rig: Rig) -> None:
         snapshot = sim.snapshot()
         controller_s = snapshot.time_s - snapshot.last_command_s
     finally:
-        child.kill()
-        child.wait(DEADLINE_S)
-        if child.stdin is not None:
-            child.stdin.close()
-        if child.stdout is not None:
-            child.stdout.close()
+        end_child(child)
     braking_s = speed / sim.profile.max_acceleration_rad_s2
     print(
         f"\nSIGKILL -> at rest: {rest_s * 1000:.1f} ms (wall, polled); controller time from "
@@ -426,6 +439,45 @@ def test_sigkill_of_the_ocu_brings_the_arm_to_rest(rig: Rig) -> None:
     # The robot-side watchdog: t plus the braking, plus the cycles a packet lags and polling.
     assert controller_s <= UR_SPEEDJ_T_S + braking_s + 0.1
     assert rest_s < 0.5
+
+
+def start_child(sim: UrSimulator, speed: float) -> subprocess.Popen[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    args = [sys.executable, "-m", "tests.link.ur_child", sim.host]
+    args += [str(sim.ports[k]) for k in ("primary", "secondary", "realtime")]
+    args += [WRIST_3, str(speed)]
+    return subprocess.Popen(
+        args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, cwd=ROOT, env=env, text=True
+    )
+
+
+def end_child(child: subprocess.Popen[str]) -> None:
+    child.kill()
+    child.wait(DEADLINE_S)
+    for stream in (child.stdin, child.stdout):
+        if stream is not None:
+            stream.close()
+
+
+def test_a_frozen_ocu_is_stopped_by_the_controller_and_does_not_restart_it(rig: Rig) -> None:
+    sim = rig.sim(host="127.0.0.4")
+    child = start_child(sim, 0.5)
+    try:
+        assert child.stdout is not None
+        assert child.stdout.readline().strip() == "moving"
+        wait_for(moves(sim, 5, 0.5), "the child driving wrist 3")
+        child.send_signal(signal.SIGSTOP)
+        frozen = time.monotonic()
+        wait_for(lambda: at_rest(sim.snapshot()), "the arm at rest (speedj's t ran out)")
+        # The fault's length (not synchronisation): longer than the link's freeze limit.
+        time.sleep(max(0.0, FREEZE_S - (time.monotonic() - frozen)))
+        child.send_signal(signal.SIGCONT)
+        accepted = sim.snapshot().accepted
+        while sim.snapshot().accepted < accepted + 40:
+            assert at_rest(sim.snapshot()), "the woken OCU restarted the arm"
+            time.sleep(0.001)
+    finally:
+        end_child(child)
 
 
 def test_the_robot_profile_of_a_ur() -> None:
