@@ -38,7 +38,7 @@ from ocu.sim.ur import UrSimSnapshot, UrSimulator
 DEADLINE_S = 10.0
 ROOT = Path(__file__).resolve().parents[2]
 WRIST_3 = "wrist_3_joint"
-FREEZE_S = 0.6
+FREEZE_S = 0.4  # over the link's freeze limit (0.3 s), under its GUI-alive timeout (0.5 s)
 
 
 def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = DEADLINE_S) -> None:
