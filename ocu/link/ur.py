@@ -126,7 +126,9 @@ class UrLink(Link):
         self._received = 0
         self._telemetry = 0
         self._malformed_closed = 0
-        self.reconnects = 0
+        # Connections lost (each starts a reconnection) and connection attempts that failed.
+        self.connections_lost = 0
+        self.failed_connects = 0
         self._send_rate = RateMeter()
         self._telemetry_rate = RateMeter()
         self._closed = False
@@ -449,6 +451,7 @@ class UrLink(Link):
         except OSError as err:
             with self._lock:
                 self._attempt += 1
+                self.failed_connects += 1
                 wait = BACKOFF_S[min(self._attempt, len(BACKOFF_S) - 1)]
                 self._next_connect = self.clock() + wait
             log.info("UR controller %s: %s (next attempt in %.1f s)", self.host, err, wait)
@@ -549,7 +552,7 @@ class UrLink(Link):
             wait = BACKOFF_S[min(self._attempt, len(BACKOFF_S) - 1)]
             self._attempt += 1
             self._next_connect = self.clock() + wait
-            self.reconnects += 1
+            self.connections_lost += 1
         if connection is not None:
             for sock in (connection.realtime, connection.secondary):
                 if sock is not None:

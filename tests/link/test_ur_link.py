@@ -239,7 +239,7 @@ def test_reconnects_after_a_dropped_connection_and_never_resumes(rig: Rig) -> No
     )
     reconnect_s = time.monotonic() - started
     assert rig.events.states() == [LinkState.CONNECTED, LinkState.LOST, LinkState.CONNECTED]
-    assert link.reconnects == 1
+    assert link.connections_lost == 1
     wait_for(lambda: at_rest(sim.snapshot()), "the arm at rest")
     # Connected again: the link streams zeros; the same command set again is held at zero.
     accepted = sim.snapshot().accepted
@@ -257,10 +257,14 @@ def test_reconnects_after_a_dropped_connection_and_never_resumes(rig: Rig) -> No
 def test_a_cut_controller_is_lost_and_reconnected_with_backoff(rig: Rig) -> None:
     sim = rig.sim()
     link = rig.link(sim, gui_alive_timeout_s=None)
+    cut = time.monotonic()
     sim.cut()
     wait_for(lambda: link.state is LinkState.LOST, "LINK LOST")
-    # Refused connections: the attempts back off (each failure waits longer).
-    wait_for(lambda: link.reconnects >= 1 and link._attempt >= 3, "three attempts")
+    # Refused connections fail at once: only the backoff spaces the attempts (at once, then
+    # 0.1, 0.2, 0.4 s): the fourth failure comes no sooner than 0.7 s after the cut.
+    wait_for(lambda: link.failed_connects >= 4, "four failed attempts")
+    assert time.monotonic() - cut >= 0.7
+    assert link.connections_lost == 1
     sim.restore()
     wait_for(lambda: link.state is LinkState.CONNECTED, "connected again")
 
