@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from ocu.core.hardware import HardwareRegistry
-from ocu.hardware import engineer
+from ocu.hardware import engineer, ur
 
 HARDWARE = HardwareRegistry()
 HARDWARE.register("engineer", engineer.over_udp)
 HARDWARE.register("engineer-sim", engineer.simulated)
 HARDWARE.register("engineer-recording", engineer.recording)
+HARDWARE.register("ur", ur.over_tcp)
+HARDWARE.register("ur-sim", ur.simulated)

@@ -1,0 +1,284 @@
+"""The UR link's connection and decoding: three TCP sockets to a controller, packets to records.
+
+`UrConnection.open()` connects as seed 004 says (docs/ur.md "The UR link"): the primary port
+(30001) for the version message, which fixes the realtime layout; then the secondary (30002:
+robot mode, safety mode, the stop flags at 10 Hz) and the realtime port (30003: joints and TCP
+at 125 or 500 Hz, and where the URScript goes). Reading never raises on bad bytes: a packet
+that does not decode is counted in `malformed` and dropped. No threads here; the link's loop
+calls `read_realtime` / `read_secondary` when a socket is readable.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ocu.protocol.ur import (
+    RealtimeState,
+    RobotMode,
+    RobotState,
+    SafetyMode,
+    StreamSplitter,
+    UrProtocolError,
+    VersionMessage,
+    decode_primary,
+    realtime_size,
+)
+from ocu.records import JointReading, TelemetryFrame
+
+RECV_BYTES = 65536
+#: Sends that cannot be written within this long mean the connection is dead.
+SEND_TIMEOUT_S = 0.2
+
+
+class UrConnectionError(OSError):
+    """The controller cannot be reached, or its version message says nothing usable."""
+
+
+@dataclass(frozen=True)
+class UrMotor:
+    """One joint's raw record (RawMotor): joint mode, robot mode, µrad, safety mode."""
+
+    device_id: int
+    state: int
+    mode: int
+    position: int
+    status: int
+
+
+@dataclass(frozen=True)
+class UrTelemetry:
+    """A realtime packet as RawTelemetry: the controller's cycle count and six joint records."""
+
+    tick: int
+    motors: tuple[UrMotor, ...]
+    state: RealtimeState
+
+
+@dataclass(frozen=True)
+class UrRobotStatus:
+    """The robot and safety modes and the stop flags, as the secondary port reports them."""
+
+    robot_mode: RobotMode
+    safety_mode: SafetyMode
+    emergency_stopped: bool
+    protective_stopped: bool
+
+    @property
+    def may_move(self) -> bool:
+        """Whether the controller takes motion: running, normal or reduced, no stop."""
+        return (
+            self.robot_mode is RobotMode.RUNNING
+            and self.safety_mode in (SafetyMode.NORMAL, SafetyMode.REDUCED)
+            and not self.emergency_stopped
+            and not self.protective_stopped
+        )
+
+    def describe(self) -> str:
+        """One line for messages: "robot RUNNING, safety PROTECTIVE_STOP, protective stop"."""
+        parts = [f"robot {self.robot_mode.name}", f"safety {self.safety_mode.name}"]
+        if self.emergency_stopped:
+            parts.append("emergency stop")
+        if self.protective_stopped:
+            parts.append("protective stop")
+        return ", ".join(parts)
+
+
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+def telemetry_frame(
+    state: RealtimeState,
+    joint_names: Sequence[str],
+    *,
+    ticks_per_s: float,
+    ticks_per_rad: float,
+    received_at: float,
+    wall_time: float,
+) -> TelemetryFrame:
+    """A realtime packet as a TelemetryFrame: one JointReading per joint, SI units."""
+    robot_mode = int(state.robot_mode)
+    safety = int(state.safety_mode)
+    motors: list[UrMotor] = []
+    readings: dict[str, JointReading] = {}
+    for index, name in enumerate(joint_names):
+        angle = _finite(state.q_actual[index])
+        fault = None if angle is not None else "the controller sent a non-finite angle"
+        joint_mode = state.joint_modes[index]
+        mode_int = int(joint_mode) if math.isfinite(joint_mode) else -1
+        motors.append(
+            UrMotor(
+                device_id=index + 1,
+                state=mode_int,
+                mode=robot_mode,
+                position=round(angle * ticks_per_rad) if angle is not None else 0,
+                status=safety,
+            )
+        )
+        readings[name] = JointReading(
+            name=name,
+            device_id=index + 1,
+            state=mode_int,
+            mode=robot_mode,
+            angle_rad=angle,
+            speed_rad_s=_finite(state.qd_actual[index]) or 0.0,
+            current_a=_finite(state.i_actual[index]) or 0.0,
+            status=safety,
+            target_angle_rad=_finite(state.q_target[index]),
+            speed_command_rad_s=_finite(state.qd_target[index]) or 0.0,
+            current_command_a=_finite(state.i_target[index]) or 0.0,
+            fault=fault,
+        )
+    tick = round(state.time_s * ticks_per_s) if math.isfinite(state.time_s) else 0
+    packet = UrTelemetry(tick=tick, motors=tuple(motors), state=state)
+    return TelemetryFrame(packet, readings, received_at, wall_time)
+
+
+def robot_status(packet: RobotState) -> UrRobotStatus | None:
+    """The status in a robot-state packet, or None if it lacks the robot mode data."""
+    mode = packet.robot_mode
+    if mode is None:
+        return None
+    board = packet.masterboard
+    safety = board.safety if board is not None else SafetyMode.NORMAL
+    return UrRobotStatus(
+        robot_mode=RobotMode(mode.robot_mode),
+        safety_mode=safety,
+        emergency_stopped=mode.emergency_stopped,
+        protective_stopped=mode.protective_stopped,
+    )
+
+
+def read_version(host: str, port: int, timeout_s: float) -> VersionMessage:
+    """Connect to the primary port and read the version message it sends first."""
+    deadline = time.monotonic() + timeout_s
+    splitter = StreamSplitter.primary()
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s) as sock:
+            while True:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise UrConnectionError(f"no version message on {host}:{port} in {timeout_s} s")
+                sock.settimeout(left)
+                data = sock.recv(RECV_BYTES)
+                if not data:
+                    raise UrConnectionError(f"{host}:{port} closed before its version message")
+                for packet in splitter.feed(data):
+                    try:
+                        decoded = decode_primary(packet)
+                    except UrProtocolError:
+                        continue
+                    if isinstance(decoded, VersionMessage):
+                        return decoded
+    except TimeoutError as err:
+        raise UrConnectionError(f"no version message on {host}:{port} in {timeout_s} s") from err
+
+
+def _connect(host: str, port: int, timeout_s: float) -> socket.socket:
+    sock = socket.create_connection((host, port), timeout=timeout_s)
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    sock.settimeout(SEND_TIMEOUT_S)
+    return sock
+
+
+class UrConnection:
+    """One session with the controller: the version, then the secondary and realtime sockets."""
+
+    def __init__(self, host: str, ports: Sequence[int], timeout_s: float) -> None:
+        if len(ports) != 3:
+            raise ValueError("ports: primary, secondary and realtime, three of them")
+        self.host = host
+        self.ports = tuple(ports)
+        self.timeout_s = timeout_s
+        self.version: tuple[int, int, int] = (0, 0, 0)
+        self.realtime_size = 0
+        self.secondary: socket.socket | None = None
+        self.realtime: socket.socket | None = None
+        self._realtime_splitter = StreamSplitter.realtime()
+        self._secondary_splitter = StreamSplitter.primary()
+        self.decode_errors = 0
+
+    @property
+    def malformed(self) -> int:
+        """Byte runs skipped by the splitters plus packets that did not decode."""
+        return (
+            self._realtime_splitter.malformed
+            + self._secondary_splitter.malformed
+            + self.decode_errors
+        )
+
+    def open(self) -> None:
+        """Connect: version from primary, then secondary and realtime; UrConnectionError/OSError."""
+        message = read_version(self.host, self.ports[0], self.timeout_s)
+        self.version = (message.major, message.minor, message.bugfix)
+        try:
+            self.realtime_size = realtime_size(message.version)
+        except UrProtocolError as err:
+            raise UrConnectionError(str(err)) from err
+        self._realtime_splitter = StreamSplitter.realtime({self.realtime_size})
+        try:
+            self.secondary = _connect(self.host, self.ports[1], self.timeout_s)
+            self.realtime = _connect(self.host, self.ports[2], self.timeout_s)
+        except OSError:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Close both sockets; idempotent."""
+        for sock in (self.secondary, self.realtime):
+            if sock is not None:
+                sock.close()
+        self.secondary = self.realtime = None
+
+    def send(self, data: bytes) -> None:
+        """Write URScript on the realtime port; OSError if the connection is gone."""
+        sock = self.realtime
+        if sock is None:
+            raise ConnectionError("not connected")
+        sock.sendall(data)
+
+    def read_realtime(self) -> list[RealtimeState] | None:
+        """The realtime packets now complete; None when the controller closed the port."""
+        data = self._recv(self.realtime)
+        if data is None:
+            return None
+        states: list[RealtimeState] = []
+        for packet in self._realtime_splitter.feed(data):
+            try:
+                states.append(RealtimeState.decode(packet, expected_size=self.realtime_size))
+            except UrProtocolError:
+                self.decode_errors += 1
+        return states
+
+    def read_secondary(self) -> list[UrRobotStatus] | None:
+        """The robot statuses in the secondary packets now complete; None when it closed."""
+        data = self._recv(self.secondary)
+        if data is None:
+            return None
+        statuses: list[UrRobotStatus] = []
+        for packet in self._secondary_splitter.feed(data):
+            try:
+                decoded = decode_primary(packet)
+                status = robot_status(decoded) if isinstance(decoded, RobotState) else None
+            except (UrProtocolError, ValueError):
+                self.decode_errors += 1
+                continue
+            if status is not None:
+                statuses.append(status)
+        return statuses
+
+    @staticmethod
+    def _recv(sock: socket.socket | None) -> bytes | None:
+        if sock is None:
+            return None
+        try:
+            data = sock.recv(RECV_BYTES)
+        except (BlockingIOError, TimeoutError):
+            return b""
+        except OSError:
+            return None
+        return data or None
