@@ -290,7 +290,8 @@ class UrLink(Link):
 
     def _script(self) -> tuple[bytes, Command | None]:
         """The URScript line for now (lock held) and the command it carries (None: stopj)."""
-        command = self._command
+        # A joint whose end has come (Command.until) is zero from then, command or not.
+        command = self._command.expired(self.clock())
         if not command.is_motion and self._estop_latched:
             return stopj(self.acceleration_rad_s2), None
         qd = []

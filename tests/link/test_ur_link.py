@@ -165,6 +165,20 @@ def test_a_command_moves_the_arm_and_a_zero_stops_it(rig: Rig, latency_ms: float
     wait_for(lambda: at_rest(sim.snapshot()), "the arm at rest")
 
 
+def test_a_joint_with_an_end_stops_then_with_no_newer_command(rig: Rig) -> None:
+    # Command.until: the position controller's motion ends where the target is, even when
+    # the control thread's next tick comes late.
+    sim = rig.sim()
+    link = rig.link(sim, gui_alive_timeout_s=None)
+    start = sim.snapshot().q[5]
+    run_s = 0.4
+    link.set_command(Command({WRIST_3: 0.5}, until={WRIST_3: time.monotonic() + run_s}))
+    wait_for(moves(sim, 5, 0.5), "wrist 3 moving")
+    wait_for(lambda: at_rest(sim.snapshot()), "the arm at rest after the end")
+    assert link.command.velocity(WRIST_3) == 0.5  # what was asked: the link ended it itself
+    assert sim.snapshot().q[5] - start == pytest.approx(0.5 * run_s, rel=0.5)
+
+
 def test_velocities_are_clamped_to_the_joints_top_speed(rig: Rig) -> None:
     sim = rig.sim()
     arm = sim.profile
