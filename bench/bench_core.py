@@ -366,6 +366,12 @@ def main() -> int:
     )
     parser.add_argument("--warmup", type=float, default=3.0)
     parser.add_argument("--control-hz", type=float, help="the control thread's rate (default)")
+    parser.add_argument(
+        "--baseline-nice",
+        type=int,
+        default=0,
+        help="the baseline tree's nice value (default 0: main before ocu.priority ran at it)",
+    )
     parser.add_argument("--json", help="write the phases here (the baseline's child run)")
     parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
     parser.add_argument(
@@ -400,7 +406,7 @@ def main() -> int:
                     "--warmup",
                     str(args.warmup),
                     "--nice",
-                    str(args.nice),
+                    str(args.baseline_nice),
                     "--json",
                     str(target),
                 ],

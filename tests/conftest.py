@@ -1,4 +1,5 @@
-"""Shared fixtures: offscreen Qt, the shipped profile, no thread left running."""
+"""Shared fixtures: offscreen Qt, the console's priority, the shipped profile, no thread left
+running."""
 
 from __future__ import annotations
 
@@ -14,7 +15,14 @@ os.environ.setdefault("PYOPENGL_PLATFORM", offscreen_gl_mode())
 
 import pytest
 
+from ocu.priority import nice_from_env, raise_priority
 from ocu.profile import RobotProfile, load_profile
+
+# The console's own scheduling priority for the whole run, asked for before any thread starts,
+# as `ocu` and `ocu-ros` do first thing (ocu.priority; $OCU_NICE=0 runs the suite at the
+# default priority, as an unprivileged user's console runs). The simulators the tests start
+# as processes run at the default priority, as they do beside the console.
+raise_priority(nice_from_env())
 
 _started_qthreads: list[object] = []
 

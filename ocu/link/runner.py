@@ -5,7 +5,7 @@ from __future__ import annotations
 import queue
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 from ocu.link.base import Link
@@ -106,8 +106,18 @@ class PositionRunner:
             for channel in channels:
                 velocities.setdefault(channel, 0.0)
             self.link.heartbeat()
-            self.link.set_velocities(**velocities)
-            self.controller.note_sent(now, velocities)
+            # A controller that says when its motions end (PositionController.until) has the
+            # link end them then, as the console's control core does (Command.until).
+            ends: dict[str, float] | None = getattr(self.controller, "until", None)
+            if ends is None:
+                self.link.set_velocities(**velocities)
+                self.controller.note_sent(now, velocities)
+            else:
+                ends = {c: at for c, at in ends.items() if velocities.get(c, 0.0) != 0.0}
+                command = self.link.command.with_velocities(velocities)
+                self.link.set_command(replace(command, until={**command.until, **ends}))
+                note_sent: Callable[..., None] = self.controller.note_sent
+                note_sent(now, velocities, ends)
             for message in self.controller.pop_messages():
                 result.messages.append(message)
                 result.events.append((now, message))
