@@ -19,7 +19,7 @@ from ocu.console.arm import ArmConsole
 from ocu.console.model import DEFAULT_FINE_FACTOR, ConsoleModel
 from ocu.console.poses import PoseError
 from ocu.kinematics.arm import ArmError
-from ocu.profile import RobotProfile, did_you_mean
+from ocu.profile import RobotProfile, companion_file, did_you_mean
 from ocu.records import CommandError
 
 USER_KEY_MAP_NAME = "hotkeys.toml"
@@ -160,8 +160,12 @@ def key_for_position(code: int) -> str | None:
     return _NAME_BY_POSITION.get(code)
 
 
-def default_key_map_path() -> Path:
-    """The key map shipped with the package (the paper's table 4)."""
+def default_key_map_path(profile: RobotProfile | None = None) -> Path:
+    """The robot's shipped key map: `hotkeys.toml` beside its profile (a UR's in
+    ocu/profiles/ur/), else the package's (the Engineer's: the paper's table 4)."""
+    beside = companion_file(profile, "hotkeys.toml") if profile is not None else None
+    if beside is not None:
+        return beside
     return Path(str(resources.files("ocu") / "profiles" / "hotkeys.toml"))
 
 
@@ -297,8 +301,9 @@ def parse_key_map(
 
 
 def load_key_map(profile: RobotProfile, override: Path | None = None) -> KeyMap:
-    """The shipped key map, with the user's override file merged over it when it exists."""
-    default = default_key_map_path()
+    """The robot's shipped key map, with the user's override file merged over it when it
+    exists."""
+    default = default_key_map_path(profile)
     key_map = parse_key_map(_read_toml(default), profile, source=str(default))
     if override is not None and override.exists():
         key_map = parse_key_map(_read_toml(override), profile, key_map, source=str(override))

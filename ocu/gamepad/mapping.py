@@ -18,7 +18,7 @@ from typing import Any
 
 from ocu.gamepad.pad import AXES, BUTTONS
 from ocu.gamepad.shaping import AxisShape
-from ocu.profile import RobotProfile, did_you_mean
+from ocu.profile import RobotProfile, companion_file, did_you_mean
 
 USER_PAD_MAP_NAME = "gamepad.toml"
 TABLES = ("options", "axes", "alt_axes", "buttons", "shape")
@@ -157,8 +157,12 @@ class PadMapping:
         return f"{binding.channel.replace('_', ' ')} ({words[0]} / {words[1]})"
 
 
-def default_pad_map_path() -> Path:
-    """The mapping shipped with the package."""
+def default_pad_map_path(profile: RobotProfile | None = None) -> Path:
+    """The robot's shipped mapping: `gamepad.toml` beside its profile, else the package's
+    (the Engineer's)."""
+    beside = companion_file(profile, "gamepad.toml") if profile is not None else None
+    if beside is not None:
+        return beside
     return Path(str(resources.files("ocu") / "profiles" / "gamepad.toml"))
 
 
@@ -364,8 +368,8 @@ def _check_consistent(mapping: PadMapping, source: str) -> None:
 
 
 def load_pad_mapping(profile: RobotProfile, override: Path | None = None) -> PadMapping:
-    """The shipped mapping, with the user's file merged over it when it exists."""
-    default = default_pad_map_path()
+    """The robot's shipped mapping, with the user's file merged over it when it exists."""
+    default = default_pad_map_path(profile)
     mapping = parse_pad_mapping(_read_toml(default), profile, source=str(default))
     if override is not None and override.exists():
         mapping = parse_pad_mapping(_read_toml(override), profile, mapping, source=str(override))

@@ -14,6 +14,8 @@ Everything public is imported from here (`from ocu.profile import RobotProfile, 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from ocu.profile.description import (
     ArmSettings,
     AssistSettings,
@@ -84,6 +86,15 @@ from ocu.profile.writer import (
     write_profile_data,
 )
 
+
+def companion_file(profile: RobotProfile, name: str) -> Path | None:
+    """A file shipped beside the profile's own (`hotkeys.toml`, `gamepad.toml`): a robot's
+    key map and pad mapping sit with its profile. None when there is none."""
+    if not profile.source:
+        return None
+    candidate = Path(profile.source).parent / name
+    return candidate if candidate.is_file() else None
+
 __all__ = [
     "ARM_KEYS",
     "ASSIST_KEYS",
@@ -137,6 +148,7 @@ __all__ = [
     "VideoSettings",
     "ZoneSettings",
     "assumption_covers",
+    "companion_file",
     "default_profile_path",
     "did_you_mean",
     "load_profile",

@@ -92,7 +92,8 @@ class QtLink(QObject):
         self.setObjectName("ocu-qt-link")
         self.link = link
         profile = link.profile
-        cameras = len(profile.link.camera_names)
+        # A robot without cameras (a UR arm) keeps one idle slot: no frame ever comes.
+        cameras = max(1, len(profile.link.camera_names))
         self.corrector = Corrector(profile.cameras)
         self.frames: LatestFrames[DecodedVideoFrame] = LatestFrames(cameras)
         self.decoder = VideoDecoder(
