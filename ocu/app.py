@@ -14,6 +14,7 @@ import ctypes.util
 import logging
 import signal
 import sys
+import tomllib
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -31,6 +32,8 @@ from ocu.priority import (
     raise_priority,
 )
 from ocu.profile import ProfileError, RobotProfile, load_profile
+from ocu.profile.ur import UrArmProfile, load_ur_profile, shipped_ur_profiles
+from ocu.profile.ur_robot import ur_robot_profile
 from ocu.windows.settings_file import SETTINGS_FILE
 
 if TYPE_CHECKING:
@@ -208,15 +211,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         nice = nice_from_env() if args.nice is None else args.nice
     except ValueError as err:
         parser.error(str(err))
-    # First, before Qt, the link or the control core start a thread: threads inherit it.
-    priority = raise_priority(nice)
-    logging.getLogger("ocu").info("scheduling priority: %s", priority.text)
     try:
-        profile = load_profile(args.profile)
+        ur_arm = load_ur_arm(args.profile)
+        profile = ur_robot_profile(ur_arm) if ur_arm is not None else load_profile(args.profile)
     except ProfileError as err:
         return refuse_file(str(err))
+    if ur_arm is not None:
+        for given, option in (
+            (args.replay, "--replay"),
+            (args.record, "--record"),
+            (args.sim_arg, "--sim-arg"),
+        ):
+            if given:
+                parser.error(f"{option} is not available for a UR arm yet (docs/ur.md)")
     robot = None
-    if args.robot:
+    if args.robot and ur_arm is None:
         try:
             robot = parse_robot(args.robot, profile.link.port)
         except argparse.ArgumentTypeError as err:
@@ -245,6 +254,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         pad_mapping = load_pad_mapping(profile, pad_override)
     except PadMappingError as err:
         return refuse_file(str(err))
+    # Before Qt, the link or the control core start a thread: threads inherit it.
+    log.info("scheduling priority: %s", raise_priority(nice).text)
+    if ur_arm is not None:
+        return run_ur_console(
+            ur_arm,
+            profile,
+            args.robot,
+            args.quit_after,
+            config_dir=config_dir,
+            key_map=key_map,
+            pad_mapping=None if args.no_gamepad else pad_mapping,
+            control_hz=args.control_hz,
+        )
     if args.replay is not None:
         return run_replay(
             profile,
@@ -349,6 +371,93 @@ def run_console(
             return run_window(app, window, quit_after_s)
     finally:
         recorder.stop()  # after the window's shutdown: the link's closing zeros are in it
+        if simulator is not None:
+            simulator.stop()
+
+
+def load_ur_arm(name: str | None) -> UrArmProfile | None:
+    """The UR arm `--profile` names (a shipped name, or a file in the UR format: it has a
+    `series`), else None (an Engineer profile); ProfileError for a bad UR file."""
+    if name is None:
+        return None
+    if name in shipped_ur_profiles():
+        return load_ur_profile(name)
+    path = Path(name)
+    if path.suffix == ".toml" and path.is_file():
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            return None  # load_profile says what is wrong with it
+        if "series" in data:
+            return load_ur_profile(path)
+    return None
+
+
+def run_ur_console(
+    arm: UrArmProfile,
+    profile: RobotProfile,
+    robot: str | None,
+    quit_after_s: float | None,
+    *,
+    config_dir: Path,
+    key_map: KeyMap,
+    pad_mapping: PadMapping | None = None,
+    control_hz: float = DEFAULT_CONTROL_HZ,
+) -> int:
+    """The console on a UR arm: the controller at `robot` (HOST[:PORT_BASE]), else the UR
+    simulator in this process on 127.0.0.1 (docs/ur.md)."""
+    from PySide6.QtWidgets import QApplication
+
+    from ocu.core.hardware import HardwareComponent
+    from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
+    from ocu.hardware.ur import UR_CAPABILITIES, parse_host, ur_component
+    from ocu.link.base import Link, LinkError
+    from ocu.link.ur import UrLink
+    from ocu.sim.ur import UrSimulator
+    from ocu.windows.main_window import MainWindow
+
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    assert isinstance(app, QApplication)
+    simulator: UrSimulator | None = None
+    try:
+        if robot is None:
+            simulator = UrSimulator(arm, host="127.0.0.1", ports=(0, 0, 0))
+            simulator.start()
+            host = "127.0.0.1"
+            ports = tuple(simulator.ports[k] for k in ("primary", "secondary", "realtime"))
+            where = f"UR simulator {host}"
+        else:
+            try:
+                host, ports = parse_host(robot)
+            except LinkError as err:
+                log.error("%s", err)
+                return 1
+            where = f"UR {arm.name} at {host}"
+
+        def make_link() -> Link:
+            return UrLink(arm, host, profile=profile, ports=ports)
+
+        def hardware_for(link: Link) -> HardwareComponent:
+            assert isinstance(link, UrLink)
+            return ur_component(link)
+
+        settings, settings_status = open_settings(config_dir)
+        window = MainWindow(
+            profile,
+            make_link,
+            where,
+            settings,
+            key_map,
+            settings_status=settings_status,
+            pad_mapping=pad_mapping,
+            pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
+            control_hz=control_hz,
+            hardware_for=hardware_for,
+            capabilities=UR_CAPABILITIES,
+        )
+        with last_zeros_guard():
+            return run_window(app, window, quit_after_s)
+    finally:
         if simulator is not None:
             simulator.stop()
 

@@ -51,6 +51,7 @@ CAPABILITIES: Mapping[str, str] = {
     "battery": "battery voltage and charge reports",
     "imu": "roll, pitch and heading reports",
     "arm": "a manipulator arm with joint positions: the Arm dock, stored poses",
+    "calibration": "first-contact calibration over its wire (ocu calibrate): the Calibration dock",
 }
 
 

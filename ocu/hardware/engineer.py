@@ -41,7 +41,8 @@ def engineer_joints(profile: RobotProfile) -> tuple[JointInterfaces, ...]:
 
 def engineer_capabilities(profile: RobotProfile, *, extension: bool) -> frozenset[str]:
     """What an Engineer with this profile can do; `extension`: its link speaks the extension."""
-    capabilities = {"torch"}  # a button of the vendor protocol's RCP
+    # The torch is a button of the vendor protocol's RCP; first contact speaks that wire.
+    capabilities = {"torch", "calibration"}
     if profile.drive_channels is not None:
         capabilities.add("drive")
     if profile.cameras:

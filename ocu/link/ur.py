@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import selectors
 import socket
 import threading
@@ -131,6 +132,7 @@ class UrLink(Link):
         self.failed_connects = 0
         self._send_rate = RateMeter()
         self._telemetry_rate = RateMeter()
+        self._emitted_at = -math.inf  # when a TelemetryFrame was last handed on
         self._closed = False
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -500,13 +502,18 @@ class UrLink(Link):
         if first:
             version = ".".join(map(str, connection.version))
             self._set_state(LinkState.CONNECTED, f"UR controller {version} at {self.host}")
-        hz = self.arm.realtime_hz
-        for state in states:
+        # The newest state, at most at the profile's telemetry rate (UR_TELEMETRY_HZ): every
+        # packet counts for the link's liveness above, the console reads what it can use.
+        with self._lock:
+            due = now - self._emitted_at >= 1.0 / self.profile.link.telemetry_rate_hz
+            if due:
+                self._emitted_at = now
+        if due:
             self.emit(
                 telemetry_frame(
-                    state,
+                    states[-1],
                     self.joint_names,
-                    ticks_per_s=hz,
+                    ticks_per_s=self.arm.realtime_hz,
                     ticks_per_rad=UR_TICKS_PER_RAD,
                     received_at=now,
                     wall_time=wall,

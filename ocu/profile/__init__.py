@@ -95,6 +95,7 @@ def companion_file(profile: RobotProfile, name: str) -> Path | None:
     candidate = Path(profile.source).parent / name
     return candidate if candidate.is_file() else None
 
+
 __all__ = [
     "ARM_KEYS",
     "ASSIST_KEYS",

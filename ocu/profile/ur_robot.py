@@ -24,6 +24,10 @@ UR_SEND_RATE_HZ = 125.0
 #: speedj's `t`: the controller ends the command (and brakes) this long after the last one,
 #: the robot-side watchdog. 7.5 periods at 125 Hz: a few late sends do not make it brake.
 UR_SPEEDJ_T_S = 0.06
+#: The link hands the newest realtime state on at most this often (the controller sends 125 or
+#: 500 a second): each reading goes through the console model, its plots and the position
+#: controller, and a Python console kept its 50 Hz control cycle only at this rate.
+UR_TELEMETRY_HZ = 50.0
 #: No realtime packet for this long: LINK LOST (62 periods at 125 Hz, 250 at 500 Hz).
 UR_LINK_LOST_AFTER_S = 0.5
 #: No heartbeat from the commanding thread for this long: zero velocities (as the Engineer).
@@ -38,6 +42,7 @@ UR_DEFAULT_MAX_RAD_S = 0.5
 
 UR_ASSUMPTIONS = (
     "link.send_rate_hz",
+    "link.telemetry_rate_hz",
     "link.robot_watchdog_s",
     "link.link_lost_after_s",
     "link.gui_alive_timeout_s",
@@ -58,7 +63,7 @@ def ur_link_settings(arm: UrArmProfile, host: str = "127.0.0.1") -> LinkSettings
         send_rate_min_hz=min(50.0, send_rate),
         send_rate_max_hz=arm.realtime_hz,
         robot_watchdog_s=UR_SPEEDJ_T_S,
-        telemetry_rate_hz=arm.realtime_hz,
+        telemetry_rate_hz=min(UR_TELEMETRY_HZ, arm.realtime_hz),
         telemetry_tick_hz=arm.realtime_hz,
         link_lost_after_s=UR_LINK_LOST_AFTER_S,
         gui_alive_timeout_s=UR_GUI_ALIVE_TIMEOUT_S,

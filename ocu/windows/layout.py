@@ -64,7 +64,7 @@ class DockLayout(QMainWindow):
     gamepad_dock: QDockWidget
     _map_dock: QDockWidget | None  # only with a chassis that drives
     robot_check_dock: QDockWidget
-    calibration_dock: QDockWidget
+    _calibration_dock: QDockWidget | None
     arm_dock: QDockWidget | None
     # The layout "Reset layout" goes back to.
     _default_state: QByteArray
@@ -124,8 +124,9 @@ class DockLayout(QMainWindow):
             self.tabifyDockWidget(self.joint_dock, self.arm_dock)
             self.joint_dock.raise_()
         # On the right, so the 3D model stays in view: it shows the joint a device should be.
-        self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.calibration_dock)
-        self.tabifyDockWidget(self.joint_dock, self.calibration_dock)
+        if self._calibration_dock is not None:
+            self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self._calibration_dock)
+            self.tabifyDockWidget(self.joint_dock, self._calibration_dock)
         self.joint_dock.raise_()
 
     def restore_layout(self) -> bool:

@@ -256,16 +256,19 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         )
         self.robot_check = RobotCheckPanel(profile)
         self.robot_check_dock = self._dock("robot_check_dock", "Robot check", self.robot_check)
-        self.calibration_panel = CalibrationPanel(
-            self.model,
-            calibration_link if replay is None else None,
-            Path(settings.fileName()).parent / CALIBRATED_PROFILE_NAME,
-            show_joint=self._show_calibration_joint,
-        )
-        self.calibration_dock = self._dock(
-            "calibration_dock", "Calibration", self.calibration_panel
-        )
-        self.calibration_panel.finished.connect(lambda _result: self._after_calibration())
+        # First contact (ocu calibrate) speaks the Engineer's wire: only where the hardware
+        # can be calibrated so.
+        self._calibration_panel: CalibrationPanel | None = None
+        self._calibration_dock: QDockWidget | None = None
+        if "calibration" in self.capabilities:
+            panel = self._calibration_panel = CalibrationPanel(
+                self.model,
+                calibration_link if replay is None else None,
+                Path(settings.fileName()).parent / CALIBRATED_PROFILE_NAME,
+                show_joint=self._show_calibration_joint,
+            )
+            self._calibration_dock = self._dock("calibration_dock", "Calibration", panel)
+            panel.finished.connect(lambda _result: self._after_calibration())
         self._arrange_docks()
         model_view = self.model_dock.widget()
         assert isinstance(model_view, Model3DWidget)
@@ -307,7 +310,8 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             self.arm_indicator = ArmModeIndicator(self.model.arm)
             self.link_status.add_indicator(self.arm_indicator)
         self.nav_status = NavStatus(self.model)
-        self.link_status.add_indicator(self.nav_status)
+        if "drive" in self.capabilities:  # the zones and assisted modes act on the drive
+            self.link_status.add_indicator(self.nav_status)
         self.pad_indicator = PadIndicator(self.teleop)
         self.link_status.add_indicator(self.pad_indicator)
         self.teleop.events.message.connect(self.log_event)
@@ -436,6 +440,16 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         return capability in self.capabilities
 
     @property
+    def calibration_panel(self) -> CalibrationPanel:
+        """The Calibration dock's panel (hardware calibrated over its wire only)."""
+        return _present(self._calibration_panel, "calibration", "Calibration panel")
+
+    @property
+    def calibration_dock(self) -> QDockWidget:
+        """The Calibration dock (hardware calibrated over its wire only)."""
+        return _present(self._calibration_dock, "calibration", "Calibration dock")
+
+    @property
     def video_panel(self) -> VideoPanel:
         """The Video dock's panel (hardware with cameras only)."""
         return _present(self._video_panel, "cameras", "Video panel")
@@ -460,7 +474,7 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
     def _start_link(self) -> None:
         if self.link is not None or self._shut:
             return
-        if self.calibration_panel.running:
+        if self._calibration_panel is not None and self._calibration_panel.running:
             # One client commands the robot at a time: the calibration has its own link.
             self.log_event("a calibration runs: the console connects when it ends")
             return
@@ -612,7 +626,8 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             return
         if self.gamepad is not None:
             self.gamepad.shutdown()  # no pad state arrives after the halt
-        self.calibration_panel.shutdown()  # its link's zeros before the window goes
+        if self._calibration_panel is not None:
+            self._calibration_panel.shutdown()  # its link's zeros before the window goes
         self.model.halt("console closed")
         self.save_layout()
         self.control.shutdown()

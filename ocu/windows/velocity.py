@@ -146,7 +146,8 @@ class VelocityPanel(QWidget):
                 buttons[direction] = button
             buttons[0].setChecked(True)
             self.switch_buttons[name] = buttons
-        layout.addWidget(switches)
+        if model.profile.switch_channels:  # a robot without switches shows no empty box
+            layout.addWidget(switches)
 
         bottom = QHBoxLayout()
         self.connect_button = QPushButton()

@@ -121,7 +121,7 @@ def test_no_cameras_no_chassis_no_video_dock_no_map_dock(
     settings: QSettings,
 ) -> None:
     window = _window(windows, qtbot, armless_cart, sim=cart_sim, settings=settings)
-    assert window.capabilities == {"torch", "arm", "range_scan", "battery", "imu"}
+    assert window.capabilities == {"torch", "calibration", "arm", "range_scan", "battery", "imu"}
     names = _dock_names(window)
     assert "video_dock" not in names
     assert "map_dock" not in names

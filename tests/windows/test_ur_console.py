@@ -1,0 +1,162 @@
+"""The console on a second robot: a Universal Robots arm (issue 22) through the same window.
+
+The window is real (offscreen), the UR simulator is real (ocu.sim.ur, TCP on 127.0.0.1), the
+hardware is the "ur" plug-in over UrLink. What is checked is what the SIMULATOR does: keys of
+the UR's own key map (ocu/profiles/ur/hotkeys.toml) move its joints, a release stops them,
+Space brings the arm to rest; and the window shows only what a UR has.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from PySide6.QtCore import QSettings, Qt
+from PySide6.QtTest import QTest
+from PySide6.QtWidgets import QApplication, QCheckBox, QDockWidget
+from pytestqt.qtbot import QtBot
+
+from ocu.core.hardware import HardwareComponent
+from ocu.gamepad.mapping import load_pad_mapping
+from ocu.hardware.ur import UR_CAPABILITIES, ur_component
+from ocu.hotkeys import HoldBinding, load_key_map
+from ocu.link.base import Link
+from ocu.link.ur import UrLink
+from ocu.profile import RobotProfile
+from ocu.profile.ur import UrArmProfile, load_ur_profile
+from ocu.profile.ur_robot import ur_robot_profile
+from ocu.records import LinkState
+from ocu.sim.ur import UrSimulator
+from ocu.windows.main_window import MainWindow, MissingCapabilityError
+from tests.windows.console_fixtures import DEADLINE_MS
+
+ROOT = Path(__file__).resolve().parents[2]
+SHOULDER_LIFT = 1  # the simulator's joint index (base to tool)
+
+
+@pytest.fixture
+def arm() -> UrArmProfile:
+    return load_ur_profile("ur5e")
+
+
+@pytest.fixture
+def ur_sim(arm: UrArmProfile) -> Iterator[UrSimulator]:
+    simulator = UrSimulator(arm, host="127.0.0.1", ports=(0, 0, 0))
+    simulator.start()
+    yield simulator
+    simulator.stop()
+
+
+@pytest.fixture
+def ur_console(
+    arm: UrArmProfile, ur_sim: UrSimulator, settings: QSettings, qtbot: QtBot
+) -> Iterator[MainWindow]:
+    profile = ur_robot_profile(arm)
+    ports = (ur_sim.ports["primary"], ur_sim.ports["secondary"], ur_sim.ports["realtime"])
+
+    def make_link() -> Link:
+        return UrLink(arm, "127.0.0.1", profile=profile, ports=ports)
+
+    def hardware_for(link: Link) -> HardwareComponent:
+        assert isinstance(link, UrLink)
+        return ur_component(link)
+
+    window = MainWindow(
+        profile,
+        make_link,
+        "UR simulator",
+        settings,
+        load_key_map(profile),
+        pad_mapping=load_pad_mapping(profile),
+        hardware_for=hardware_for,
+        capabilities=UR_CAPABILITIES,
+    )
+    qtbot.addWidget(window)
+    window.show()
+    qtbot.waitUntil(lambda: window.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS)
+    yield window
+    window.shutdown()
+    QApplication.processEvents()
+
+
+def wait_sim(qtbot: QtBot, sim: UrSimulator, check: object, what: str) -> None:
+    assert callable(check)
+    try:
+        qtbot.waitUntil(lambda: bool(check(sim.snapshot())), timeout=DEADLINE_MS)
+    except AssertionError:
+        raise AssertionError(f"the UR simulator: not {what}; {sim.snapshot()}") from None
+
+
+def test_the_urs_keys_move_its_joints_and_space_brings_it_to_rest(
+    ur_console: MainWindow, ur_sim: UrSimulator, qtbot: QtBot
+) -> None:
+    window = ur_console
+    window.activateWindow()
+    window.velocity_panel.setFocus()
+    QTest.keyPress(window, Qt.Key.Key_Y)  # shoulder_lift_joint + (the UR's key map)
+    wait_sim(qtbot, ur_sim, lambda s: s.qd[SHOULDER_LIFT] > 0.0, "the shoulder lifting")
+    assert all(v == 0.0 for i, v in enumerate(ur_sim.snapshot().qd) if i != SHOULDER_LIFT)
+    QTest.keyRelease(window, Qt.Key.Key_Y)
+    wait_sim(qtbot, ur_sim, lambda s: all(v == 0.0 for v in s.qd), "at rest after the release")
+    QTest.keyPress(window, Qt.Key.Key_P)  # wrist_3_joint +
+    wait_sim(qtbot, ur_sim, lambda s: s.qd[5] > 0.0, "wrist 3 turning")
+    QTest.keyClick(window, Qt.Key.Key_Space)
+    wait_sim(qtbot, ur_sim, lambda s: s.program == "stopj", "stopj running (the e-stop)")
+    wait_sim(qtbot, ur_sim, lambda s: all(v == 0.0 for v in s.qd), "at rest after Space")
+    QTest.keyRelease(window, Qt.Key.Key_P)
+    assert window.model.estopped
+
+
+def test_the_window_shows_what_a_ur_has_and_nothing_of_the_engineer(
+    ur_console: MainWindow,
+) -> None:
+    window = ur_console
+    names = {dock.objectName() for dock in window.findChildren(QDockWidget)}
+    assert {"velocity_dock", "joint_position_dock"} <= names
+    assert not names & {"video_dock", "map_dock", "calibration_dock"}
+    for view in ("video_panel", "map_dock", "calibration_panel"):
+        with pytest.raises(MissingCapabilityError):
+            getattr(window, view)
+    # No torch box, no switches, no zones badge in the status bar.
+    torch = [box for box in window.findChildren(QCheckBox) if "Torch" in box.text()]
+    assert not [box for box in torch if box.isVisibleTo(window)]
+    assert not window.nav_status.isVisible()
+    joints = [window.joint_panel.table.cell_text(r, "joint") for r in range(6)]
+    assert joints == list(load_ur_profile("ur5e").joint_names)
+
+
+def test_the_engineer_keeps_its_own_key_map(profile: RobotProfile, arm: UrArmProfile) -> None:
+    assert load_key_map(profile).hold["Y"] == HoldBinding("shoulder", 1)
+    assert load_key_map(ur_robot_profile(arm)).hold["Y"] == HoldBinding("shoulder_lift_joint", 1)
+
+
+def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(tmp_path: Path) -> None:
+    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "PYTHONPATH": str(ROOT)}
+    result = subprocess.run(
+        [
+            *(sys.executable, "-m", "ocu", "--profile", "ur5e", "--quit-after", "3"),
+            *("--config-dir", str(tmp_path), "--no-gamepad"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "UR link connected: UR controller 5.10.0 at 127.0.0.1" in result.stderr
+    assert "link stopped (zeros sent last)" in result.stderr
+    refused = subprocess.run(
+        [sys.executable, "-m", "ocu", "--profile", "ur5e", "--record", str(tmp_path / "a.mcap")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+        check=False,
+    )
+    assert refused.returncode == 2
+    assert "--record is not available for a UR arm yet" in refused.stderr
