@@ -542,6 +542,18 @@ def _end_path(console: HeadlessConsole) -> None:
         log.info("follow_path stopped: cmd_vel took over")
 
 
+def _name_os_threads() -> None:
+    """Give the node's own threads ("ocu-control", "ocu-ros-bridge" ...) their names in the
+    OS as well: top -H, ps -L and /proc/PID/task/*/comm show them (15 characters at most)."""
+    for thread in threading.enumerate():
+        if not thread.name.startswith("ocu-") or thread.native_id is None:
+            continue
+        try:
+            Path(f"/proc/self/task/{thread.native_id}/comm").write_text(thread.name[:15])
+        except OSError:
+            continue  # gone meanwhile, not Linux, no /proc: the names are a convenience
+
+
 def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Event) -> int:
     from ocu.console.model import ConsoleModel
     from ocu.core.hardware import HardwareError
@@ -611,6 +623,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         # the bridge subscribes to them: LINK LOST stops what ROS moves.
         bridge.start(hardware.link, model.limits, sink=sink)
         console.start()
+        _name_os_threads()
         log.info("commanding %s:%d; SIGINT or SIGTERM stops the robot and exits", *robot)
         master = MasterWatch()
         while not stop.wait(STOP_POLL_S):
