@@ -24,13 +24,11 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
-from ocu.console.channels import Source
 from ocu.console.poses import ARM_POSES_NAME, default_config_dir
 from ocu.priority import nice_from_env, raise_priority
 from ocu.profile import ProfileError, RobotProfile, load_profile
-from ocu.records import CommandError
 from ocu.ros.convert import (
     DEFAULT_CMD_VEL_TIMEOUT_S,
     DEFAULT_RATE_HZ,
@@ -45,10 +43,6 @@ from ocu.ros.environment import (
     master_uri,
     missing_ros,
 )
-
-if TYPE_CHECKING:
-    from ocu.headless import HeadlessConsole
-    from ocu.ros.rosbridge import RosBridge
 
 log = logging.getLogger("ocu.ros")
 
@@ -443,105 +437,6 @@ def _run(args: list[str], stop: threading.Event) -> int:
         rospy.signal_shutdown("ocu-ros exiting")
 
 
-class _ModelSink:
-    """The bridge's velocities into the console model (`Source.ROS`), under its lock.
-
-    The model stops ROS by its own rules too (the input mux, ocu/control/mux.md: LINK LOST,
-    the link's safety stops, a stalled control thread, the e-stop). `ros_stopped` is that
-    stop: it zeroes ROS's channels in the model at once and has the bridge drop its goals
-    (`BridgeCore.halt`), so nothing ROS started resumes by itself; the next ROS command is
-    obeyed. The bridge's core is halted from a thread of its own ("ocu-ros-halt"): the stop
-    runs under the model's lock, and the bridge calls this sink under the core's lock.
-    """
-
-    def __init__(self, console: HeadlessConsole) -> None:
-        self.console = console
-        self.model = console.model
-        self.bridge: RosBridge | None = None
-        self._lock = threading.Lock()
-        self._pending: str | None = None  # a stop the bridge's core has not heard yet
-        self._wake = threading.Condition(self._lock)
-        self._closed = False
-        self._thread = threading.Thread(target=self._run, name="ocu-ros-halt", daemon=True)
-        zero = self.model.clear_external
-
-        def ros_stopped(reason: str) -> None:
-            # The model's lock is held: zero now, tell the bridge on the halt thread.
-            zero()
-            with self._lock:
-                self._pending = reason or "stopped"
-                self._wake.notify_all()
-
-        self.model.mux.register(Source.ROS.value, ros_stopped)
-
-    def start(self, bridge: RosBridge) -> None:
-        self.bridge = bridge
-        self._thread.start()
-
-    def close(self) -> None:
-        with self._lock:
-            self._closed = True
-            self._wake.notify_all()
-        if self._thread.is_alive():
-            self._thread.join(STOP_POLL_S)
-
-    def set_velocities(self, **velocities: float) -> None:
-        """The bridge's command (its core's lock held): into the model."""
-        with self._lock:
-            if self._pending is not None:
-                # The model stopped ROS and the core has not dropped its goals yet: a goal's
-                # next step must not take the channels back meanwhile.
-                velocities = dict.fromkeys(velocities, 0.0)
-        try:
-            self.console.call(lambda: self.model.set_external_velocities(velocities))
-        except CommandError as err:
-            log.warning("ROS command refused: %s", err)
-
-    def _run(self) -> None:
-        while True:
-            with self._lock:
-                self._wake.wait_for(lambda: self._closed or self._pending is not None)
-                if self._closed:
-                    return
-                reason = self._pending
-            bridge = self.bridge
-            if bridge is not None and reason is not None:
-                bridge.core.halt(reason)
-            with self._lock:
-                if self._pending == reason:
-                    self._pending = None
-
-
-def _follow_path(
-    console: HeadlessConsole, bridge: RosBridge, points: list[tuple[float, float]]
-) -> None:
-    """/follow_path: the model's path mode (Source.ASSIST), started as a planner's."""
-    refusal = bridge.core.refusal()
-    if refusal:
-        log.error("follow_path ignored: %s", refusal)
-        return
-    try:
-        console.call(lambda: console.model.start_path(points, external=True))
-    except CommandError as err:
-        log.error("follow_path refused: %s", err)
-        return
-    log.info("follow_path: %d poses in odom, path mode started", len(points))
-
-
-def _end_path(console: HeadlessConsole) -> None:
-    """A cmd_vel ends a path ROS gave (the only path mode of the node)."""
-    model = console.model
-
-    def end() -> bool:
-        if model.assist_mode != "path":
-            return False
-        model.stop_assist("cmd_vel took over")
-        return True
-
-    if console.call(end):
-        log.info("follow_path stopped: cmd_vel took over")
-
-
 def _name_os_threads() -> None:
     """Give the node's own threads ("ocu-control", "ocu-ros-bridge" ...) their names in the
     OS as well: top -H, ps -L and /proc/PID/task/*/comm show them (15 characters at most)."""
@@ -560,12 +455,13 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.hardware.registry import HARDWARE
     from ocu.headless import HeadlessConsole
     from ocu.link.base import LinkError
+    from ocu.ros.host import ModelSink, end_path, follow_path
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
 
     simulator: SimulatorProcess | None = None
     console: HeadlessConsole | None = None
-    sink: _ModelSink | None = None
+    sink: ModelSink | None = None
     bridge: RosBridge | None = None
     try:
         robot = config.robot
@@ -607,7 +503,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         )
         # The model feeds its own navigator (odometry, the zones, the path mode); the bridge
         # publishes from it, hands it other nodes' scans and /follow_path.
-        sink = _ModelSink(console)
+        sink = ModelSink(console, silent_after_s=profile.link.gui_alive_timeout_s)
         ros = bridge = RosBridge(
             profile,
             config.bridge,
@@ -615,10 +511,11 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
             arm_poses_path=config.arm_poses_path,
             navigator=model.nav,
             feed_navigator=False,
-            on_path=lambda points: _follow_path(headless, ros, points),
-            on_cmd_vel=lambda: _end_path(headless),
+            on_path=lambda points: follow_path(headless, ros.core, points),
+            on_cmd_vel=lambda: end_path(headless),
+            on_step=sink.stepped,
         )
-        sink.start(bridge)
+        sink.start(bridge.core)
         # The link logs its state changes and safety events itself (forwarded to rosout);
         # the bridge subscribes to them: LINK LOST stops what ROS moves.
         bridge.start(hardware.link, model.limits, sink=sink)

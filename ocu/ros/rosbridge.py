@@ -134,7 +134,7 @@ class RosBridge:
         settings: BridgeSettings | None = None,
         *,
         hardware_id: str = "",
-        heartbeat: bool = False,
+        on_step: Callable[[], None] | None = None,
         on_state_changed: StateCallback | None = None,
         arm_poses_path: pathlib.Path | None = None,
         navigator: Navigator | None = None,
@@ -156,9 +156,9 @@ class RosBridge:
         )
         self.settings = self.core.settings
         self.hardware_id = hardware_id
-        # Beat the link's heartbeat from the bridge thread (a host without a control thread
-        # of its own); the console's and ocu-ros's control thread beats it itself.
-        self.heartbeat = heartbeat
+        # Called each step of the bridge thread: the host watches it (ocu-ros stops what ROS
+        # moves when it falls silent); the link's heartbeat is the control thread's.
+        self.on_step = on_step
         self._life_lock = threading.Lock()
         self._link: Link | None = None
         self._subscribers: list[Any] = []
@@ -599,7 +599,7 @@ class RosBridge:
             self._loop()
         except Exception:
             # Without this loop nothing enforces the cmd_vel timeout: stop what ROS moves
-            # and take ROS off the robot (the heartbeat stops too, so the link zeroes the rest).
+            # and take ROS off the robot (the host's watch on this thread stops the rest).
             log.exception("ROS bridge loop failed: ROS control stopped")
             self.failed.set()
             self.core.detach(stop=True)
@@ -609,11 +609,10 @@ class RosBridge:
         next_step = time.monotonic()
         next_diagnostics = next_step
         odometry = Schedule(ODOM_PERIOD_S, next_step)
-        link = self._link
         while not self._stop.is_set():
             now = time.monotonic()
-            if self.heartbeat and link is not None:
-                link.heartbeat()
+            if self.on_step is not None:
+                self.on_step()
             try:
                 for text in self.core.step(now):
                     log.info("%s", text)
@@ -621,7 +620,7 @@ class RosBridge:
                     self.publish_odometry()
             except Exception as err:
                 # One failing step halts what ROS moves, with the reason; the loop (the
-                # cmd_vel timeout, the heartbeat) and the node go on serving.
+                # cmd_vel timeout, the host's watch) and the node go on serving.
                 reason = f"{type(err).__name__}: {err}"
                 if self._throttle.allow("loop"):
                     log.exception("ROS bridge step failed (%s)", reason)
