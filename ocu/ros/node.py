@@ -1,4 +1,4 @@
-"""The `ocu-ros` node: ROS 1 commands to the Engineer over the Qt-free link core.
+"""The `ocu-ros` node: ROS 1 commands to the Engineer through the console's control core.
 
     ocu-ros                                   # the built-in simulator
     ocu-ros _robot:=192.168.0.100             # a robot (the profile's port)
@@ -63,7 +63,7 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~max_angular      rad/s; the same for angular.z (default: profile default_max)
   ~cmd_vel_timeout  s without cmd_vel before the tracks stop (default 0.5, at most 2)
   ~twist_stamped    subscribe to geometry_msgs/TwistStamped instead of Twist (default false)
-  ~rate             Hz of the control loop: timeout, position control, heartbeat (default 50)
+  ~rate             Hz of the bridge's loop and the control thread (default 50)
   ~camera           camera to select at start (a name in the profile's link.camera_names)
   ~extension        ask an extended robot for every camera's stream (default false)
   ~arm_poses        the operator's stored arm poses (TOML); default: the console's
