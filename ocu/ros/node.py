@@ -484,6 +484,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         # mode, its control thread at ~rate (the console's 50 Hz by default), which also
         # beats the link's heartbeat.
         model = ConsoleModel(profile, arm_poses_path=config.arm_poses_path)
+        model.nav.grid = None  # no map view: no occupancy grid to build from each scan
         model.events.message.connect(lambda text: log.info("%s", text), direct=True)
         model.events.position_message.connect(lambda text: log.info("%s", text), direct=True)
         # The node is the only commander: the maxima ROS is held to are the model's.
