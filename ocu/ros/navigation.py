@@ -1,5 +1,5 @@
-"""The ROS side of driving with a map, without ROS or Qt: messages as plain data, the zones
-between the bridge and the robot, and the path mode for /follow_path.
+"""The ROS side of driving with a map, without ROS or Qt: messages as plain data and the
+frames of other nodes' scans (the zones and the path mode are the console model's).
 
 - `odometry_data`: nav_msgs/Odometry (frame `odom`, child `base_link`) and the matching tf.
 - `laser_scan_data` / `scan_from_ros`: sensor_msgs/LaserScan both ways.
@@ -7,9 +7,6 @@ between the bridge and the robot, and the path mode for /follow_path.
   planar scan taken in a frame below `base_link` (a laser's frame); unknown frames are refused.
 - `path_points`: a nav_msgs/Path in `odom` as waypoints (other frames are refused), each
   position within `MAX_PATH_COORDINATE_M` of the origin.
-- `GuardedSink`: the bridge's velocity sink with the safety zones in front of it — the same
-  Navigator.guard the console's model applies — so cmd_vel, joint goals and /follow_path are
-  slowed near obstacles in `ocu-ros` too.
 """
 
 from __future__ import annotations
@@ -21,10 +18,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ocu.nav.navigator import Navigator
 from ocu.nav.odometry import OdometryEstimate
 from ocu.records import SCAN_FROM_ROS, ScanFrame
-from ocu.ros.bridge import VelocitySink
 from ocu.ros.convert import BridgeError, quoted, rotation_of
 
 ODOM_FRAME = "odom"
@@ -262,53 +257,3 @@ class FrameTree:
             )
         yaw = math.atan2(float(pose[1, 0]), float(pose[0, 0]))
         return PlanarMount(float(pose[0, 3]), float(pose[1, 3]), yaw)
-
-
-class GuardedSink:
-    """A VelocitySink that passes the drive pair through the safety zones first.
-
-    The bridge holds the last drive it asked for; `refresh()` (every bridge step) judges it
-    again, so a robot driving on under a steady cmd_vel is slowed and stopped as it nears an
-    obstacle.
-    """
-
-    def __init__(self, sink: VelocitySink, navigator: Navigator) -> None:
-        self.sink = sink
-        self.navigator = navigator
-        self.drive = navigator.drive
-        self._lock = threading.Lock()
-        self._wanted: tuple[float, float] = (0.0, 0.0)
-        self._sent: tuple[float, float] | None = None
-
-    def set_velocities(self, **velocities: float) -> None:
-        """The bridge's command: the drive pair judged by the zones, the rest as it is."""
-        with self._lock:
-            if self.drive is not None and any(name in velocities for name in self.drive):
-                linear, turn = self.drive
-                self._wanted = (
-                    float(velocities.get(linear, self._wanted[0])),
-                    float(velocities.get(turn, self._wanted[1])),
-                )
-                velocities = {**velocities, **self._guarded()}
-            self.sink.set_velocities(**velocities)
-
-    def refresh(self) -> None:
-        """Judge the drive again (new scans, the robot moved); send it if it changed."""
-        with self._lock:
-            if self.drive is None:
-                return
-            if self._wanted == (0.0, 0.0):
-                self.navigator.guard(0.0, 0.0)  # standing: the zones' state stays current
-                return
-            before = self._sent
-            guarded = self._guarded()
-            if tuple(guarded.values()) != before:
-                self.sink.set_velocities(**guarded)
-
-    def _guarded(self) -> dict[str, float]:
-        assert self.drive is not None
-        state = self.navigator.guard(*self._wanted)
-        decision = state.decision
-        values = (decision.linear_m_s, decision.angular_rad_s) if decision else self._wanted
-        self._sent = values
-        return dict(zip(self.drive, values, strict=True))

@@ -1,4 +1,4 @@
-"""The `ocu-ros` node: ROS 1 commands to the Engineer over the Qt-free link core.
+"""The `ocu-ros` node: ROS 1 commands to the Engineer through the console's control core.
 
     ocu-ros                                   # the built-in simulator
     ocu-ros _robot:=192.168.0.100             # a robot (the profile's port)
@@ -63,7 +63,7 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~max_angular      rad/s; the same for angular.z (default: profile default_max)
   ~cmd_vel_timeout  s without cmd_vel before the tracks stop (default 0.5, at most 2)
   ~twist_stamped    subscribe to geometry_msgs/TwistStamped instead of Twist (default false)
-  ~rate             Hz of the control loop: timeout, position control, heartbeat (default 50)
+  ~rate             Hz of the bridge's loop and the control thread (default 50)
   ~camera           camera to select at start (a name in the profile's link.camera_names)
   ~extension        ask an extended robot for every camera's stream (default false)
   ~arm_poses        the operator's stored arm poses (TOML); default: the console's
@@ -437,17 +437,31 @@ def _run(args: list[str], stop: threading.Event) -> int:
         rospy.signal_shutdown("ocu-ros exiting")
 
 
+def _name_os_threads() -> None:
+    """Give the node's own threads ("ocu-control", "ocu-ros-bridge" ...) their names in the
+    OS as well: top -H, ps -L and /proc/PID/task/*/comm show them (15 characters at most)."""
+    for thread in threading.enumerate():
+        if not thread.name.startswith("ocu-") or thread.native_id is None:
+            continue
+        try:
+            Path(f"/proc/self/task/{thread.native_id}/comm").write_text(thread.name[:15])
+        except OSError:
+            continue  # gone meanwhile, not Linux, no /proc: the names are a convenience
+
+
 def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Event) -> int:
-    from ocu.control.commands import VelocityLimits
+    from ocu.console.model import ConsoleModel
+    from ocu.core.hardware import HardwareError
+    from ocu.hardware.registry import HARDWARE
+    from ocu.headless import HeadlessConsole
     from ocu.link.base import LinkError
-    from ocu.link.live import UdpLink
-    from ocu.nav.navigator import Navigator
-    from ocu.records import Command
+    from ocu.ros.host import ModelSink, end_path, follow_path
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
 
     simulator: SimulatorProcess | None = None
-    link: UdpLink | None = None
+    console: HeadlessConsole | None = None
+    sink: ModelSink | None = None
     bridge: RosBridge | None = None
     try:
         robot = config.robot
@@ -460,42 +474,61 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
             robot = simulator.address
             log.info("built-in simulator at %s:%d", *robot)
         try:
-            link = UdpLink(profile, robot, extension=config.extension)
-        except LinkError as err:
+            hardware = HARDWARE.create(
+                "engineer", profile, f"{robot[0]}:{robot[1]}", extension=config.extension
+            )
+        except (LinkError, HardwareError) as err:
             log.error("%s", err)
             return 1
-        # The node is the only commander: the maxima ROS is held to are its own.
-        limits = VelocityLimits(profile)
+        # The console's control core (ocu.core): the model's mux, limits, zones and path
+        # mode, its control thread at ~rate (the console's 50 Hz by default), which also
+        # beats the link's heartbeat.
+        model = ConsoleModel(profile, arm_poses_path=config.arm_poses_path)
+        model.nav.grid = None  # no map view: no occupancy grid to build from each scan
+        model.events.message.connect(lambda text: log.info("%s", text), direct=True)
+        model.events.position_message.connect(lambda text: log.info("%s", text), direct=True)
+        # The node is the only commander: the maxima ROS is held to are the model's.
         for channel, value in (
             (config.bridge.drive[0], config.max_linear_m_s),
             (config.bridge.drive[1], config.max_angular_rad_s),
         ):
-            kept = limits.set(channel, value)
+            kept = model.set_max_velocity(channel, value)
             if kept != value:
                 log.warning(
                     "%s maximum %.3f above the profile's hard maximum: %.3f", channel, value, kept
                 )
         if config.camera is not None:
-            link.set_command(Command(camera=config.camera))  # before anything is sent
-        # Odometry, the safety zones and the path mode, fed from the link (no map: no view).
-        navigator = Navigator(profile, grid=False)
-        bridge = RosBridge(
+            model.select_camera(config.camera)  # before anything is sent
+        headless = console = HeadlessConsole(
+            model, hardware, control_period_s=1.0 / config.bridge.rate_hz
+        )
+        # The model feeds its own navigator (odometry, the zones, the path mode); the bridge
+        # publishes from it, hands it other nodes' scans and /follow_path.
+        sink = ModelSink(console, silent_after_s=profile.link.gui_alive_timeout_s)
+        ros = bridge = RosBridge(
             profile,
             config.bridge,
             hardware_id=f"{robot[0]}:{robot[1]}",
-            heartbeat=True,
             arm_poses_path=config.arm_poses_path,
-            navigator=navigator,
+            navigator=model.nav,
+            feed_navigator=False,
+            on_path=lambda points: follow_path(headless, ros.core, points),
+            on_cmd_vel=lambda: end_path(headless),
+            on_step=sink.stepped,
         )
+        sink.start(bridge.core)
         # The link logs its state changes and safety events itself (forwarded to rosout);
         # the bridge subscribes to them: LINK LOST stops what ROS moves.
-        bridge.start(link, limits)
-        link.start()
+        bridge.start(hardware.link, model.limits, sink=sink)
+        console.start()
+        _name_os_threads()
         log.info("commanding %s:%d; SIGINT or SIGTERM stops the robot and exits", *robot)
         master = MasterWatch()
         while not stop.wait(STOP_POLL_S):
             if bridge.failed.is_set():
                 return 1
+            if console.manager.error is not None:
+                return 1  # the control thread died (logged); the link zeroed without it
             if master.restarted():
                 return EXIT_MASTER_RESTARTED
         if isinstance(stop, SignalStop):
@@ -504,8 +537,10 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     finally:
         if bridge is not None:
             bridge.stop()
-        if link is not None:
-            link.shutdown()
+        if sink is not None:
+            sink.close()
+        if console is not None:
+            console.stop()
             log.info("link shut down, zeros sent last")
         if simulator is not None:
             simulator.stop()

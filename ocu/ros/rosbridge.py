@@ -29,8 +29,9 @@ With a Navigator (driving with a map, ocu.nav.navigator):
 - in  `scan` other nodes' LaserScans for the safety zones, each publisher and frame a source
   of its own, placed by its frame (`base_link`, or a frame linked to it on /tf, /tf_static)
 - in  `/tf`, `/tf_static` other nodes' transforms, to place their scans
-- in  `follow_path` nav_msgs/Path in `odom`: the path mode (Samson's controller) follows it;
-  a cmd_vel, the operator, LINK LOST or stale odometry ends it
+- in  `follow_path` nav_msgs/Path in `odom`: handed to the host (`on_path`), whose model
+  runs the path mode (Samson's controller); a cmd_vel, the operator, LINK LOST or stale
+  odometry ends it
 """
 
 from __future__ import annotations
@@ -74,7 +75,6 @@ from ocu.ros.diagnostics import BridgeState, bridge_report, link_report
 from ocu.ros.environment import ensure_ros_path
 from ocu.ros.navigation import (
     FrameTree,
-    GuardedSink,
     NavigationError,
     laser_scan_data,
     odometry_data,
@@ -134,31 +134,31 @@ class RosBridge:
         settings: BridgeSettings | None = None,
         *,
         hardware_id: str = "",
-        heartbeat: bool = False,
+        on_step: Callable[[], None] | None = None,
         on_state_changed: StateCallback | None = None,
         arm_poses_path: pathlib.Path | None = None,
         navigator: Navigator | None = None,
         feed_navigator: bool = True,
         on_path: Callable[[list[tuple[float, float]]], None] | None = None,
+        on_cmd_vel: Callable[[], None] | None = None,
     ) -> None:
-        """`navigator` adds odom, tf, scan and follow_path. `feed_navigator`: the bridge
-        feeds it the link's events (the node); the console's model feeds its own. `on_path`
-        takes a /follow_path for a host that runs the path mode itself (the console);
-        without it the bridge follows the path through its own commands."""
+        """`navigator` adds odom, tf and scan. `feed_navigator`: the bridge feeds it the
+        link's events; a console model (the window's, `ocu-ros`'s) feeds its own. `on_path`
+        takes a /follow_path (subscribed only with it) to the host's path mode; `on_cmd_vel`
+        runs on each cmd_vel before it is obeyed (`ocu-ros` ends a path there)."""
         self.profile = profile
         self.navigator = navigator
         self.feed_navigator = feed_navigator
         self.on_path = on_path
-        self._guarded: GuardedSink | None = None
-        self._path_running = False
+        self.on_cmd_vel = on_cmd_vel
         self.core = BridgeCore(
             profile, settings, on_state_changed=on_state_changed, arm_poses_path=arm_poses_path
         )
         self.settings = self.core.settings
         self.hardware_id = hardware_id
-        # The node beats the link's heartbeat from the bridge thread; the console's GUI
-        # thread beats it itself, so a stalled GUI still stops the robot.
-        self.heartbeat = heartbeat
+        # Called each step of the bridge thread: the host watches it (ocu-ros stops what ROS
+        # moves when it falls silent); the link's heartbeat is the control thread's.
+        self.on_step = on_step
         self._life_lock = threading.Lock()
         self._link: Link | None = None
         self._subscribers: list[Any] = []
@@ -176,7 +176,7 @@ class RosBridge:
     def start(self, link: Link, limits: VelocityLimits, sink: VelocitySink | None = None) -> None:
         """Subscribe to `link`, advertise and command it; rospy.init_node must have run.
 
-        Commands go to `sink` when given (the console's model), else to the link itself;
+        Commands go to `sink` when given (a console model), else to the link itself;
         `limits` are the velocity maxima ROS is held to.
         """
         with self._life_lock:
@@ -188,9 +188,6 @@ class RosBridge:
             navigator = self.navigator
             if navigator is not None:
                 self._publishers.add_navigation()
-                if sink is None:
-                    # The node commands the link itself: the zones sit in front of it.
-                    self._guarded = target = GuardedSink(link, navigator)
             link.subscribe(self._on_link_event)
             self.core.attach(target, limits, link_state=lambda: link.state)
             if self.settings.twist_stamped:
@@ -214,8 +211,11 @@ class RosBridge:
                     rospy.Subscriber(SCAN_TOPIC, LaserScan, self._on_scan, queue_size=10),
                     rospy.Subscriber(TF_TOPIC, TFMessage, self._on_tf, queue_size=50),
                     rospy.Subscriber(TF_STATIC_TOPIC, TFMessage, self._on_tf, queue_size=50),
-                    rospy.Subscriber(FOLLOW_PATH_TOPIC, Path, self._on_follow_path, queue_size=1),
                 ]
+            if navigator is not None and self.on_path is not None:
+                self._subscribers.append(
+                    rospy.Subscriber(FOLLOW_PATH_TOPIC, Path, self._on_follow_path, queue_size=1)
+                )
             self._stop.clear()
             self.failed.clear()
             self._thread = threading.Thread(target=self._run, name="ocu-ros-bridge", daemon=True)
@@ -277,8 +277,6 @@ class RosBridge:
         if isinstance(event, LinkStateChanged):
             # A lost link stops what ROS moves, whatever cmd_vel says next.
             self.core.on_link_state(event.state, event.reason)
-            if event.state is not LinkState.CONNECTED and self._stop_path():
-                log.warning("follow_path stopped: %s", event.state.label)
         elif isinstance(event, TelemetryFrame):
             self.on_telemetry(event)
         elif isinstance(event, VideoFrame):
@@ -376,48 +374,6 @@ class RosBridge:
             return
         if self.on_path is not None:
             self.on_path(points)
-            return
-        navigator = self.navigator
-        assert navigator is not None
-        if self.core.refusal():
-            log.error("follow_path ignored: %s", self.core.refusal())
-            return
-        try:
-            navigator.start_path(points, external=True)
-        except (ValueError, ArithmeticError) as err:
-            if self._throttle.allow("follow_path"):
-                log.error("follow_path refused: %s", err)
-            return
-        self._path_running = True
-        log.info("follow_path: %d poses in odom, path mode started", len(points))
-
-    def _stop_path(self) -> bool:
-        if not self._path_running or self.navigator is None:
-            return False
-        self._path_running = False
-        self.navigator.stop_assist()
-        return True
-
-    def _step_navigation(self, now: float) -> None:
-        """The node's path mode and zones, each bridge step."""
-        navigator = self.navigator
-        if navigator is None:
-            return
-        if self._path_running and self.on_path is None:
-            link = self._link
-            link_ok = link is not None and link.state is LinkState.CONNECTED
-            command = navigator.assist_step(now, link_ok=link_ok)
-            if command is None:
-                self._path_running = False
-            elif command.done:
-                self._path_running = False
-                log.info("%s", command.message)
-                self.core.on_cmd_vel(0.0, 0.0)
-            elif self.core.on_cmd_vel(command.linear_m_s, command.angular_rad_s) is None:
-                self._stop_path()
-                log.warning("follow_path stopped: %s", self.core.refusal() or "refused")
-        if self._guarded is not None:
-            self._guarded.refresh()
 
     def publish_odometry(self) -> None:
         """The navigator's pose on `odom` and as the tf odom -> base_link."""
@@ -554,8 +510,8 @@ class RosBridge:
         self._cmd_vel(message.twist)
 
     def _cmd_vel(self, twist: Any) -> None:
-        if self._stop_path():
-            log.info("follow_path stopped: cmd_vel took over")
+        if self.on_cmd_vel is not None:
+            self.on_cmd_vel()
         linear, angular = twist.linear, twist.angular
         ignored = (float(linear.y), float(linear.z), float(angular.x), float(angular.y))
         try:
@@ -643,7 +599,7 @@ class RosBridge:
             self._loop()
         except Exception:
             # Without this loop nothing enforces the cmd_vel timeout: stop what ROS moves
-            # and take ROS off the robot (the heartbeat stops too, so the link zeroes the rest).
+            # and take ROS off the robot (the host's watch on this thread stops the rest).
             log.exception("ROS bridge loop failed: ROS control stopped")
             self.failed.set()
             self.core.detach(stop=True)
@@ -653,21 +609,18 @@ class RosBridge:
         next_step = time.monotonic()
         next_diagnostics = next_step
         odometry = Schedule(ODOM_PERIOD_S, next_step)
-        link = self._link
         while not self._stop.is_set():
             now = time.monotonic()
-            if self.heartbeat and link is not None:
-                link.heartbeat()
+            if self.on_step is not None:
+                self.on_step()
             try:
-                self._step_navigation(now)
                 for text in self.core.step(now):
                     log.info("%s", text)
                 if odometry.due(now):
                     self.publish_odometry()
             except Exception as err:
                 # One failing step halts what ROS moves, with the reason; the loop (the
-                # cmd_vel timeout, the heartbeat) and the node go on serving.
-                self._stop_path()
+                # cmd_vel timeout, the host's watch) and the node go on serving.
                 reason = f"{type(err).__name__}: {err}"
                 if self._throttle.allow("loop"):
                     log.exception("ROS bridge step failed (%s)", reason)

@@ -1,7 +1,7 @@
 """Driving with a map through ROS: odom, tf, scan, follow_path and the zones in `ocu-ros`.
 
-The pure parts (messages as data, the guarded sink) run without ROS; the node runs as a
-child process against a real roscore and the simulator in this process.
+The pure parts (messages as data, the model's zones under a ROS command) run without ROS;
+the node runs as a child process against a real roscore and the simulator in this process.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from ocu.console.model import ConsoleModel
 from ocu.nav.geometry import Pose
 from ocu.nav.navigator import ZONES_BLIND, ZONES_OFF_NO_DATA, Navigator
 from ocu.nav.world import load_world, parse_world
@@ -22,7 +23,6 @@ from ocu.records import ScanFrame
 from ocu.ros.master import RosMaster
 from ocu.ros.navigation import (
     FrameTree,
-    GuardedSink,
     NavigationError,
     PlanarMount,
     odometry_data,
@@ -36,16 +36,6 @@ from tests.ros.conftest import ROSPY_WARNINGS, Collector, NodeProcess, needs_ros
 
 pytestmark = ROSPY_WARNINGS
 LINEAR = "drive_linear"
-
-
-class Recording:
-    """A VelocitySink that keeps what it was told."""
-
-    def __init__(self) -> None:
-        self.calls: list[dict[str, float]] = []
-
-    def set_velocities(self, **velocities: float) -> None:
-        self.calls.append(velocities)
 
 
 def test_odometry_as_a_ros_message(profile: RobotProfile) -> None:
@@ -102,11 +92,11 @@ def test_scans_and_paths_from_other_nodes() -> None:
         path_points("odom", [])
 
 
-def test_the_guarded_sink_slows_a_steady_command_as_the_wall_nears(profile: RobotProfile) -> None:
+def test_the_model_slows_a_steady_ros_command_as_the_wall_nears(profile: RobotProfile) -> None:
+    # ocu-ros's velocities go into the console model (Source.ROS); its zones judge the
+    # same steady command again each control step as scans come (was: GuardedSink).
     now = [0.0]
-    navigator = Navigator(profile, clock=lambda: now[0], grid=False)
-    sink = Recording()
-    guarded = GuardedSink(sink, navigator)
+    model = ConsoleModel(profile, clock=lambda: now[0])
 
     def wall(gap_m: float) -> ScanFrame:
         x = 0.67 + gap_m
@@ -114,17 +104,18 @@ def test_the_guarded_sink_slows_a_steady_command_as_the_wall_nears(profile: Robo
         packet = RangeSensor(world, RangeSensorConfig(noise_m=0.0)).sweep(Pose(0, 0, 0), 0)
         return scan_frame(packet, now[0], 0.0)
 
-    navigator.on_scan(wall(2.0))
-    guarded.set_velocities(drive_linear=0.45, drive_turn=0.0, waist=0.1)
-    assert sink.calls[-1] == {"drive_linear": 0.45, "drive_turn": 0.0, "waist": 0.1}
+    model.on_scan(wall(2.0))
+    model.set_external_velocities({"drive_linear": 0.3, "drive_turn": 0.0, "waist": 0.1})
+    model.update(now[0])
+    assert model.command().velocities == {"drive_linear": 0.3, "waist": 0.1}
     now[0] += 0.1
-    navigator.on_scan(wall(0.25))
-    guarded.refresh()  # the same command, judged again
-    assert sink.calls[-1] == {"drive_linear": pytest.approx(0.2), "drive_turn": 0.0}
+    model.on_scan(wall(0.25))
+    model.update(now[0])  # the same command, judged again
+    assert model.command().velocities == {"drive_linear": pytest.approx(0.2), "waist": 0.1}
     now[0] += 0.1
-    navigator.on_scan(wall(0.02))
-    guarded.refresh()
-    assert sink.calls[-1] == {"drive_linear": 0.0, "drive_turn": 0.0}
+    model.on_scan(wall(0.02))
+    model.update(now[0])
+    assert model.command().velocities == {"waist": 0.1}
 
 
 def wall_scan(gap_m: float, at: float) -> ScanFrame:
