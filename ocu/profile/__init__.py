@@ -69,6 +69,7 @@ from ocu.profile.keys import (
     SCALE_NAMES,
     SI_KEYS,
     TOML_LINE_LENGTH,
+    TOOL_AXES,
     TOP_KEYS,
     VIDEO_KEYS,
     ZONE_KEYS,
@@ -94,6 +95,7 @@ def companion_file(profile: RobotProfile, name: str) -> Path | None:
         return None
     candidate = Path(profile.source).parent / name
     return candidate if candidate.is_file() else None
+
 
 __all__ = [
     "ARM_KEYS",
@@ -125,6 +127,7 @@ __all__ = [
     "SCALE_NAMES",
     "SI_KEYS",
     "TOML_LINE_LENGTH",
+    "TOOL_AXES",
     "TOP_KEYS",
     "VIDEO_KEYS",
     "ZONE_KEYS",

@@ -131,7 +131,11 @@ def _visuals(arm: UrArmProfile) -> dict[str, list[str]]:
         ],
         "upper_arm_link": [
             *_cylinder(
-                r_shoulder, shoulder_off + r_shoulder, (0.0, 0.0, shoulder_off / 2.0), "z", "ur_blue"
+                r_shoulder,
+                shoulder_off + r_shoulder,
+                (0.0, 0.0, shoulder_off / 2.0),
+                "z",
+                "ur_blue",
             ),
             *_cylinder(r_upper, abs(a[1]), (a[1] / 2.0, 0.0, shoulder_off), "x", "ur_grey"),
             *_cylinder(
@@ -206,10 +210,11 @@ def ur_urdf(arm: UrArmProfile) -> str:
             )
             roll = alpha[prev]
         lines += _link(child, visuals[child])
-        kind = "continuous" if joint.min_rad is None or joint.max_rad is None else "revolute"
+        kind = "revolute"
         limit = f'velocity="{_number(joint.max_speed_rad_s)}" effort="0"'
-        if kind == "revolute":
-            assert joint.min_rad is not None and joint.max_rad is not None
+        if joint.min_rad is None or joint.max_rad is None:
+            kind = "continuous"
+        else:
             limit = f'lower="{_number(joint.min_rad)}" upper="{_number(joint.max_rad)}" ' + limit
         lines += [
             f'  <joint name="{joint.name}" type="{kind}">',
@@ -224,7 +229,9 @@ def ur_urdf(arm: UrArmProfile) -> str:
     if abs(a[5]) > 0.0 or abs(alpha[5]) > 0.0:
         # A last DH row with a or α: the flange frame is that far past wrist 3's.
         lines += _link("wrist_3_dh", [])
-        lines += _fixed("wrist_3_link-dh", "wrist_3_link", "wrist_3_dh", (a[5], 0, 0), (alpha[5], 0, 0))
+        lines += _fixed(
+            "wrist_3_link-dh", "wrist_3_link", "wrist_3_dh", (a[5], 0, 0), (alpha[5], 0, 0)
+        )
         parent = "wrist_3_dh"
     lines += _link("ft_frame", [])
     lines += _fixed("wrist_3_link-ft_frame", parent, "ft_frame", (0, 0, 0), (math.pi, 0, 0))
