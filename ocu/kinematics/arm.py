@@ -326,6 +326,19 @@ class ArmKinematics:
         except IkError as err:
             raise ArmError(str(err)) from err
 
+    def solve_matrix(self, pose: Matrix, *, current: Vector | None = None) -> Vector:
+        """Joint values that put tool0 at a whole pose (4x4 in the base frame: position and
+        orientation), for an arm of six joints or more; ArmError when none can."""
+        if self.chain.dof < 6:
+            raise ArmError(
+                f"a whole pose needs six joints; this arm has {self.chain.dof}: give x, y, z "
+                "and pitch"
+            )
+        try:
+            return solve(self.chain, np.asarray(pose, dtype=float), current).q
+        except IkError as err:
+            raise ArmError(str(err)) from err
+
     # ---- collisions --------------------------------------------------------------------
 
     def contact(self, q: Vector, others: Mapping[str, float]) -> Contact | None:
