@@ -41,6 +41,7 @@ _BASE_RADIUS_M = 0.075
 _SHOULDER_OFFSET_M = 0.138
 _ELBOW_OFFSET_M = 0.007
 _FLANGE_RADIUS_M = 0.0315  # the ISO 9409-1-50-4-M6 tool flange, 63 mm across
+_FLANGE_M = 0.01  # the flange's thickness, drawn (assumed)
 
 _COLOURS = {
     "ur_grey": (0.78, 0.80, 0.82, 1.0),
@@ -148,10 +149,11 @@ def _visuals(arm: UrArmProfile) -> dict[str, list[str]]:
         ],
         "forearm_link": [
             *_cylinder(r_fore, abs(a[2]), (a[2] / 2.0, 0.0, elbow_off), "x", "ur_grey"),
+            # Up to wrist 1's housing (which is coaxial: the two abut rather than overlap).
             *_cylinder(
                 r_wrist,
-                wrist_1_z - elbow_off + r_wrist,
-                (a[2], 0.0, (wrist_1_z + elbow_off - r_wrist) / 2.0 + r_wrist / 2.0),
+                wrist_1_z - r_wrist - elbow_off + r_fore,
+                (a[2], 0.0, (wrist_1_z - r_wrist + elbow_off - r_fore) / 2.0),
                 "z",
                 "ur_grey",
             ),
@@ -159,17 +161,25 @@ def _visuals(arm: UrArmProfile) -> dict[str, list[str]]:
         # Wrist 1's housing; wrist 2 turns about -y of this frame, d5 along it.
         "wrist_1_link": [
             *_cylinder(r_wrist, 2.0 * r_wrist, (0.0, 0.0, 0.0), "z", "ur_blue"),
-            *_cylinder(r_wrist, d[4], (0.0, -d[4] / 2.0, 0.0), "y", "ur_grey"),
+            *_cylinder(
+                r_wrist, d[4] - r_wrist, (0.0, -(d[4] - r_wrist) / 2.0, 0.0), "y", "ur_grey"
+            ),
         ],
         # Wrist 2's housing; wrist 3 turns about +y of this frame, d6 along it.
         "wrist_2_link": [
             *_cylinder(r_wrist, 2.0 * r_wrist, (0.0, 0.0, 0.0), "z", "ur_blue"),
-            *_cylinder(r_wrist, d[5], (0.0, d[5] / 2.0, 0.0), "y", "ur_grey"),
+            *_cylinder(
+                r_wrist,
+                d[5] - r_wrist - _FLANGE_M,
+                (0.0, (d[5] - r_wrist - _FLANGE_M) / 2.0, 0.0),
+                "y",
+                "ur_grey",
+            ),
         ],
         # Wrist 3's housing ends at the flange (z = 0 of this frame is the flange face).
         "wrist_3_link": [
-            *_cylinder(r_wrist, r_wrist, (0.0, 0.0, -r_wrist / 2.0 - 0.01), "z", "ur_blue"),
-            *_cylinder(_FLANGE_RADIUS_M, 0.01, (0.0, 0.0, -0.005), "z", "ur_dark"),
+            *_cylinder(r_wrist, r_wrist, (0.0, 0.0, -r_wrist / 2.0 - _FLANGE_M), "z", "ur_blue"),
+            *_cylinder(_FLANGE_RADIUS_M, _FLANGE_M, (0.0, 0.0, -_FLANGE_M / 2.0), "z", "ur_dark"),
         ],
     }
     return visuals
