@@ -860,3 +860,47 @@ def test_a_camera_on_a_link_needs_its_offset_and_the_simulator_checks_the_link(
         RobotSimulator(
             wrong, world=parse_world({"box": [{"centre_m": [2.0, 0.0], "size_m": [0.3, 0.3]}]})
         )
+
+
+def test_a_profile_names_its_robot_description_and_the_writer_keeps_it(tmp_path: Path) -> None:
+    """`urdf`: a file, relative to the profile's folder; the console and the 3D view load it."""
+    description = tmp_path / "models" / "robot.urdf"
+    description.parent.mkdir()
+    description.write_text('<robot name="r"><link name="base_link"/></robot>', encoding="utf-8")
+    data = copy.deepcopy(SHIPPED_DATA)
+    data["urdf"] = "models/robot.urdf"
+    data["arm"]["tool_axis"] = "z"
+    target = tmp_path / "robot.toml"
+    write_profile_data(target, data, header="ocu test")
+    assert tomllib.loads(target.read_text(encoding="utf-8")) == data
+    written = load_profile(target)
+    assert written.urdf == description
+    assert written.arm is not None
+    assert written.arm.tool_axis == "z"
+    # Absolute paths are taken as they are; without the key the Engineer's model is meant.
+    data["urdf"] = str(description)
+    assert parse_profile(data).urdf == description
+    engineer = load_profile()
+    assert engineer.urdf is None
+    assert engineer.arm is not None
+    assert engineer.arm.tool_axis == "x"
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        (("urdf",), 3, r"profile\.urdf: must be a non-empty string"),
+        (("urdf",), "", r"profile\.urdf: must be a non-empty string"),
+        (("urdf",), "no_such.urdf", r"robot\.toml: profile\.urdf: no file .*no_such\.urdf"),
+        (("arm", "tool_axis"), "y", r"robot\.toml: profile\.arm\.tool_axis: must be one of"),
+    ],
+)
+def test_a_bad_robot_description_is_refused_by_file_and_key(
+    tmp_path: Path, key: tuple[str, ...], value: object, message: str
+) -> None:
+    target = tmp_path / "robot.toml"
+    with pytest.raises(ProfileError, match=message):
+        parse_profile(_edited(key, value), source=str(target))
+    with pytest.raises(ProfileError, match=message):
+        write_profile_data(target, _edited(key, value))
+    assert list(tmp_path.iterdir()) == []  # nothing written

@@ -183,7 +183,9 @@ class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoReques
         self.arm_error = ""
         if profile.arm is not None:
             try:
-                kinematics = arm or ArmKinematics(load_urdf(meshes=False), profile.arm)
+                kinematics = arm or ArmKinematics(
+                    load_urdf(profile.urdf, meshes=False), profile.arm
+                )
                 controller = ArmController(profile, self.limits, kinematics, self.controller)
             except (ArmError, UrdfError) as err:
                 self.arm_error = f"the arm's Cartesian control is off: {err}"

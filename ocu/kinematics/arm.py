@@ -2,17 +2,20 @@
 IK, the self-collision model and the workspace, from a robot model and the profile's [arm].
 
 The task has four coordinates: tool0's position in the base frame and its pitch: the angle of
-its x axis in the vertical plane through the waist axis and the tool, from the outward
-horizontal, positive up (0 level and pointing away from the robot, -90° straight down, beyond
-±90° tilted back toward the robot; ROS's pitch about y is its negative). Pitch rate is the
+its pointing axis (the profile's arm.tool_axis: x for the Engineer, whose tool0 looks along x;
+z for a UR, whose tool0 looks along z as ROS-Industrial has it) in the vertical plane through
+the waist axis and the tool, from the outward horizontal, positive up (0 level and pointing
+away from the robot, -90° straight down, beyond ±90° tilted back toward the robot; for the
+Engineer ROS's pitch about y is its negative). Pitch rate is the
 rotation about the horizontal axis across that plane, so the 4 x n task Jacobian is the linear
 rows of the geometric Jacobian plus one row for it. Conditioning is measured with
 lengths in units of the arm's reach, so that metres and radians weigh alike whatever the
 robot's size.
 
 IK is closed-form where the chain has the yaw + three-pitch structure (ocu.kinematics.analytic)
-and damped least squares otherwise (ocu.kinematics.numeric), aiming the tool's x axis outward
-at the target's azimuth and the given pitch.
+and damped least squares otherwise (ocu.kinematics.numeric), aiming the tool's pointing axis
+outward at the target's azimuth and the given pitch; an arm of six joints or more keeps the
+rest of the tool's orientation as it is now (the smallest turn that points it so).
 """
 
 from __future__ import annotations
@@ -32,9 +35,10 @@ from ocu.kinematics.numeric import IkError, solve
 from ocu.model.mesh import MeshData
 from ocu.model.tree import KinematicTree, Matrix
 from ocu.model.urdf import RobotModel
-from ocu.profile import ArmSettings
+from ocu.profile import TOOL_AXES, ArmSettings
 
 FRAMES = ("base", "tool", "camera")
+
 WORKSPACE_CELL_M = 0.02
 WORKSPACE_SAMPLES = (48, 48, 16)
 # Green: the ghost is light blue, stale joints amber, implausible ones red.
@@ -93,12 +97,13 @@ class PathHit:
         return text
 
 
-def outward(pose: Matrix, axis_xy: Vector) -> Vector:
-    """The horizontal unit vector from the yaw axis toward the frame's origin (else its x)."""
+def outward(pose: Matrix, axis_xy: Vector, column: int = 0) -> Vector:
+    """The horizontal unit vector from the yaw axis toward the frame's origin (else its
+    pointing axis, the column)."""
     direction = np.array([pose[0, 3] - axis_xy[0], pose[1, 3] - axis_xy[1], 0.0])
     norm = float(np.linalg.norm(direction))
     if norm < 1e-9:
-        direction = np.array([pose[0, 0], pose[1, 0], 0.0])
+        direction = np.array([pose[0, column], pose[1, column], 0.0])
         norm = float(np.linalg.norm(direction))
         if norm < 1e-9:
             return np.array([1.0, 0.0, 0.0])
@@ -106,16 +111,38 @@ def outward(pose: Matrix, axis_xy: Vector) -> Vector:
     return result
 
 
-def pitch_of(pose: Matrix, axis_xy: Vector) -> float:
-    """The frame's pitch (rad): its x axis's angle from the outward horizontal, up positive."""
-    x_axis = pose[:3, 0]
-    return math.atan2(float(x_axis[2]), float(x_axis @ outward(pose, axis_xy)))
+def pitch_of(pose: Matrix, axis_xy: Vector, column: int = 0) -> float:
+    """The frame's pitch (rad): its pointing axis's (x: column 0, z: 2) angle from the outward
+    horizontal, up positive."""
+    pointing = pose[:3, column]
+    return math.atan2(float(pointing[2]), float(pointing @ outward(pose, axis_xy, column)))
 
 
-def pitch_axis(pose: Matrix, axis_xy: Vector) -> Vector:
+def pitch_axis(pose: Matrix, axis_xy: Vector, column: int = 0) -> Vector:
     """The axis about which a positive pitch rate turns the frame: minus the lateral axis."""
-    result: Vector = -np.cross(np.array([0.0, 0.0, 1.0]), outward(pose, axis_xy))
+    result: Vector = -np.cross(np.array([0.0, 0.0, 1.0]), outward(pose, axis_xy, column))
     return result
+
+
+def _turn_onto(start: Vector, goal: Vector) -> Matrix:
+    """The smallest rotation (3x3) taking unit vector `start` onto unit vector `goal`."""
+    cross = np.cross(start, goal)
+    sine, cosine = float(np.linalg.norm(cross)), float(start @ goal)
+    if sine < 1e-12:
+        if cosine > 0.0:
+            return np.eye(3)
+        # Opposite: half a turn about any axis across them.
+        across = np.cross(start, [1.0, 0.0, 0.0])
+        if np.linalg.norm(across) < 1e-6:
+            across = np.cross(start, [0.0, 1.0, 0.0])
+        axis = across / np.linalg.norm(across)
+        return np.asarray(2.0 * np.outer(axis, axis) - np.eye(3), dtype=float)
+    axis = cross / sine
+    angle = math.atan2(sine, cosine)
+    skew = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.asarray(
+        np.eye(3) + math.sin(angle) * skew + (1.0 - math.cos(angle)) * skew @ skew, dtype=float
+    )
 
 
 def _path(tree: KinematicTree, link: str) -> set[str]:
@@ -132,6 +159,12 @@ class ArmKinematics:
 
     def __init__(self, model: RobotModel, settings: ArmSettings) -> None:
         self.settings = settings
+        if settings.tool_axis not in TOOL_AXES:
+            raise ArmError(
+                f"arm.tool_axis: one of {', '.join(TOOL_AXES)}, not {settings.tool_axis!r}"
+            )
+        # The tool frame's column whose pitch the task holds.
+        self.pointing = 0 if settings.tool_axis == "x" else 2
         self.tree: KinematicTree = model.tree.copy()
         try:
             self.chain = Chain(
@@ -199,17 +232,19 @@ class ArmKinematics:
         """tool0's 4x4 pose in the base frame."""
         return self.chain.forward(q)
 
+    def pitch(self, pose: Matrix) -> float:
+        """The pitch of a tool pose (4x4 in the base frame): its pointing axis's."""
+        return pitch_of(pose, self.axis_xy, self.pointing)
+
     def tool_pose(self, q: Vector) -> ToolPose:
         """tool0's position and pitch."""
         pose = self.chain.forward(q)
-        return ToolPose(
-            float(pose[0, 3]), float(pose[1, 3]), float(pose[2, 3]), pitch_of(pose, self.axis_xy)
-        )
+        return ToolPose(float(pose[0, 3]), float(pose[1, 3]), float(pose[2, 3]), self.pitch(pose))
 
     def task_jacobian(self, q: Vector) -> npt.NDArray[np.float64]:
         """4 x n: d(x, y, z, pitch)/dq."""
         full = self.chain.jacobian(q)
-        axis = pitch_axis(self.chain.forward(q), self.axis_xy)
+        axis = pitch_axis(self.chain.forward(q), self.axis_xy, self.pointing)
         return np.vstack([full[:3], axis @ full[3:]])
 
     def condition(self, q: Vector) -> float:
@@ -272,13 +307,35 @@ class ArmKinematics:
         c, s = math.cos(azimuth), math.sin(azimuth)
         cp, sp = math.cos(target.pitch), math.sin(target.pitch)
         pose = np.eye(4)
-        # x outward at the pitch, y across (horizontal), z completing the frame.
-        x_axis = np.array([c * cp, s * cp, sp])
+        # The pointing axis outward at the pitch, y across (horizontal), the third completing
+        # the frame.
+        pointing = np.array([c * cp, s * cp, sp])
         y_axis = np.array([-s, c, 0.0])
-        pose[:3, 0], pose[:3, 1], pose[:3, 2] = x_axis, y_axis, np.cross(x_axis, y_axis)
+        if self.pointing == 0:
+            pose[:3, 0], pose[:3, 1], pose[:3, 2] = pointing, y_axis, np.cross(pointing, y_axis)
+        else:
+            pose[:3, 0], pose[:3, 1], pose[:3, 2] = np.cross(y_axis, pointing), y_axis, pointing
+        if current is not None and self.chain.dof >= 6:
+            # Six joints can keep the tool's roll and heading: turn today's orientation by the
+            # least that points it at the target's direction.
+            now = self.chain.forward(np.asarray(current, dtype=float))[:3, :3]
+            pose[:3, :3] = _turn_onto(now[:, self.pointing], pointing) @ now
         pose[:3, 3] = target.position
         try:
             return solve(self.chain, pose, current).q
+        except IkError as err:
+            raise ArmError(str(err)) from err
+
+    def solve_matrix(self, pose: Matrix, *, current: Vector | None = None) -> Vector:
+        """Joint values that put tool0 at a whole pose (4x4 in the base frame: position and
+        orientation), for an arm of six joints or more; ArmError when none can."""
+        if self.chain.dof < 6:
+            raise ArmError(
+                f"a whole pose needs six joints; this arm has {self.chain.dof}: give x, y, z "
+                "and pitch"
+            )
+        try:
+            return solve(self.chain, np.asarray(pose, dtype=float), current).q
         except IkError as err:
             raise ArmError(str(err)) from err
 

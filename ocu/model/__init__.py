@@ -2,7 +2,14 @@
 
 from ocu.model.mesh import MeshData
 from ocu.model.tree import Joint, KinematicTree, Mimic, TreeError
-from ocu.model.urdf import RobotModel, UrdfError, default_urdf_path, load_urdf, parse_urdf
+from ocu.model.urdf import (
+    RobotModel,
+    UrdfError,
+    default_urdf_path,
+    load_urdf,
+    parse_urdf,
+    profile_urdf_path,
+)
 
 __all__ = [
     "Joint",
@@ -15,4 +22,5 @@ __all__ = [
     "default_urdf_path",
     "load_urdf",
     "parse_urdf",
+    "profile_urdf_path",
 ]

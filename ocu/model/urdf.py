@@ -39,6 +39,7 @@ from ocu.model.mesh_files import (
     read_mesh_file,
 )
 from ocu.model.tree import JOINT_TYPES, Joint, KinematicTree, Matrix, Mimic, TreeError, transform
+from ocu.profile import RobotProfile
 
 # Joint types a display model draws fixed at their rest pose: urdfdom reads floating and
 # planar (robot_state_publisher publishes no transform for them), pybullet reads spherical.
@@ -105,6 +106,11 @@ def default_urdf_path() -> Path:
     if in_checkout.exists():
         return in_checkout
     return Path(sys.prefix) / "share" / "ocu" / "assets" / "engineer.urdf"
+
+
+def profile_urdf_path(profile: RobotProfile) -> Path:
+    """The URDF of a profile's robot: its `urdf`, else the shipped Engineer model."""
+    return profile.urdf if profile.urdf is not None else default_urdf_path()
 
 
 def load_urdf(

@@ -7,6 +7,7 @@ import datetime as dt
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from ocu.profile.hardware import Channel, ExtensionSettings, LinkSettings, VideoSettings
 from ocu.profile.keys import DRIVE_LINEAR_ROLE, DRIVE_TURN_ROLE
@@ -183,6 +184,9 @@ class ArmSettings:
     ground_z_m: float | None
     twist_timeout_s: float
     poses: dict[str, dict[str, float]]
+    # The tool frame's axis it points along, whose pitch the Cartesian task holds: "x" (the
+    # Engineer's tool0) or "z" (ROS-Industrial's tool0 on a UR: z out of the flange).
+    tool_axis: str = "x"
 
 
 @dataclass(frozen=True)
@@ -209,6 +213,9 @@ class RobotProfile:
     navigation: NavigationSettings = NavigationSettings()
     # Keys measured on a robot, by dotted name ("channels.shoulder.axis").
     measured: Mapping[str, Measurement] = field(default_factory=dict)
+    # The robot's description (URDF) the 3D model and the arm's kinematics are built from;
+    # None: the shipped Engineer model (ocu.model.urdf.profile_urdf_path).
+    urdf: Path | None = None
 
     def provenance(self, key: str) -> str:
         """Where a dotted key's value comes from: "measured", "assumption" or "documents"."""

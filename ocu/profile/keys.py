@@ -35,6 +35,7 @@ TOP_KEYS = (
     "arm",
     "navigation",
     "measured",
+    "urdf",
 )
 LINK_KEYS = (
     "address",
@@ -159,7 +160,10 @@ ARM_KEYS = (
     "ground_z_m",
     "twist_timeout_s",
     "poses",
+    "tool_axis",
 )
+# The tool frame's axes an arm may point along (ArmSettings.tool_axis).
+TOOL_AXES = ("x", "z")
 # What a `[measured."some.key"]` entry may say about how that key was measured on a robot.
 MEASUREMENT_KEYS = ("how", "when", "residual", "residual_unit", "samples")
 # Table names are TOML bare keys; the dotted names in `measured` and `assumptions` join them.

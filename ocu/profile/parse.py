@@ -60,6 +60,7 @@ from ocu.profile.keys import (
     OPTIONAL_EXTENSION_FRAME_TYPE_KEYS,
     SCALE_NAMES,
     SI_KEYS,
+    TOOL_AXES,
     TOP_KEYS,
     VIDEO_KEYS,
     ZONE_KEYS,
@@ -447,6 +448,7 @@ def _parse_arm(reader: TableReader, motors: dict[str, Motor]) -> ArmSettings:
         ground_z_m=reader.number("ground_z_m") if reader.optional("ground_z_m") else None,
         twist_timeout_s=reader.number("twist_timeout_s", low=0.01, high=2.0),
         poses=poses,
+        tool_axis=reader.choice("tool_axis", TOOL_AXES) if reader.optional("tool_axis") else "x",
     )
 
 
@@ -596,7 +598,26 @@ def _parse_profile(data: dict[str, Any], source: str) -> RobotProfile:
             else NavigationSettings()
         ),
         measured=measured,
+        urdf=_parse_urdf(root, source),
     )
+
+
+def _parse_urdf(root: TableReader, source: str) -> Path | None:
+    """The `urdf` key: the robot's description, a file; relative to the profile's folder."""
+    if not root.optional("urdf"):
+        return None
+    text = root.string("urdf")
+    path = Path(text).expanduser()
+    if not path.is_absolute() and source.startswith("<"):
+        raise ProfileError(f"{root.where}.urdf: a relative path needs the profile's file")
+    if not path.is_absolute():
+        path = Path(source).parent / path
+    if not path.is_file():
+        raise ProfileError(
+            f"{root.where}.urdf: no file {str(path)!r} (a relative path is from the "
+            "profile's folder)"
+        )
+    return path
 
 
 def _parse_measured(

@@ -60,10 +60,20 @@ class UrArmProfile:
         return tuple(joint.name for joint in self.joints)
 
 
+# Files beside the UR profiles that are not profiles (ocu.profile.companion_file).
+_COMPANIONS = ("hotkeys.toml", "gamepad.toml")
+
+
 def shipped_ur_profiles() -> tuple[str, ...]:
     """The names of the shipped UR profiles."""
     folder = resources.files("ocu") / "profiles" / "ur"
-    return tuple(sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml")))
+    return tuple(
+        sorted(
+            p.name[:-5]
+            for p in folder.iterdir()
+            if p.name.endswith(".toml") and p.name not in _COMPANIONS
+        )
+    )
 
 
 def load_ur_profile(name_or_path: str | Path) -> UrArmProfile:

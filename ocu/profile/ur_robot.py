@@ -3,7 +3,8 @@
 The console, the headless console and the control core take an `ocu.profile.RobotProfile`;
 this builds one for a UR: six motors that report their position, six velocity channels named
 after the joints (rad/s), the arm's joints and frames, and link timing chosen for a UR
-controller. No chassis, drive, cameras, torch or protocol extension. Every timing value and
+controller, and its URDF (ocu.profile.ur_urdf). No chassis, drive, cameras, torch or protocol
+extension. Every timing value and
 why it was chosen is in docs/ur.md ("The UR link"); the assumed ones are listed in
 `assumptions` so that `provenance()` says so.
 """
@@ -15,6 +16,7 @@ import math
 from ocu.profile.description import ArmSettings, Motor, RobotProfile
 from ocu.profile.hardware import Channel, FrameTypes, LinkSettings
 from ocu.profile.ur import UrArmProfile
+from ocu.profile.ur_urdf import ur_urdf_path
 
 #: The realtime port: the one whose packets say the link is alive, and where URScript goes.
 UR_REALTIME_PORT = 30003
@@ -122,13 +124,16 @@ def ur_robot_profile(arm: UrArmProfile, host: str = "127.0.0.1") -> RobotProfile
         max_pitch_speed_rad_s=0.5,
         acceleration_rad_s2=arm.max_acceleration_rad_s2,
         joint_limit_margin_rad=math.radians(2.0),
-        singularity_slow=0.05,
-        singularity_stop=0.01,
+        # Condition numbers of the task Jacobian, lengths in units of the longest link (as
+        # the Engineer's: the same scale whatever the arm's size).
+        singularity_slow=17.0,
+        singularity_stop=30.0,
         clearance_m=0.05,
         slow_distance_m=0.1,
         ground_z_m=None,
         twist_timeout_s=0.1,
         poses={},
+        tool_axis="z",
     )
     return RobotProfile(
         name=arm.name,
@@ -147,4 +152,6 @@ def ur_robot_profile(arm: UrArmProfile, host: str = "127.0.0.1") -> RobotProfile
         extension=None,
         cameras=(),
         arm=arm_settings,
+        # Its description: the URDF written from the DH parameters (ocu.profile.ur_urdf).
+        urdf=ur_urdf_path(arm),
     )

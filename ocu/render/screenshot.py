@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ocu.model.packages import add_package_path_option
-from ocu.model.urdf import RobotModel, UrdfError, load_urdf
+from ocu.model.urdf import RobotModel, UrdfError, load_urdf, profile_urdf_path
 from ocu.profile import ProfileError, load_profile
 from ocu.render.camera import VIEWS, OrbitCamera
 from ocu.render.platform import configure_gl_platform
@@ -139,7 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--size", default="800x600", help="image size WxH (default 800x600)")
     parser.add_argument("--view", choices=tuple(VIEWS), default="iso", help="camera preset")
-    parser.add_argument("--urdf", type=Path, default=None, help="another URDF to draw")
+    parser.add_argument(
+        "--urdf", type=Path, default=None, help="URDF to draw (default: the profile's robot)"
+    )
     parser.add_argument("--profile", type=Path, default=None, help="robot profile TOML")
     add_package_path_option(parser)
     return parser
@@ -149,8 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; argv are the arguments after `screenshot`. Returns the exit status."""
     args = build_parser().parse_args(argv)
     try:
-        load_profile(args.profile)  # a bad profile is reported here, as everywhere else
-        model = load_urdf(args.urdf, package_paths=args.package_path)
+        profile = load_profile(args.profile)  # a bad profile is reported here, as elsewhere
+        urdf = args.urdf if args.urdf is not None else profile_urdf_path(profile)
+        model = load_urdf(urdf, package_paths=args.package_path)
         joints = parse_angles(args.joints, model, "--joints")
         ghost = parse_angles(args.ghost, model, "--ghost")
         for name in args.stale:

@@ -36,9 +36,9 @@ from ocu.console.poses import MAX_NAME_LENGTH, PoseError, PoseStore
 from ocu.control.arm import ArmController
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionController, PositionError
-from ocu.kinematics.arm import ArmError, ArmKinematics, ToolPose, pitch_axis, pitch_of
+from ocu.kinematics.arm import ArmError, ArmKinematics, ToolPose, pitch_axis
 from ocu.model.tree import Matrix
-from ocu.model.urdf import UrdfError, load_urdf
+from ocu.model.urdf import UrdfError, load_urdf, profile_urdf_path
 from ocu.profile import RobotProfile
 from ocu.records import JointReading, LinkState
 
@@ -120,7 +120,9 @@ class BridgeCore:
         self.arm_error = ""
         if arm is None and profile.arm is not None:
             try:
-                self.arm_kinematics = ArmKinematics(load_urdf(meshes=False), profile.arm)
+                self.arm_kinematics = ArmKinematics(
+                    load_urdf(profile_urdf_path(profile), meshes=False), profile.arm
+                )
             except (ArmError, UrdfError) as err:
                 self.arm_error = f"arm topics off: {err}"
                 log.warning("%s", self.arm_error)
@@ -488,7 +490,7 @@ class BridgeCore:
             jog, clamped = bound_arm_twist(
                 values[:3],
                 values[3:],
-                pitch_axis(tool, arm.kinematics.axis_xy),
+                pitch_axis(tool, arm.kinematics.axis_xy, arm.kinematics.pointing),
                 settings.max_linear_speed_m_s,
                 settings.max_pitch_speed_rad_s,
             )
@@ -511,7 +513,7 @@ class BridgeCore:
         self, position: Sequence[float], orientation_xyzw: Sequence[float]
     ) -> ToolPose:
         """A PoseStamped's content as the arm's goal: the position, and the pitch of the
-        orientation's x axis (its yaw and roll are the arm's to choose)."""
+        orientation's pointing axis (arm.tool_axis; its yaw and roll are the arm's to choose)."""
         if self.arm_kinematics is None:
             raise ArmError(self.arm_error or "this robot has no arm profile")
         values = [float(v) for v in position]
@@ -524,9 +526,7 @@ class BridgeCore:
         pose = np.eye(4)
         pose[:3, :3] = rotation
         pose[:3, 3] = values
-        return ToolPose(
-            values[0], values[1], values[2], pitch_of(pose, self.arm_kinematics.axis_xy)
-        )
+        return ToolPose(values[0], values[1], values[2], self.arm_kinematics.pitch(pose))
 
     def arm_tool_matrix(self, readings: Mapping[str, JointReading]) -> Matrix | None:
         """tool0's pose in the base frame from readings (None: an arm joint not read)."""

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from types import TracebackType
 from typing import NamedTuple
 
-from ocu.model.urdf import UrdfError, load_urdf
+from ocu.model.urdf import UrdfError, load_urdf, profile_urdf_path
 from ocu.nav.geometry import Pose
 from ocu.nav.world import World
 from ocu.net.loop import SelectLoop
@@ -151,7 +151,7 @@ def _camera_links(profile: RobotProfile) -> CameraLinks | None:
     if not wanted:
         return None
     try:
-        model = load_urdf(meshes=False)
+        model = load_urdf(profile_urdf_path(profile), meshes=False)
     except UrdfError as err:
         raise ValueError(f"cameras mounted on {', '.join(sorted(wanted))}: {err}") from err
     base_link = profile.arm.base_link if profile.arm is not None else "base_link"

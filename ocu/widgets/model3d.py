@@ -35,7 +35,7 @@ from PySide6.QtWidgets import QMenu, QVBoxLayout, QWidget
 
 from ocu.model.mesh import MeshData
 from ocu.model.tree import KinematicTree, Matrix
-from ocu.model.urdf import RobotModel, load_urdf
+from ocu.model.urdf import RobotModel, load_urdf, profile_urdf_path
 from ocu.profile import RobotProfile
 from ocu.records import JointReading
 from ocu.render.camera import VIEW_KEYS, VIEWS, OrbitCamera
@@ -95,7 +95,9 @@ class Model3DWidget(QWidget):
     ) -> None:
         super().__init__(parent)
         self.profile = profile
-        self.model: RobotModel = load_urdf(urdf_path)
+        self.model: RobotModel = load_urdf(
+            urdf_path if urdf_path is not None else profile_urdf_path(profile)
+        )
         self.live: KinematicTree = self.model.tree.copy()
         self.ghost: KinematicTree | None = None
         self._ghost_targets: dict[str, float] = {}
