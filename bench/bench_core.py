@@ -270,6 +270,45 @@ class GuiSampler:
             print(f"  {100 * count / total:5.1f} %  {key}")
 
 
+PAINTS: dict[str, list[float]] = {}
+
+
+def time_paints() -> None:
+    """Wrap every paintEvent of the console's own widgets and pyqtgraph's view: how long each
+    paint holds the GUI thread (a diagnosis: `--paint-times`)."""
+    import pyqtgraph as pg
+
+    from ocu.widgets import gamepad, map_view, model3d_surfaces, video_status, video_view
+
+    classes: list[type] = [pg.GraphicsView]
+    for module in (model3d_surfaces, video_view, map_view, video_status, gamepad):
+        classes += [
+            c
+            for c in vars(module).values()
+            if isinstance(c, type) and "paintEvent" in vars(c) and c.__module__ == module.__name__
+        ]
+    for cls in classes:
+        original = cls.paintEvent
+
+        def timed(
+            self: object, event: object, _original: object = original, _n: str = cls.__name__
+        ) -> None:
+            started = time.perf_counter()
+            _original(self, event)  # type: ignore[operator]
+            PAINTS.setdefault(_n, []).append(1000 * (time.perf_counter() - started))
+
+        cls.paintEvent = timed  # type: ignore[method-assign]
+
+
+def report_paints() -> None:
+    print("paints on the GUI thread (ms): class: count, p50, p99, max")
+    for name, times in sorted(PAINTS.items(), key=lambda kv: -max(kv[1])):
+        print(
+            f"  {name}: {len(times)}, {percentile(times, 50):.1f}, {percentile(times, 99):.1f}, "
+            f"{max(times):.1f}"
+        )
+
+
 def hogs(count: int) -> list[subprocess.Popen[bytes]]:
     """CPU-bound processes at the default priority (nice 0), whatever this process's is."""
     now = os.getpriority(os.PRIO_PROCESS, 0)
@@ -372,6 +411,9 @@ def main() -> int:
         default=0,
         help="the baseline tree's nice value (default 0: main before ocu.priority ran at it)",
     )
+    parser.add_argument(
+        "--paint-times", action="store_true", help="also time every paint (a diagnosis)"
+    )
     parser.add_argument("--json", help="write the phases here (the baseline's child run)")
     parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
     parser.add_argument(
@@ -386,7 +428,11 @@ def main() -> int:
     os.setpriority(os.PRIO_PROCESS, 0, args.nice)
     print(f"console at nice {os.getpriority(os.PRIO_PROCESS, 0)}")
     print(f"{os.cpu_count()} cores; load {os.getloadavg()[0]:.1f} before the run")
+    if args.paint_times:
+        time_paints()
     phases = measure(args)
+    if args.paint_times:
+        report_paints()
     if args.json:
         Path(args.json).write_text(json.dumps([asdict(p) for p in phases]), encoding="utf-8")
         return 0
