@@ -431,6 +431,24 @@ class SafetyEvent:
     message: str
 
 
+@dataclass(frozen=True)
+class RobotModeReport:
+    """The robot controller's own mode, where it reports one (a UR: its robot mode, safety
+    mode and stops): whether it takes motion now. The link sends one when it changes."""
+
+    mode: str  # "RUNNING", "POWER_OFF", ...
+    safety: str  # "NORMAL", "REDUCED", "PROTECTIVE_STOP", ...
+    may_move: bool
+    stops: tuple[str, ...] = ()  # "emergency stop", "protective stop"
+
+    @property
+    def text(self) -> str:
+        """The status bar's words: "RUNNING · NORMAL", "PROTECTIVE STOP", ..."""
+        if self.stops:
+            return " · ".join(stop.upper() for stop in self.stops)
+        return f"{self.mode} · {self.safety}".replace("_", " ")
+
+
 # What a raw datagram was, for recordings (DatagramSent.kind, DatagramReceived.kind).
 RCP = "rcp"
 HELLO = "hello"
@@ -483,6 +501,7 @@ LinkEvent = (
     | LinkStateChanged
     | ExtensionChanged
     | SafetyEvent
+    | RobotModeReport
     | DatagramSent
     | DatagramReceived
     | CommandSent

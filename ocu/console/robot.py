@@ -15,7 +15,14 @@ from collections.abc import Callable
 
 from ocu.console.events import Event
 from ocu.profile import RobotProfile
-from ocu.records import JointReading, LinkState, LinkStats, StatusFrame, TelemetryFrame
+from ocu.records import (
+    JointReading,
+    LinkState,
+    LinkStats,
+    RobotModeReport,
+    StatusFrame,
+    TelemetryFrame,
+)
 
 DEFAULT_HISTORY_S = 60.0
 
@@ -33,6 +40,7 @@ class RobotEvents:
         self.stats_changed: Event[[LinkStats]] = Event()
         self.status_changed: Event[[StatusFrame]] = Event()
         self.extension_changed: Event[[bool, str]] = Event()
+        self.robot_mode_changed: Event[[RobotModeReport | None]] = Event()
 
 
 class RobotState:
@@ -57,6 +65,8 @@ class RobotState:
         self._fresh_at: dict[str, float] = {}
         self.history: dict[str, deque[Sample]] = {name: deque() for name in profile.motors}
         self.link_state = LinkState.CONNECTING
+        # The controller's own mode (None: it reports none, or not yet).
+        self.robot_mode: RobotModeReport | None = None
         self.link_reason = ""
         self.stats: LinkStats | None = None
         self.status: StatusFrame | None = None
@@ -90,6 +100,8 @@ class RobotState:
         if state is LinkState.CONNECTING:
             self.frame = None
         self.events.link_state_changed.emit(state, reason)
+        if state is not LinkState.CONNECTED and self.robot_mode is not None:
+            self.on_robot_mode(None)  # not heard: the mode is not known any more
 
     def on_stats(self, stats: LinkStats) -> None:
         """New counters and rates."""
@@ -107,6 +119,11 @@ class RobotState:
         if not active:
             self.status = None
         self.events.extension_changed.emit(active, reason)
+
+    def on_robot_mode(self, report: RobotModeReport | None) -> None:
+        """The controller's own mode changed (a UR's robot and safety modes; None: unknown)."""
+        self.robot_mode = report
+        self.events.robot_mode_changed.emit(report)
 
     # ---- what views read -------------------------------------------------------------------
 

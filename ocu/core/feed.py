@@ -25,6 +25,7 @@ from ocu.records import (
     LinkState,
     LinkStateChanged,
     LinkStats,
+    RobotModeReport,
     SafetyEvent,
     ScanFrame,
     StatusFrame,
@@ -45,6 +46,7 @@ _FED = (
     ExtensionChanged,
     LinkStateChanged,
     SafetyEvent,
+    RobotModeReport,
 )
 
 
@@ -109,6 +111,8 @@ def feed(model: ConsoleModel, event: LinkEvent) -> None:
         model.robot.on_link_state(event.state, event.reason)
         if event.state is LinkState.LOST:
             model.halt("link lost")
+    elif isinstance(event, RobotModeReport):
+        model.robot.on_robot_mode(event)
     elif isinstance(event, SafetyEvent):
         # The link zeroed the command by itself: the model agrees, nothing resumes.
         model.halt(event.message)

@@ -537,6 +537,9 @@ class UrLink(Link):
     def _on_status(self, status: UrRobotStatus) -> None:
         with self._lock:
             old, self._status = self._status, status
+        if old != status:
+            self.emit(status.report())
+        with self._lock:
             if old == status or (old is None and status.may_move):
                 return
             had_motion = self._take_motion() if not status.may_move else False

@@ -27,7 +27,7 @@ from ocu.protocol.ur import (
     decode_primary,
     realtime_size,
 )
-from ocu.records import JointReading, TelemetryFrame
+from ocu.records import JointReading, RobotModeReport, TelemetryFrame
 
 RECV_BYTES = 65536
 #: Sends that cannot be written within this long mean the connection is dead.
@@ -76,6 +76,18 @@ class UrRobotStatus:
             and not self.emergency_stopped
             and not self.protective_stopped
         )
+
+    def report(self) -> RobotModeReport:
+        """The neutral record of it (ocu.records), for the console and ROS."""
+        stops = tuple(
+            name
+            for name, on in (
+                ("emergency stop", self.emergency_stopped),
+                ("protective stop", self.protective_stopped),
+            )
+            if on
+        )
+        return RobotModeReport(self.robot_mode.name, self.safety_mode.name, self.may_move, stops)
 
     def describe(self) -> str:
         """One line for messages: "robot RUNNING, safety PROTECTIVE_STOP, protective stop"."""

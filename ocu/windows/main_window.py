@@ -69,6 +69,7 @@ from ocu.widgets.map_view import MapPanel, NavStatus
 from ocu.widgets.model3d import Model3DWidget
 from ocu.widgets.replay import ReplayBanner, ReplayControls
 from ocu.widgets.robot_check import RobotCheckPanel
+from ocu.widgets.robot_mode import RobotModeIndicator
 from ocu.widgets.video import VideoPanel
 from ocu.windows.arm import ArmModeIndicator, ArmPanel
 from ocu.windows.calibration import CalibrationLinkFactory, CalibrationPanel
@@ -312,6 +313,9 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self.nav_status = NavStatus(self.model)
         if "drive" in self.capabilities:  # the zones and assisted modes act on the drive
             self.link_status.add_indicator(self.nav_status)
+        # The controller's own mode, where the hardware reports one (a UR): hidden until then.
+        self.robot_mode = RobotModeIndicator(self.model.robot)
+        self.link_status.add_indicator(self.robot_mode)
         self.pad_indicator = PadIndicator(self.teleop)
         self.link_status.add_indicator(self.pad_indicator)
         self.teleop.events.message.connect(self.log_event)

@@ -144,6 +144,11 @@ def test_after_a_release_no_older_motion_is_applied_under_jitter_and_duplicates(
             while not link.extension_active:
                 assert time.monotonic() < deadline, "the extension was never detected"
                 time.sleep(0.01)
+            # The vendor RCPs sent before the extension was seen arrive within the jitter's
+            # bound by the simulator's own clock (a loaded simulator delivers late, but in
+            # order of its clock): past it, only sequenced RCPs can arrive.
+            detected = time.monotonic()
+            assert sim.wait_until(lambda s: s.time_s > detected + 0.5, DEADLINE_S)
             for step in range(10):  # a slider moved about, then released
                 link.set_velocities(neck=0.1 + 0.02 * step)
                 time.sleep(0.02)  # the operator's pace, not a synchronisation

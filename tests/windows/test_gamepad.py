@@ -308,10 +308,14 @@ def test_calibration_from_the_dock_is_saved_and_used(
             virtual_pad.set_axis(axis, values[0])
         for axis in ("lefttrigger", "righttrigger"):
             virtual_pad.set_axis(axis, values[1])
+        # Every axis set, the triggers last: a poll between two set_axis calls must not end
+        # the step (on a loaded machine the triggers' full press was then never seen).
         qtbot.waitUntil(
-            lambda v=values[0]: (
+            lambda v=values[0], t=values[1]: (
                 console.teleop.state is not None  # type: ignore[misc]
                 and console.teleop.state.axis("righty") == v
+                and console.teleop.state.axis("lefttrigger") == t
+                and console.teleop.state.axis("righttrigger") == t
             ),
             timeout=DEADLINE_MS,
         )

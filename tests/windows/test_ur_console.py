@@ -160,3 +160,28 @@ def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(tmp_path: Path) 
     )
     assert refused.returncode == 2
     assert "--record is not available for a UR arm yet" in refused.stderr
+
+
+def test_the_controllers_own_stop_is_shown_and_nothing_resumes_after_it(
+    ur_console: MainWindow, ur_sim: UrSimulator, qtbot: QtBot
+) -> None:
+    window = ur_console
+    indicator = window.robot_mode
+    qtbot.waitUntil(indicator.isVisible, timeout=DEADLINE_MS)
+    assert indicator.text() == "RUNNING · NORMAL"
+    assert indicator.mode_style == "moving"
+    window.activateWindow()
+    window.velocity_panel.setFocus()
+    QTest.keyPress(window, Qt.Key.Key_U)  # elbow_joint +, held through the stop
+    wait_sim(qtbot, ur_sim, lambda s: s.qd[2] > 0.0, "the elbow moving")
+    ur_sim.emergency_stop(True)  # the robot's own red button
+    qtbot.waitUntil(lambda: indicator.text() == "EMERGENCY STOP", timeout=DEADLINE_MS)
+    assert indicator.mode_style == "refused"
+    qtbot.waitUntil(lambda: not window.model.is_moving, timeout=DEADLINE_MS)
+    ur_sim.emergency_stop(False)
+    qtbot.waitUntil(lambda: indicator.mode_style == "moving", timeout=DEADLINE_MS)
+    # The key is still held: the arm stays at rest until the operator acts again.
+    accepted = ur_sim.snapshot().accepted
+    wait_sim(qtbot, ur_sim, lambda s: s.accepted >= accepted + 25, "25 more commands")
+    assert all(v == 0.0 for v in ur_sim.snapshot().qd)
+    QTest.keyRelease(window, Qt.Key.Key_U)
