@@ -17,6 +17,7 @@ from ocu.profile import load_profile
 from ocu.profile.ur import UrArmProfile, load_ur_profile, shipped_ur_profiles
 from ocu.profile.ur_robot import ur_robot_profile
 from ocu.profile.ur_urdf import shipped_urdf_path, ur_urdf, ur_urdf_path
+from ocu.sim.ur_arm import forward_kinematics
 from ocu.widgets.model3d import Model3DWidget
 
 MODELS = ("ur3e", "ur5e", "ur10e", "ur5")
@@ -24,20 +25,9 @@ Matrix = npt.NDArray[np.float64]
 
 
 def dh_forward(arm: UrArmProfile, q: npt.NDArray[np.float64]) -> Matrix:
-    """The flange in the controller's base frame: the product of the standard DH rows."""
-    pose = np.eye(4)
-    for joint, theta in zip(arm.joints, q, strict=True):
-        ct, st = math.cos(theta), math.sin(theta)
-        ca, sa = math.cos(joint.dh_alpha_rad), math.sin(joint.dh_alpha_rad)
-        pose = pose @ np.array(
-            [
-                [ct, -st * ca, st * sa, joint.dh_a_m * ct],
-                [st, ct * ca, -ct * sa, joint.dh_a_m * st],
-                [0.0, sa, ca, joint.dh_d_m],
-                [0.0, 0.0, 0.0, 1.0],
-            ]
-        )
-    return pose
+    """The flange in the controller's base frame: the product of the standard DH rows (the
+    UR simulator's forward kinematics, which the URDF is checked against)."""
+    return forward_kinematics(arm, list(q))
 
 
 def test_the_shipped_profiles_each_have_their_urdf_and_it_is_the_generators() -> None:
