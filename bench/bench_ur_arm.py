@@ -230,8 +230,8 @@ def _jog(console: Console, method: str) -> tuple[float, float]:
             return float(origin[1] - console.tool(console.sim.snapshot().q)[1])
 
         def done() -> bool:
-            if console.stopped():
-                raise Interruption(console.stopped())
+            if method != "baseline" and not console.headless.call(lambda: arm.controller.active):
+                raise Interruption(f"arm: jog stopped: {arm.status.reason}")
             return travelled() >= JOG_M
 
         started = time.monotonic()
