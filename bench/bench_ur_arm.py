@@ -49,8 +49,6 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-import ocu.link.ur as ur_link
-
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from ocu.console.channels import Source
@@ -60,6 +58,7 @@ from ocu.headless import HeadlessConsole
 from ocu.kinematics.arm import ArmKinematics
 from ocu.kinematics.numeric import damped_pseudo_inverse
 from ocu.kinematics.trajectory import SyncMove, plan
+from ocu.link import ur as ur_link
 from ocu.link.ur_wire import telemetry_frame
 from ocu.profile import RobotProfile
 from ocu.profile.ur import UrArmProfile, load_ur_profile
