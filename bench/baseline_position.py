@@ -2,7 +2,8 @@
 
 It predicts between telemetry packets by integrating what it commanded, and resets the
 prediction to each reading as it arrives: a reading that is already one delay old, with the
-commands still in flight forgotten (issue 15). Only bench/bench_position.py uses it.
+commands still in flight forgotten (issue 15). Only bench/bench_position.py uses it, with
+the paper's constant-speed controller (`ConstantSpeedController`, the other baseline).
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ocu.control.commands import VelocityLimits
-from ocu.control.position import PositionError
+from ocu.control.position import JointPredictor, PositionController, PositionError
+from ocu.control.position import _Track as _PositionTrack
 from ocu.profile import Motor, RobotProfile
 from ocu.records import JointReading
 
@@ -238,3 +240,40 @@ class ResetPredictionController:
     def _finish(self, name: str, message: str) -> None:
         self._tracks.pop(name, None)
         self._messages.append(message)
+
+
+class ConstantSpeedController(PositionController):
+    """The paper's controller, kept as the benchmark baseline.
+
+    It moves at one constant speed toward the target and decides only from telemetry: no
+    prediction, no slowing down, so with slow telemetry it overshoots and hunts.
+    """
+
+    def __init__(self, profile: RobotProfile, limits: VelocityLimits, speed_rad_s: float) -> None:
+        super().__init__(profile, limits, stale_after_s=math.inf, settle_timeout_s=math.inf)
+        self.speed_rad_s = speed_rad_s
+
+    def update(self, now: float) -> dict[str, float]:
+        """Constant speed toward the target from the last measured angle."""
+        output: dict[str, float] = {}
+        for name, track in list(self._tracks.items()):
+            channel = self.channel_of(name)
+            measured = self.predictors[name].last_angle_rad
+            if measured is None:
+                output[channel] = 0.0
+                continue
+            error = track.target_rad - measured
+            output[channel] = (
+                0.0 if abs(error) <= self.tolerance_rad else math.copysign(self.speed_rad_s, error)
+            )
+        return output
+
+    def _check_motion(
+        self,
+        name: str,
+        track: _PositionTrack,
+        predictor: JointPredictor,
+        previous_angle: float,
+        previous_taken: float,
+    ) -> None:
+        """The paper's controller has no stall check."""

@@ -32,10 +32,10 @@ from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from baseline_position import ResetPredictionController
+from baseline_position import ConstantSpeedController, ResetPredictionController
 
 from ocu.control.commands import VelocityLimits
-from ocu.control.position import ConstantSpeedController, PositionController
+from ocu.control.position import PositionController
 from ocu.link.live import UdpLink
 from ocu.link.runner import Controller, PositionRunner
 from ocu.profile import load_profile

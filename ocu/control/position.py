@@ -64,7 +64,8 @@ STOP_FRACTION = 0.5
 # repeated at every reading until it passes, and the first pass is the likeliest to be wrong.
 REACHED_BAND_RAD = math.radians(0.5)
 CONFIRM_SIGMAS = 3.0
-STALE_PERIODS = 2.5
+STALE_PERIODS = 2.5  # telemetry periods, but never under STALE_MIN_S (a 50 Hz arm's
+STALE_MIN_S = 0.25  # readings would go stale on one 50 ms stall of a busy machine)
 STALL_MIN_COMMANDED_RAD = math.radians(2.0)
 STALL_NOISE_SIGMAS = 6.0
 STALL_FRACTION = 0.25
@@ -310,7 +311,9 @@ class PositionController:
         self.gain_delay_product = gain_delay_product
         self.tolerance_rad = tolerance_rad
         period_s = 1.0 / profile.link.telemetry_rate_hz
-        self._stale_base_s = STALE_PERIODS * period_s if stale_after_s is None else stale_after_s
+        self._stale_base_s = (
+            max(STALE_PERIODS * period_s, STALE_MIN_S) if stale_after_s is None else stale_after_s
+        )
         self._settle_base_s = (
             max(MIN_SETTLE_TIMEOUT_S, SETTLE_PERIODS * period_s)
             if settle_timeout_s is None
@@ -661,40 +664,3 @@ def read_since_change(predictor: JointPredictor) -> bool:
         return False
     changed_at = predictor.last_change_at
     return changed_at is None or predictor.last_taken_at >= changed_at
-
-
-class ConstantSpeedController(PositionController):
-    """The paper's controller, kept as the benchmark baseline.
-
-    It moves at one constant speed toward the target and decides only from telemetry: no
-    prediction, no slowing down, so with slow telemetry it overshoots and hunts.
-    """
-
-    def __init__(self, profile: RobotProfile, limits: VelocityLimits, speed_rad_s: float) -> None:
-        super().__init__(profile, limits, stale_after_s=math.inf, settle_timeout_s=math.inf)
-        self.speed_rad_s = speed_rad_s
-
-    def update(self, now: float) -> dict[str, float]:
-        """Constant speed toward the target from the last measured angle."""
-        output: dict[str, float] = {}
-        for name, track in list(self._tracks.items()):
-            channel = self.channel_of(name)
-            measured = self.predictors[name].last_angle_rad
-            if measured is None:
-                output[channel] = 0.0
-                continue
-            error = track.target_rad - measured
-            output[channel] = (
-                0.0 if abs(error) <= self.tolerance_rad else math.copysign(self.speed_rad_s, error)
-            )
-        return output
-
-    def _check_motion(
-        self,
-        name: str,
-        track: _Track,
-        predictor: JointPredictor,
-        previous_angle: float,
-        previous_taken: float,
-    ) -> None:
-        """The paper's controller has no stall check."""

@@ -31,7 +31,7 @@ from collections.abc import Callable, Sequence
 
 from ocu.link.base import Link
 from ocu.link.stats import RateMeter
-from ocu.link.ur_wire import UrConnection, UrRobotStatus, telemetry_frame
+from ocu.link.ur_wire import SpeedEcho, UrConnection, UrRobotStatus, telemetry_frame
 from ocu.profile import RobotProfile
 from ocu.profile.ur import UrArmProfile
 from ocu.profile.ur_robot import UR_TICKS_PER_RAD, ur_robot_profile
@@ -133,6 +133,7 @@ class UrLink(Link):
         self._send_rate = RateMeter()
         self._telemetry_rate = RateMeter()
         self._emitted_at = -math.inf  # when a TelemetryFrame was last handed on
+        self._echo = SpeedEcho()  # the round trip, from the controller's reaction
         self._closed = False
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -319,7 +320,14 @@ class UrLink(Link):
                 if gap is not None and gap > FREEZE_LIMIT_S and self._take_motion():
                     frozen = f"link loop frozen for {gap:.2f} s: motion commands zeroed"
                 data, sent = self._script()
-            self._write(connection, data, sent)
+            if self._write(connection, data, sent):
+                qd = (
+                    [0.0] * len(self.joint_names)
+                    if sent is None
+                    else [sent.velocity(name) for name in self.joint_names]
+                )
+                with self._lock:
+                    self._echo.sent(qd, self.clock())
         if frozen:
             self._notify_safety(frozen)
 
@@ -493,8 +501,10 @@ class UrLink(Link):
         with self._lock:
             self._received += len(states)
             self._telemetry += len(states)
-            for _ in states:
+            for state in states:
                 self._telemetry_rate.add(now)
+                self._echo.received(state.qd_target, now)
+            delay_s = self._echo.delay_s
             self._last_valid_at = now
             first = self._state is not LinkState.CONNECTED
             if first:
@@ -517,6 +527,7 @@ class UrLink(Link):
                     ticks_per_rad=UR_TICKS_PER_RAD,
                     received_at=now,
                     wall_time=wall,
+                    delay_s=delay_s,
                 )
             )
 
@@ -615,6 +626,7 @@ class UrLink(Link):
                 last_valid_age_s=None if last is None else now - last,
                 send_rate_hz=self._rate_hz,
                 estop_latched=self._estop_latched,
+                delay_s=self._echo.delay_s,
             )
 
     # ---- shutdown --------------------------------------------------------------------------

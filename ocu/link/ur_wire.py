@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import math
 import socket
+import statistics
 import time
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -99,6 +101,65 @@ class UrRobotStatus:
         return ", ".join(parts)
 
 
+class SpeedEcho:
+    """The round trip, from the controller's own reaction to a changed speedj.
+
+    A UR echoes no command, but its realtime packet carries `qd_target`, the joint speeds its
+    motion planner is heading for: when a changed speedj lands, the next cycle's `qd_target`
+    leaves the old speeds toward the new ones. So a change sent while the targets were steady
+    at the last command (not still ramping) is a probe: the first packet whose targets moved
+    toward it arrived one round trip (both ways and a control cycle) after it was sent. The
+    median of the last samples is the link's delay (TelemetryFrame.delay_s, LinkStats): the
+    position controller's prediction needs it (docs/ur.md). Not thread-safe: the link's lock.
+    """
+
+    SAMPLES = 9
+    EPS = 1e-6
+    GIVE_UP_S = 2.0  # a probe never answered (the controller refused the command)
+
+    def __init__(self) -> None:
+        self._commanded: tuple[float, ...] | None = None
+        self._targets: tuple[float, ...] | None = None
+        self._probe: tuple[float, tuple[float, ...], tuple[float, ...]] | None = None
+        self._samples: deque[float] = deque(maxlen=self.SAMPLES)
+
+    def sent(self, qd: Sequence[float], at: float) -> None:
+        """Joint speeds went out at `at` (speedj; stopj: zeros)."""
+        new = tuple(qd)
+        before, self._commanded = self._commanded, new
+        if before is None or new == before or self._probe is not None:
+            return
+        targets = self._targets
+        if targets is None or any(
+            abs(t - b) > self.EPS for t, b in zip(targets, before, strict=True)
+        ):
+            return  # still ramping to an earlier command: a reaction could be that ramp
+        self._probe = (at, before, new)
+
+    def received(self, qd_target: Sequence[float], at: float) -> None:
+        """A realtime packet's target speeds, arrived at `at`."""
+        self._targets = tuple(qd_target)
+        probe = self._probe
+        if probe is None:
+            return
+        sent_at, before, after = probe
+        for target, old, new in zip(qd_target, before, after, strict=True):
+            moved = target - old
+            if abs(new - old) > self.EPS and abs(moved) > self.EPS and moved * (new - old) > 0:
+                self._samples.append(max(at - sent_at, 0.0))
+                self._probe = None
+                return
+        if at - sent_at > self.GIVE_UP_S:
+            self._probe = None
+
+    @property
+    def delay_s(self) -> float | None:
+        """The median of the last round trips (None: none measured yet)."""
+        if not self._samples:
+            return None
+        return float(statistics.median(self._samples))
+
+
 def _finite(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
@@ -111,6 +172,7 @@ def telemetry_frame(
     ticks_per_rad: float,
     received_at: float,
     wall_time: float,
+    delay_s: float | None = None,
 ) -> TelemetryFrame:
     """A realtime packet as a TelemetryFrame: one JointReading per joint, SI units."""
     robot_mode = int(state.robot_mode)
@@ -147,7 +209,7 @@ def telemetry_frame(
         )
     tick = round(state.time_s * ticks_per_s) if math.isfinite(state.time_s) else 0
     packet = UrTelemetry(tick=tick, motors=tuple(motors), state=state)
-    return TelemetryFrame(packet, readings, received_at, wall_time)
+    return TelemetryFrame(packet, readings, received_at, wall_time, delay_s)
 
 
 def robot_status(packet: RobotState) -> UrRobotStatus | None:

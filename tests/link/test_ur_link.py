@@ -179,6 +179,29 @@ def test_a_joint_with_an_end_stops_then_with_no_newer_command(rig: Rig) -> None:
     assert sim.snapshot().q[5] - start == pytest.approx(0.5 * run_s, rel=0.5)
 
 
+def test_the_round_trip_is_measured_from_the_controllers_reaction(rig: Rig) -> None:
+    # 50 ms each way: the first packet whose target speeds move toward a changed speedj comes
+    # at least 100 ms after it was sent; the telemetry carries it for the prediction.
+    sim = rig.sim(latency_ms=50.0)
+    link = rig.link(sim, gui_alive_timeout_s=None)
+    assert link.stats().delay_s is None  # nothing sent yet: not measured
+    for speed in (0.3, 0.0, -0.3, 0.0):  # each from steady speeds: four probes
+        link.set_command(Command({WRIST_3: speed}))
+        wait_for(moves(sim, 5, speed), f"wrist 3 at {speed} rad/s")
+        wait_for(lambda s=speed: link_sees(rig, s), "the OCU seeing it")
+    delay = link.stats().delay_s
+    assert delay is not None
+    assert 0.1 <= delay < 0.6, delay
+    frame = rig.events.last_frame()
+    assert frame is not None
+    assert frame.delay_s == pytest.approx(delay)
+
+
+def link_sees(rig: Rig, speed: float) -> bool:
+    frame = rig.events.last_frame()
+    return frame is not None and abs(frame.readings[WRIST_3].speed_rad_s - speed) < 1e-3
+
+
 def test_velocities_are_clamped_to_the_joints_top_speed(rig: Rig) -> None:
     sim = rig.sim()
     arm = sim.profile
