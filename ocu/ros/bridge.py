@@ -45,6 +45,7 @@ from ocu.records import JointReading, LinkState
 # Every public name of the two modules is importable from here too (the bridge's API).
 from ocu.ros.convert import *  # noqa: F403
 from ocu.ros.convert import (
+    NO_DRIVE,
     BridgeError,
     BridgeSettings,
     CmdVelTimeout,
@@ -285,7 +286,8 @@ class BridgeCore:
         Not obeyed: ROS is not in control (see `refusal()`), or the link gate is closed and
         the Twist asks for motion (zeros are sent instead). `ignored` are the other four
         Twist components, only to warn once that they do nothing. A non-finite component
-        stops the tracks and raises BridgeError.
+        stops the tracks and raises BridgeError; so does any Twist for a robot without a
+        chassis (a UR arm), which moves nothing.
         """
         with self._lock:
             if not self._in_control:
@@ -293,8 +295,11 @@ class BridgeCore:
                 return None
             assert self._sink is not None
             now = self.clock()
-            self._timeout.feed(now)
             self._cmd_vel_count += 1
+            if self.settings.drive is None:
+                self._rejected += 1
+                raise BridgeError(NO_DRIVE)
+            self._timeout.feed(now)
             if any(v != 0.0 for v in ignored) and not self._ignored_logged:
                 self._ignored_logged = True
                 log.warning(
@@ -305,7 +310,7 @@ class BridgeCore:
                 drive = twist_to_drive(linear_x, angular_z, self.settings, self._limits)
                 bounds = drive_bounds(self.settings, self._limits)
                 if bound_drive(linear_x, angular_z, bounds)[2] and self._throttle.allow("cmd_vel"):
-                    linear, turn = self.settings.drive
+                    linear, turn = self.settings.drive_channels()
                     log.warning(
                         "cmd_vel linear.x %.4g m/s, angular.z %.4g rad/s above the maxima "
                         "(%.2f m/s, %.2f rad/s): scaled to %.3f m/s, %.3f rad/s",
