@@ -425,22 +425,27 @@ class BridgeCore:
         self._goal_channels -= set(self._arm.channels)
         self._arm_owned = True
 
-    def on_pose_goal(self, target: ToolPose) -> dict[str, float]:
-        """Move tool0 to a position and pitch (base frame): IK, path check, one synchronized
-        move. Returns the joint goal; ArmError with the reason when refused."""
+    def on_pose_goal(self, target: ToolPose | Matrix) -> dict[str, float]:
+        """Move tool0 to a position and pitch, or (an arm of six joints or more) to a whole 4x4
+        pose, in the base frame: IK, path check, one synchronized move. Returns the joint
+        goal; ArmError with the reason when refused."""
         with self._lock:
             arm = self._arm_ready("pose goal")
             now = self.clock()
             try:
                 _, start = arm.estimate(now)
                 kin = arm.kinematics
-                q = kin.solve(target, current=start)
+                if isinstance(target, ToolPose):
+                    q, label = kin.solve(target, current=start), target.describe()
+                else:
+                    q = kin.solve_matrix(target, current=start)
+                    label = f"{kin.tool_pose(q).describe()} and the goal's orientation"
                 move = arm.plan_move(q, now)
             except ArmError:
                 self._rejected += 1
                 raise
             self._arm_takes_over()
-            arm.start(move, now, target.describe())
+            arm.start(move, now, label)
             self._update_state()
             return kin.mapping(q)
 
@@ -516,9 +521,10 @@ class BridgeCore:
 
     def goal_from_pose(
         self, position: Sequence[float], orientation_xyzw: Sequence[float]
-    ) -> ToolPose:
-        """A PoseStamped's content as the arm's goal: the position, and the pitch of the
-        orientation's pointing axis (arm.tool_axis; its yaw and roll are the arm's to choose)."""
+    ) -> ToolPose | Matrix:
+        """A PoseStamped's content as the arm's goal: for an arm of six joints or more (a UR)
+        the whole pose (4x4); else the position and the pitch of the orientation's pointing
+        axis (arm.tool_axis; its yaw and roll are the arm's to choose)."""
         if self.arm_kinematics is None:
             raise ArmError(self.arm_error or "this robot has no arm profile")
         values = [float(v) for v in position]
@@ -531,6 +537,8 @@ class BridgeCore:
         pose = np.eye(4)
         pose[:3, :3] = rotation
         pose[:3, 3] = values
+        if self.arm_kinematics.chain.dof >= 6:
+            return pose
         return ToolPose(values[0], values[1], values[2], self.arm_kinematics.pitch(pose))
 
     def arm_tool_matrix(self, readings: Mapping[str, JointReading]) -> Matrix | None:

@@ -16,7 +16,7 @@ Topics (relative names resolve in the node's namespace; /diagnostics is global):
 The arm (docs/arm.md), when the profile has an [arm] table:
 
 - in  `arm/pose_goal`  geometry_msgs/PoseStamped in base_link: tool0's position; the pitch
-  from the orientation
+  from the orientation (an arm of six joints or more, a UR: the whole orientation)
 - in  `arm/twist_cmd`  geometry_msgs/TwistStamped in base_link: tool0's linear velocity and
   the angular velocity about its pitch axis; the arm stops 0.1 s after the last one
 - in  `arm/named_pose` std_msgs/String: a stored pose (stow, ready, ... or the operator's)
@@ -47,7 +47,7 @@ from typing import Any
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionError
-from ocu.kinematics.arm import ArmError
+from ocu.kinematics.arm import ArmError, ToolPose
 from ocu.link.base import Link
 from ocu.link.ur import UrLink
 from ocu.nav.navigator import Navigator
@@ -568,9 +568,17 @@ class RosBridge:
         except ArmError as err:
             log.error("pose goal rejected: %s", err)
             return
+        if isinstance(target, ToolPose):
+            what = target.describe()
+        else:
+            q = orientation
+            what = (
+                f"x {position.x * 1e3:.0f} y {position.y * 1e3:.0f} z {position.z * 1e3:.0f} mm, "
+                f"orientation ({q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f})"
+            )
         log.info(
             "pose goal %s: %s",
-            target.describe(),
+            what,
             ", ".join(f"{j} {math.degrees(a):.1f}°" for j, a in goal.items()),
         )
 

@@ -247,6 +247,58 @@ def test_pose_goal_moves_tool0_to_the_position(
         goals.unregister()
 
 
+def _quaternion_product(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, ...]:
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
+
+
+def _angle_between(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    dot = abs(sum(x * y for x, y in zip(a, b, strict=True)))
+    return 2.0 * math.acos(min(1.0, dot))
+
+
+def test_pose_goal_turns_tool0_to_the_whole_orientation(
+    ur_node: NodeProcess, joint_states: Collector, tool_poses: Collector
+) -> None:
+    """Six joints: the goal's whole orientation, not only its pitch (a turn of tool0 about its
+    own z axis, which leaves the pitch as it is)."""
+    from geometry_msgs.msg import PoseStamped
+
+    goals = publisher(ur_node, "arm/pose_goal", PoseStamped)
+    try:
+        at_rest(joint_states)
+        now = tool_poses.messages[-1].pose
+        o = now.orientation
+        turn = math.radians(30.0)
+        wanted = _quaternion_product(
+            (o.x, o.y, o.z, o.w), (0.0, 0.0, math.sin(turn / 2), math.cos(turn / 2))
+        )
+        target = (now.position.x, now.position.y + 0.02, now.position.z)
+        goal = PoseStamped()
+        goal.header.frame_id = "base_link"
+        goal.pose.position.x, goal.pose.position.y, goal.pose.position.z = target
+        q = goal.pose.orientation
+        q.x, q.y, q.z, q.w = wanted
+        after = tool_poses.count()
+        goals.publish(goal)
+
+        def arrived(m: Any) -> bool:
+            p, r = m.pose.position, m.pose.orientation
+            return math.dist((p.x, p.y, p.z), target) < 0.002 and _angle_between(
+                (r.x, r.y, r.z, r.w), wanted
+            ) < math.radians(1.0)
+
+        tool_poses.wait(arrived, 20.0, after=after)
+    finally:
+        goals.unregister()
+
+
 def test_named_pose_moves_the_arm_to_the_stored_pose(
     ur_node: NodeProcess, joint_states: Collector
 ) -> None:
