@@ -366,8 +366,8 @@ def build_parser() -> argparse.ArgumentParser:
     """Only --help: the node is configured with ROS private parameters."""
     return argparse.ArgumentParser(
         prog="ocu-ros",
-        description="ROS 1 node for the Servosila Engineer: cmd_vel and joint goals in, "
-        "joint states, camera images and diagnostics out.",
+        description="ROS 1 node for the Servosila Engineer or a Universal Robots arm: cmd_vel, "
+        "joint goals and arm commands in, joint states, camera images and diagnostics out.",
         epilog=PARAMETERS,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

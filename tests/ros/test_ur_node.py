@@ -341,7 +341,7 @@ def test_tf_has_base_link_to_tool0(ur_node: NodeProcess, tool_poses: Collector) 
     transform = next(t for t in message.transforms if t.child_frame_id == "tool0")
     # The same tool0 as arm/tool_pose publishes from the same packets.
     stamp = transform.header.stamp
-    pose = next(m for m in reversed(tool_poses.messages) if m.header.stamp == stamp).pose
+    pose = tool_poses.wait(lambda m: m.header.stamp == stamp, 5.0).pose
     t = transform.transform.translation
     assert (t.x, t.y, t.z) == pytest.approx(
         (pose.position.x, pose.position.y, pose.position.z), abs=1e-9
