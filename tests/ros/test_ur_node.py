@@ -448,6 +448,25 @@ def test_sigterm_stops_the_built_in_simulator_with_stopj_last(
     assert output.index("SIGTERM: shutting down") < output.index("UR simulator stopping")
 
 
+def controller_status(node: NodeProcess, safety_mode: str, level: int) -> None:
+    """Wait for the node's /diagnostics to show the controller in this safety mode."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    def shows(message: Any) -> bool:
+        for status in message.status:
+            if status.name == "ocu: robot controller":
+                values = {kv.key: kv.value for kv in status.values}
+                return values["safety mode"] == safety_mode and status.level == level
+        return False
+
+    diagnostics = Collector("/diagnostics", DiagnosticArray)
+    try:
+        diagnostics.wait_connected(node.name)
+        diagnostics.wait(shows, 10.0)
+    finally:
+        diagnostics.close()
+
+
 # ---- a UR controller given with _robot ----------------------------------------------------
 
 
@@ -477,6 +496,7 @@ def controller() -> Iterator[UrSimulator]:
 def test_ur_controller_with_robot_moves_and_stops_with_stopj(
     ros_master: RosMaster, ros_client: None, controller: UrSimulator, tmp_path: Path
 ) -> None:
+    from diagnostic_msgs.msg import DiagnosticStatus
     from sensor_msgs.msg import JointState
 
     base = controller.ports["primary"] - 1
@@ -493,6 +513,11 @@ def test_ur_controller_with_robot_moves_and_stops_with_stopj(
             ),
             20.0,
         ), controller.snapshot()
+        # The controller's emergency stop on /diagnostics, and its release.
+        controller.emergency_stop()
+        controller_status(node, "ROBOT_EMERGENCY_STOP", DiagnosticStatus.ERROR)
+        controller.emergency_stop(False)
+        controller_status(node, "NORMAL", DiagnosticStatus.OK)
         # Moving again when the signal comes: stopj is the last thing the controller hears.
         goals.publish(JointState(name=["elbow_joint"], position=[start + 1.0]))
         assert wait_for(lambda: abs(controller.snapshot().qd[2]) > 0.2, 10.0)
