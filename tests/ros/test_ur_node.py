@@ -456,7 +456,7 @@ def controller_status(node: NodeProcess, safety_mode: str, level: int) -> None:
         for status in message.status:
             if status.name == "ocu: robot controller":
                 values = {kv.key: kv.value for kv in status.values}
-                return values["safety mode"] == safety_mode and status.level == level
+                return bool(values["safety mode"] == safety_mode and status.level == level)
         return False
 
     diagnostics = Collector("/diagnostics", DiagnosticArray)
