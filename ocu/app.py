@@ -14,7 +14,6 @@ import ctypes.util
 import logging
 import signal
 import sys
-import tomllib
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -32,8 +31,8 @@ from ocu.priority import (
     raise_priority,
 )
 from ocu.profile import ProfileError, RobotProfile, load_profile
-from ocu.profile.ur import UrArmProfile, load_ur_profile, shipped_ur_profiles
-from ocu.profile.ur_robot import ur_robot_profile
+from ocu.profile.ur import UrArmProfile
+from ocu.profile.ur_robot import load_ur_arm, ur_robot_profile
 from ocu.windows.settings_file import SETTINGS_FILE
 
 if TYPE_CHECKING:
@@ -373,24 +372,6 @@ def run_console(
         recorder.stop()  # after the window's shutdown: the link's closing zeros are in it
         if simulator is not None:
             simulator.stop()
-
-
-def load_ur_arm(name: str | None) -> UrArmProfile | None:
-    """The UR arm `--profile` names (a shipped name, or a file in the UR format: it has a
-    `series`), else None (an Engineer profile); ProfileError for a bad UR file."""
-    if name is None:
-        return None
-    if name in shipped_ur_profiles():
-        return load_ur_profile(name)
-    path = Path(name)
-    if path.suffix == ".toml" and path.is_file():
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-            return None  # load_profile says what is wrong with it
-        if "series" in data:
-            return load_ur_profile(path)
-    return None
 
 
 def run_ur_console(

@@ -10,6 +10,9 @@ when the RobotProfile was built by ocu.profile.ur_robot; it can also be given (`
 
 from __future__ import annotations
 
+import logging
+import threading
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -20,7 +23,12 @@ from ocu.profile import ProfileError, RobotProfile
 from ocu.profile.ur import UrArmProfile, load_ur_profile
 from ocu.sim.ur import UrSimulator
 
+log = logging.getLogger("ocu.hardware")
+
 UR_CAPABILITIES = frozenset({"arm"})
+#: On shutdown, how long the in-process simulator is given to run the link's last stopj.
+STOPJ_WAIT_S = 1.0
+STOPJ_POLL_S = 0.01
 #: Where the in-process simulator listens (any free ports there).
 SIM_HOST = "127.0.0.1"
 
@@ -78,13 +86,35 @@ class SimulatedUr(HardwareComponent):
 
     def __init__(self, simulator: UrSimulator, link: Link) -> None:
         self.simulator = simulator
+        self._simulator_stopped = False
         assert isinstance(link, UrLink)
         super().__init__("ur-sim", link, joints=ur_joints(link.arm), capabilities=UR_CAPABILITIES)
 
     def shutdown(self) -> None:
-        """The link's stopj last, then the simulator; idempotent."""
+        """The link's stopj last, then the simulator once it ran it (logged); idempotent."""
         super().shutdown()
+        if not self._simulator_stopped:
+            self._simulator_stopped = True
+            self._report_stop()
         self.simulator.stop()
+
+    def _report_stop(self) -> None:
+        """Wait (at most STOPJ_WAIT_S) for the simulator to have run the link's stopj and
+        brought the arm to rest, and log what it received last: the truth of the shutdown."""
+        deadline = time.monotonic() + STOPJ_WAIT_S
+        idle = threading.Event()
+        snapshot = self.simulator.snapshot()
+        while time.monotonic() < deadline:
+            if snapshot.last_command == "stopj" and snapshot.program is None:
+                break
+            idle.wait(STOPJ_POLL_S)  # the simulator's thread has no event to wait on
+            snapshot = self.simulator.snapshot()
+        speed = max(abs(v) for v in snapshot.qd)
+        log.info(
+            "UR simulator stopping: its last command %s, the arm %s",
+            snapshot.last_command or "none",
+            "at rest" if speed == 0.0 else f"moving ({speed:.3f} rad/s)",
+        )
 
 
 def simulated(

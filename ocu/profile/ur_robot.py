@@ -12,10 +12,12 @@ why it was chosen is in docs/ur.md ("The UR link"); the assumed ones are listed 
 from __future__ import annotations
 
 import math
+import tomllib
+from pathlib import Path
 
 from ocu.profile.description import ArmSettings, Motor, RobotProfile
 from ocu.profile.hardware import Channel, FrameTypes, LinkSettings
-from ocu.profile.ur import UrArmProfile
+from ocu.profile.ur import UrArmProfile, load_ur_profile, shipped_ur_profiles
 from ocu.profile.ur_urdf import ur_urdf_path
 
 #: The realtime port: the one whose packets say the link is alive, and where URScript goes.
@@ -155,3 +157,21 @@ def ur_robot_profile(arm: UrArmProfile, host: str = "127.0.0.1") -> RobotProfile
         # Its description: the URDF written from the DH parameters (ocu.profile.ur_urdf).
         urdf=ur_urdf_path(arm),
     )
+
+
+def load_ur_arm(name: str | None) -> UrArmProfile | None:
+    """The UR arm `--profile` names (a shipped name, or a file in the UR format: it has a
+    `series`), else None (an Engineer profile); ProfileError for a bad UR file."""
+    if name is None:
+        return None
+    if name in shipped_ur_profiles():
+        return load_ur_profile(name)
+    path = Path(name)
+    if path.suffix == ".toml" and path.is_file():
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            return None  # load_profile says what is wrong with it
+        if "series" in data:
+            return load_ur_profile(path)
+    return None

@@ -45,6 +45,7 @@ from ocu.records import JointReading, LinkState
 # Every public name of the two modules is importable from here too (the bridge's API).
 from ocu.ros.convert import *  # noqa: F403
 from ocu.ros.convert import (
+    NO_DRIVE,
     BridgeError,
     BridgeSettings,
     CmdVelTimeout,
@@ -285,7 +286,8 @@ class BridgeCore:
         Not obeyed: ROS is not in control (see `refusal()`), or the link gate is closed and
         the Twist asks for motion (zeros are sent instead). `ignored` are the other four
         Twist components, only to warn once that they do nothing. A non-finite component
-        stops the tracks and raises BridgeError.
+        stops the tracks and raises BridgeError; so does any Twist for a robot without a
+        chassis (a UR arm), which moves nothing.
         """
         with self._lock:
             if not self._in_control:
@@ -293,8 +295,11 @@ class BridgeCore:
                 return None
             assert self._sink is not None
             now = self.clock()
-            self._timeout.feed(now)
             self._cmd_vel_count += 1
+            if self.settings.drive is None:
+                self._rejected += 1
+                raise BridgeError(NO_DRIVE)
+            self._timeout.feed(now)
             if any(v != 0.0 for v in ignored) and not self._ignored_logged:
                 self._ignored_logged = True
                 log.warning(
@@ -305,7 +310,7 @@ class BridgeCore:
                 drive = twist_to_drive(linear_x, angular_z, self.settings, self._limits)
                 bounds = drive_bounds(self.settings, self._limits)
                 if bound_drive(linear_x, angular_z, bounds)[2] and self._throttle.allow("cmd_vel"):
-                    linear, turn = self.settings.drive
+                    linear, turn = self.settings.drive_channels()
                     log.warning(
                         "cmd_vel linear.x %.4g m/s, angular.z %.4g rad/s above the maxima "
                         "(%.2f m/s, %.2f rad/s): scaled to %.3f m/s, %.3f rad/s",
@@ -420,22 +425,27 @@ class BridgeCore:
         self._goal_channels -= set(self._arm.channels)
         self._arm_owned = True
 
-    def on_pose_goal(self, target: ToolPose) -> dict[str, float]:
-        """Move tool0 to a position and pitch (base frame): IK, path check, one synchronized
-        move. Returns the joint goal; ArmError with the reason when refused."""
+    def on_pose_goal(self, target: ToolPose | Matrix) -> dict[str, float]:
+        """Move tool0 to a position and pitch, or (an arm of six joints or more) to a whole 4x4
+        pose, in the base frame: IK, path check, one synchronized move. Returns the joint
+        goal; ArmError with the reason when refused."""
         with self._lock:
             arm = self._arm_ready("pose goal")
             now = self.clock()
             try:
                 _, start = arm.estimate(now)
                 kin = arm.kinematics
-                q = kin.solve(target, current=start)
+                if isinstance(target, ToolPose):
+                    q, label = kin.solve(target, current=start), target.describe()
+                else:
+                    q = kin.solve_matrix(target, current=start)
+                    label = f"{kin.tool_pose(q).describe()} and the goal's orientation"
                 move = arm.plan_move(q, now)
             except ArmError:
                 self._rejected += 1
                 raise
             self._arm_takes_over()
-            arm.start(move, now, target.describe())
+            arm.start(move, now, label)
             self._update_state()
             return kin.mapping(q)
 
@@ -511,9 +521,10 @@ class BridgeCore:
 
     def goal_from_pose(
         self, position: Sequence[float], orientation_xyzw: Sequence[float]
-    ) -> ToolPose:
-        """A PoseStamped's content as the arm's goal: the position, and the pitch of the
-        orientation's pointing axis (arm.tool_axis; its yaw and roll are the arm's to choose)."""
+    ) -> ToolPose | Matrix:
+        """A PoseStamped's content as the arm's goal: for an arm of six joints or more (a UR)
+        the whole pose (4x4); else the position and the pitch of the orientation's pointing
+        axis (arm.tool_axis; its yaw and roll are the arm's to choose)."""
         if self.arm_kinematics is None:
             raise ArmError(self.arm_error or "this robot has no arm profile")
         values = [float(v) for v in position]
@@ -526,6 +537,8 @@ class BridgeCore:
         pose = np.eye(4)
         pose[:3, :3] = rotation
         pose[:3, 3] = values
+        if self.arm_kinematics.chain.dof >= 6:
+            return pose
         return ToolPose(values[0], values[1], values[2], self.arm_kinematics.pitch(pose))
 
     def arm_tool_matrix(self, readings: Mapping[str, JointReading]) -> Matrix | None:

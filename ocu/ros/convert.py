@@ -37,6 +37,7 @@ __all__ = [
     "DEFAULT_CMD_VEL_TIMEOUT_S",
     "DEFAULT_RATE_HZ",
     "MAX_CMD_VEL_TIMEOUT_S",
+    "NO_DRIVE",
     "QUOTE_CHARS",
     "RATE_RANGE_HZ",
     "UNKNOWN_CAMERA",
@@ -97,6 +98,12 @@ def quoted(text: str, limit: int = QUOTE_CHARS) -> str:
     return f"{text[:limit]!r}... ({len(text)} characters)"
 
 
+NO_DRIVE = (
+    "this robot has no chassis (no channels with the roles drive_linear and drive_turn): "
+    "cmd_vel refused"
+)
+
+
 class BridgeError(ValueError):
     """A bridge setting or a velocity command that cannot be used."""
 
@@ -106,12 +113,13 @@ class BridgeSettings:
     """The bridge's tunables; the node reads them from its private ROS parameters.
 
     The minima are robot facts: `from_profile` takes them from the drive channels, and the
-    channels themselves from their roles (`drive`: the linear and the turn channel).
+    channels themselves from their roles (`drive`: the linear and the turn channel; None for
+    a robot without a chassis, a UR arm: cmd_vel is refused).
     """
 
     min_linear_m_s: float
     min_angular_rad_s: float
-    drive: tuple[str, str]
+    drive: tuple[str, str] | None
     cmd_vel_timeout_s: float = DEFAULT_CMD_VEL_TIMEOUT_S
     rate_hz: float = DEFAULT_RATE_HZ
     twist_stamped: bool = False
@@ -133,16 +141,12 @@ class BridgeSettings:
 
     @classmethod
     def from_profile(cls, profile: RobotProfile, **overrides: float | bool) -> BridgeSettings:
-        """Defaults from the profile: the thresholds are the drive channels' min_speed."""
+        """Defaults from the profile: the thresholds are the drive channels' min_speed (0 and
+        no drive when the profile has no chassis: cmd_vel is then refused)."""
         drive = profile.drive_channels
-        if drive is None:
-            raise BridgeError(
-                "the profile has no chassis (no channels with the roles drive_linear and "
-                "drive_turn): cmd_vel cannot drive it"
-            )
-        values: dict[str, float | bool | tuple[str, str]] = {
-            "min_linear_m_s": profile.channels[drive[0]].min_speed,
-            "min_angular_rad_s": profile.channels[drive[1]].min_speed,
+        values: dict[str, float | bool | tuple[str, str] | None] = {
+            "min_linear_m_s": profile.channels[drive[0]].min_speed if drive else 0.0,
+            "min_angular_rad_s": profile.channels[drive[1]].min_speed if drive else 0.0,
             "drive": drive,
         }
         values.update(overrides)
@@ -150,13 +154,19 @@ class BridgeSettings:
 
     @property
     def drive_zero(self) -> dict[str, float]:
-        """Both drive channels at zero."""
-        return dict.fromkeys(self.drive, 0.0)
+        """Both drive channels at zero (none without a chassis)."""
+        return dict.fromkeys(self.drive or (), 0.0)
+
+    def drive_channels(self) -> tuple[str, str]:
+        """The linear and the turn channel; BridgeError when the robot has none."""
+        if self.drive is None:
+            raise BridgeError(NO_DRIVE)
+        return self.drive
 
 
 def drive_bounds(settings: BridgeSettings, limits: VelocityLimits) -> DriveBounds:
     """The chassis bounds now: maxima from the link's limits, minima from the settings."""
-    linear, turn = settings.drive
+    linear, turn = settings.drive_channels()
     return DriveBounds(
         max_linear_m_s=limits.get(linear),
         max_angular_rad_s=limits.get(turn),
@@ -206,7 +216,7 @@ def twist_to_drive(
         linear, angular = scale_drive(linear_x, angular_z, bounds)
     except DriveError as err:
         raise BridgeError(str(err)) from err
-    return dict(zip(settings.drive, (linear, angular), strict=True))
+    return dict(zip(settings.drive_channels(), (linear, angular), strict=True))
 
 
 def bound_arm_twist(

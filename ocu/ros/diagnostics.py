@@ -2,7 +2,8 @@
 
 Who may move the robot through the bridge (`BridgeState`), whether the link lets ROS drive
 (`LinkGate`), a snapshot of the bridge (`BridgeStatus`), and the diagnostic_msgs reports of
-the bridge and of the link that `/diagnostics` publishes (`bridge_report`, `link_report`).
+the bridge and of the link that `/diagnostics` publishes (`bridge_report`, `link_report`), and
+of a UR controller's robot and safety modes (`controller_report`).
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ from dataclasses import dataclass
 from enum import Enum, IntEnum
 
 from ocu.link.history import UPLINK_LOSS_UNMEASURABLE
+from ocu.link.ur_wire import UrRobotStatus
+from ocu.protocol.ur import SafetyMode
 from ocu.records import LinkState, LinkStats
 from ocu.ros.convert import DEFAULT_CMD_VEL_TIMEOUT_S
 
@@ -24,6 +27,7 @@ __all__ = [
     "DiagnosticReport",
     "LinkGate",
     "bridge_report",
+    "controller_report",
     "gate_text",
     "link_report",
 ]
@@ -180,6 +184,7 @@ def bridge_report(status: BridgeStatus, hardware_id: str) -> DiagnosticReport:
             (f"{name} ({unit})", f"{status.drive.get(name, 0.0):.3f}")
             for name, unit in zip(status.drive, ("m/s", "rad/s"), strict=False)
         ),
+        *((("cmd_vel", "refused: no chassis (no drive channels)"),) if not status.drive else ()),
         ("last cmd_vel age (s)", _optional(status.cmd_vel_age_s, ".2f")),
         ("cmd_vel timeout (s)", f"{status.cmd_vel_timeout_s:g}"),
         ("cmd_vel received", str(status.cmd_vel_count)),
@@ -189,3 +194,30 @@ def bridge_report(status: BridgeStatus, hardware_id: str) -> DiagnosticReport:
         ("rejected commands", str(status.rejected_count)),
     )
     return DiagnosticReport("ocu: ROS bridge", level, message, hardware_id, values)
+
+
+def controller_report(status: UrRobotStatus | None, hardware_id: str) -> DiagnosticReport:
+    """A UR controller's robot mode, safety mode and stop flags (its secondary port's report):
+    OK while it takes motion, WARN in reduced mode, ERROR otherwise, STALE before the first."""
+    if status is None:
+        return DiagnosticReport(
+            "ocu: robot controller",
+            DiagnosticLevel.STALE,
+            "no robot state from the controller yet",
+            hardware_id,
+            (("robot mode", "unknown"), ("safety mode", "unknown")),
+        )
+    if not status.may_move:
+        level = DiagnosticLevel.ERROR
+    elif status.safety_mode is SafetyMode.REDUCED:
+        level = DiagnosticLevel.WARN
+    else:
+        level = DiagnosticLevel.OK
+    values = (
+        ("robot mode", status.robot_mode.name),
+        ("safety mode", status.safety_mode.name),
+        ("emergency stopped", str(status.emergency_stopped).lower()),
+        ("protective stopped", str(status.protective_stopped).lower()),
+        ("takes motion", str(status.may_move).lower()),
+    )
+    return DiagnosticReport("ocu: robot controller", level, status.describe(), hardware_id, values)

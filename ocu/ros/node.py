@@ -1,13 +1,16 @@
-"""The `ocu-ros` node: ROS 1 commands to the Engineer through the console's control core.
+"""The `ocu-ros` node: ROS 1 commands to the robot through the console's control core.
 
     ocu-ros                                   # the built-in simulator
     ocu-ros _robot:=192.168.0.100             # a robot (the profile's port)
     ocu-ros _robot:=10.0.0.5:10000 _twist_stamped:=true
+    ocu-ros _profile:=ur5e                    # a UR arm: its simulator in this process
+    ocu-ros _profile:=ur5e _robot:=10.0.0.7   # a UR controller (ports 30001-30003)
 
 SIGINT and SIGTERM (and a shutdown asked through ROS) stop the bridge, then shut the link
-down, which sends zeros last, then stop the built-in simulator. So does a restart of the ROS
-master, which rospy cannot survive (the new master knows none of the node's topics): the node
-then exits with status 3 for a supervisor (roslaunch's respawn) to start it again.
+down, which sends zeros last (a UR: stopj), then stop the built-in simulator. So does a
+restart of the ROS master, which rospy cannot survive (the new master knows none of the
+node's topics): the node then exits with status 3 for a supervisor (roslaunch's respawn) to
+start it again.
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ from typing import Any, Protocol
 from ocu.console.poses import ARM_POSES_NAME, default_config_dir
 from ocu.priority import nice_from_env, raise_priority
 from ocu.profile import ProfileError, RobotProfile, load_profile
+from ocu.profile.ur import UrArmProfile
+from ocu.profile.ur_robot import load_ur_arm, ur_robot_profile
 from ocu.ros.convert import (
     DEFAULT_CMD_VEL_TIMEOUT_S,
     DEFAULT_RATE_HZ,
@@ -54,8 +59,10 @@ EXIT_MASTER_RESTARTED = 3
 
 PARAMETERS = """\
 private parameters (set with _name:=value, a launch file or rosparam):
-  ~robot            HOST[:PORT] of the robot; empty: start the built-in simulator
-  ~profile          robot profile (TOML); empty: the shipped Engineer profile
+  ~robot            HOST[:PORT] of the robot (a UR: HOST[:PORT_BASE], ports BASE+1..BASE+3);
+                    empty: start the built-in simulator (a UR's: in the node's process)
+  ~profile          robot profile (TOML), or a UR arm (ur3e, ur5e, ur10e, ur5 or a UR
+                    profile file: it has `series`); empty: the shipped Engineer profile
   ~sim_args         extra ocu-sim options for the built-in simulator, e.g. "--telemetry-hz 20"
   ~min_linear       m/s; 0 < |linear.x| below it is raised to it (default: profile, 0.2)
   ~min_angular      rad/s; the same for angular.z (default: profile, 0.2)
@@ -74,6 +81,10 @@ topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose, foll
 camera/compressed, camera/<name>/image/compressed, arm/tool_pose, odom, /tf (odom ->
 base_link, base_link -> tool0), scan (when the robot sends ranges), /diagnostics out (see
 docs/ros.md and docs/arm.md)
+
+A UR arm has no chassis, cameras or protocol extension: ~sim_args, ~min_linear,
+~min_angular, ~max_linear, ~max_angular, ~cmd_vel_timeout, ~twist_stamped, ~camera and
+~extension are refused for it (exit status 2), and cmd_vel is refused (/diagnostics says so).
 
 _name:=value arguments hold for this run only: the node puts back (or deletes) what they
 replaced on the parameter server when it exits.
@@ -100,6 +111,10 @@ class NodeConfig:
     extension: bool
     camera: int | None = None
     arm_poses_path: Path | None = None
+    #: A UR arm's profile (None: an Engineer); its controller is at `ur_target`
+    #: (HOST[:PORT_BASE]), or its simulator runs in the node when that is empty.
+    ur_arm: UrArmProfile | None = None
+    ur_target: str = ""
 
 
 ParamGetter = Callable[[str, Any], Any]
@@ -145,17 +160,87 @@ def parse_address(text: str, default_port: int) -> tuple[str, int]:
     return host, int(port_text)
 
 
-def read_profile(get: ParamGetter) -> tuple[RobotProfile, str | None]:
-    """The profile named by ~profile (the shipped one if empty)."""
+def read_robot(get: ParamGetter) -> tuple[RobotProfile, str | None, UrArmProfile | None]:
+    """The profile named by ~profile (the shipped one if empty), and the UR arm's profile
+    when it names one (read as `ocu --profile` reads it: ocu.profile.ur_robot.load_ur_arm)."""
     path = _text(get, "profile") or None
     try:
-        return load_profile(path), path
+        arm = load_ur_arm(path)
+        if arm is not None:
+            return ur_robot_profile(arm), path, arm
+        return load_profile(path), path, None
     except ProfileError as err:
         raise ConfigError(f"~profile: {err}") from err
 
 
-def read_config(get: ParamGetter, profile: RobotProfile, profile_path: str | None) -> NodeConfig:
+def read_profile(get: ParamGetter) -> tuple[RobotProfile, str | None]:
+    """The profile named by ~profile (the shipped one if empty)."""
+    profile, path, _ = read_robot(get)
+    return profile, path
+
+
+#: The parameters of a chassis, its cameras, the protocol extension and the Engineer's
+#: simulator process: refused for a UR arm, which has none of them.
+NOT_FOR_UR = (
+    "sim_args",
+    "min_linear",
+    "min_angular",
+    "max_linear",
+    "max_angular",
+    "cmd_vel_timeout",
+    "twist_stamped",
+    "camera",
+    "extension",
+)
+_UNSET = object()
+
+
+def read_ur_config(
+    get: ParamGetter, profile: RobotProfile, profile_path: str | None, arm: UrArmProfile
+) -> NodeConfig:
+    """The parameters for a UR arm, checked; those of a chassis are refused (NOT_FOR_UR)."""
+    from ocu.hardware.ur import parse_host
+    from ocu.link.base import LinkError
+
+    given = [name for name in NOT_FOR_UR if get(name, _UNSET) is not _UNSET]
+    if given:
+        raise ConfigError(
+            f"{', '.join('~' + n for n in given)}: not for a UR arm ({arm.name}: no chassis, "
+            "cameras or protocol extension; its simulator runs in the node)"
+        )
+    target = _text(get, "robot")
+    if target:
+        try:
+            parse_host(target)
+        except LinkError as err:
+            raise ConfigError(f"~robot: {err}") from err
+    try:
+        bridge = BridgeSettings.from_profile(profile, rate_hz=_number(get, "rate", DEFAULT_RATE_HZ))
+    except BridgeError as err:
+        raise ConfigError(str(err)) from err
+    return NodeConfig(
+        robot=None,
+        profile_path=profile_path,
+        sim_args=(),
+        bridge=bridge,
+        max_linear_m_s=0.0,
+        max_angular_rad_s=0.0,
+        extension=False,
+        arm_poses_path=Path(_text(get, "arm_poses") or default_config_dir() / ARM_POSES_NAME),
+        ur_arm=arm,
+        ur_target=target,
+    )
+
+
+def read_config(
+    get: ParamGetter,
+    profile: RobotProfile,
+    profile_path: str | None,
+    ur_arm: UrArmProfile | None = None,
+) -> NodeConfig:
     """Every private parameter, checked; `get(name, default)` reads one (rospy.get_param)."""
+    if ur_arm is not None:
+        return read_ur_config(get, profile, profile_path, ur_arm)
     robot_text = _text(get, "robot")
     robot = parse_address(robot_text, profile.link.port) if robot_text else None
     try:
@@ -164,7 +249,7 @@ def read_config(get: ParamGetter, profile: RobotProfile, profile_path: str | Non
         raise ConfigError(f"~sim_args: {err}") from err
     try:
         defaults = BridgeSettings.from_profile(profile)
-        linear, turn = (profile.channels[name] for name in defaults.drive)
+        linear, turn = (profile.channels[name] for name in defaults.drive_channels())
         bridge = BridgeSettings.from_profile(
             profile,
             min_linear_m_s=_number(get, "min_linear", linear.min_speed),
@@ -281,8 +366,8 @@ def build_parser() -> argparse.ArgumentParser:
     """Only --help: the node is configured with ROS private parameters."""
     return argparse.ArgumentParser(
         prog="ocu-ros",
-        description="ROS 1 node for the Servosila Engineer: cmd_vel and joint goals in, "
-        "joint states, camera images and diagnostics out.",
+        description="ROS 1 node for the Servosila Engineer or a Universal Robots arm: cmd_vel, "
+        "joint goals and arm commands in, joint states, camera images and diagnostics out.",
         epilog=PARAMETERS,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -426,8 +511,8 @@ def _run(args: list[str], stop: threading.Event) -> int:
             except rospy.ROSInitException as err:
                 raise ConfigError(str(err)) from err
             params.upload(values)
-            profile, profile_path = read_profile(params.get)
-            config = read_config(params.get, profile, profile_path)
+            profile, profile_path, ur_arm = read_robot(params.get)
+            config = read_config(params.get, profile, profile_path, ur_arm)
         except ConfigError as err:
             log.error("bad parameter: %s", err)
             return 2
@@ -453,6 +538,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.console.model import ConsoleModel
     from ocu.core.hardware import HardwareError
     from ocu.hardware.registry import HARDWARE
+    from ocu.hardware.ur import SIM_HOST, SimulatedUr
     from ocu.headless import HeadlessConsole
     from ocu.link.base import LinkError
     from ocu.ros.host import ModelSink, end_path, follow_path
@@ -465,21 +551,41 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     bridge: RosBridge | None = None
     try:
         robot = config.robot
-        if robot is None:
+        if config.ur_arm is not None:
+            # A UR arm: its controller over TCP, or its simulator in this process (free
+            # ports on 127.0.0.1), which the hardware's shutdown stops after the last stopj.
+            plugin = "ur" if config.ur_target else "ur-sim"
             try:
-                simulator = SimulatorProcess(config.profile_path, list(config.sim_args))
-            except SimulatorProcessError as err:
+                hardware = HARDWARE.create(plugin, profile, config.ur_target, arm=config.ur_arm)
+            except (LinkError, HardwareError, OSError) as err:
                 log.error("%s", err)
                 return 1
-            robot = simulator.address
-            log.info("built-in simulator at %s:%d", *robot)
-        try:
-            hardware = HARDWARE.create(
-                "engineer", profile, f"{robot[0]}:{robot[1]}", extension=config.extension
-            )
-        except (LinkError, HardwareError) as err:
-            log.error("%s", err)
-            return 1
+            if isinstance(hardware, SimulatedUr):
+                ports = hardware.simulator.ports
+                where = f"the UR simulator ({config.ur_arm.name}) at {SIM_HOST}:" + ",".join(
+                    str(ports[k]) for k in ("primary", "secondary", "realtime")
+                )
+                log.info("built-in %s", where)
+            else:
+                where = f"UR {config.ur_arm.name} at {config.ur_target}"
+            hardware_id = config.ur_target or f"ur-sim {SIM_HOST}"
+        else:
+            if robot is None:
+                try:
+                    simulator = SimulatorProcess(config.profile_path, list(config.sim_args))
+                except SimulatorProcessError as err:
+                    log.error("%s", err)
+                    return 1
+                robot = simulator.address
+                log.info("built-in simulator at %s:%d", *robot)
+            hardware_id = where = f"{robot[0]}:{robot[1]}"
+            try:
+                hardware = HARDWARE.create(
+                    "engineer", profile, hardware_id, extension=config.extension
+                )
+            except (LinkError, HardwareError) as err:
+                log.error("%s", err)
+                return 1
         # The console's control core (ocu.core): the model's mux, limits, zones and path
         # mode, its control thread at ~rate (the console's 50 Hz by default), which also
         # beats the link's heartbeat.
@@ -488,9 +594,11 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         model.events.message.connect(lambda text: log.info("%s", text), direct=True)
         model.events.position_message.connect(lambda text: log.info("%s", text), direct=True)
         # The node is the only commander: the maxima ROS is held to are the model's.
+        drive = config.bridge.drive
         for channel, value in (
-            (config.bridge.drive[0], config.max_linear_m_s),
-            (config.bridge.drive[1], config.max_angular_rad_s),
+            ((drive[0], config.max_linear_m_s), (drive[1], config.max_angular_rad_s))
+            if drive is not None
+            else ()
         ):
             kept = model.set_max_velocity(channel, value)
             if kept != value:
@@ -505,14 +613,16 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         # The model feeds its own navigator (odometry, the zones, the path mode); the bridge
         # publishes from it, hands it other nodes' scans and /follow_path.
         sink = ModelSink(console, silent_after_s=profile.link.gui_alive_timeout_s)
+        # Odometry, scans and /follow_path are a chassis's: none for a robot without one.
+        chassis = drive is not None
         ros = bridge = RosBridge(
             profile,
             config.bridge,
-            hardware_id=f"{robot[0]}:{robot[1]}",
+            hardware_id=hardware_id,
             arm_poses_path=config.arm_poses_path,
-            navigator=model.nav,
+            navigator=model.nav if chassis else None,
             feed_navigator=False,
-            on_path=lambda points: follow_path(headless, ros.core, points),
+            on_path=(lambda points: follow_path(headless, ros.core, points)) if chassis else None,
             on_cmd_vel=lambda: end_path(headless),
             on_step=sink.stepped,
         )
@@ -522,7 +632,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         bridge.start(hardware.link, model.limits, sink=sink)
         console.start()
         _name_os_threads()
-        log.info("commanding %s:%d; SIGINT or SIGTERM stops the robot and exits", *robot)
+        log.info("commanding %s; SIGINT or SIGTERM stops the robot and exits", where)
         master = MasterWatch()
         while not stop.wait(STOP_POLL_S):
             if bridge.failed.is_set():
@@ -541,7 +651,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
             sink.close()
         if console is not None:
             console.stop()
-            log.info("link shut down, zeros sent last")
+            log.info("link shut down, %s sent last", "stopj" if config.ur_arm else "zeros")
         if simulator is not None:
             simulator.stop()
 

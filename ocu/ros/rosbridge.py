@@ -10,12 +10,13 @@ Topics (relative names resolve in the node's namespace; /diagnostics is global):
 - in  `joint_goals`    sensor_msgs/JointState: name[] with position[] in radians
 - out `joint_states`   sensor_msgs/JointState: radians, rad/s, effort = motor current (A)
 - out `camera/compressed` and `camera/<name>/image/compressed`  sensor_msgs/CompressedImage
-- out `/diagnostics`   diagnostic_msgs/DiagnosticArray: link health and the bridge's state
+- out `/diagnostics`   diagnostic_msgs/DiagnosticArray: link health and the bridge's state;
+  for a UR also its controller's robot mode, safety mode and stop flags
 
 The arm (docs/arm.md), when the profile has an [arm] table:
 
 - in  `arm/pose_goal`  geometry_msgs/PoseStamped in base_link: tool0's position; the pitch
-  from the orientation
+  from the orientation (an arm of six joints or more, a UR: the whole orientation)
 - in  `arm/twist_cmd`  geometry_msgs/TwistStamped in base_link: tool0's linear velocity and
   the angular velocity about its pitch axis; the arm stops 0.1 s after the last one
 - in  `arm/named_pose` std_msgs/String: a stored pose (stow, ready, ... or the operator's)
@@ -46,8 +47,9 @@ from typing import Any
 
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionError
-from ocu.kinematics.arm import ArmError
+from ocu.kinematics.arm import ArmError, ToolPose
 from ocu.link.base import Link
+from ocu.link.ur import UrLink
 from ocu.nav.navigator import Navigator
 from ocu.profile import RobotProfile
 from ocu.records import (
@@ -71,7 +73,7 @@ from ocu.ros.convert import (
     quaternion_xyzw,
     quoted,
 )
-from ocu.ros.diagnostics import BridgeState, bridge_report, link_report
+from ocu.ros.diagnostics import BridgeState, bridge_report, controller_report, link_report
 from ocu.ros.environment import ensure_ros_path
 from ocu.ros.navigation import (
     FrameTree,
@@ -492,6 +494,10 @@ class RosBridge:
             diagnostic_status(link_report(link.state, link.stats(), self.hardware_id)),
             bridge,
         ]
+        if isinstance(link, UrLink):
+            # The UR's robot and safety modes: what the controller lets move (docs/ur.md).
+            report = controller_report(link.robot_status, self.hardware_id)
+            message.status.append(diagnostic_status(report))
         self._publish(publishers.diagnostics, message)
 
     def _publish(self, publisher: Any, message: Any) -> None:
@@ -518,7 +524,8 @@ class RosBridge:
             drive = self.core.on_cmd_vel(float(linear.x), float(angular.z), ignored)
         except BridgeError as err:
             if self._throttle.allow("cmd_vel"):
-                log.warning("cmd_vel rejected, tracks stopped: %s", err)
+                stopped = ", tracks stopped" if self.settings.drive is not None else ""
+                log.warning("cmd_vel rejected%s: %s", stopped, err)
             return
         if drive is None and self._throttle.allow("cmd_vel ignored"):
             log.info("cmd_vel ignored: %s", self.core.refusal() or "ROS control changed")
@@ -561,9 +568,17 @@ class RosBridge:
         except ArmError as err:
             log.error("pose goal rejected: %s", err)
             return
+        if isinstance(target, ToolPose):
+            what = target.describe()
+        else:
+            q = orientation
+            what = (
+                f"x {position.x * 1e3:.0f} y {position.y * 1e3:.0f} z {position.z * 1e3:.0f} mm, "
+                f"orientation ({q.x:.3f}, {q.y:.3f}, {q.z:.3f}, {q.w:.3f})"
+            )
         log.info(
             "pose goal %s: %s",
-            target.describe(),
+            what,
             ", ".join(f"{j} {math.degrees(a):.1f}°" for j, a in goal.items()),
         )
 

@@ -99,6 +99,8 @@ class UrSimSnapshot:
     clients: dict[str, int]
     realtime_sent: int
     dropped_clients: int
+    #: The name of the last accepted URScript command (None: none yet).
+    last_command: str | None = None
 
 
 class UrSimulator:
@@ -144,6 +146,7 @@ class UrSimulator:
         self.accepted = 0
         self.refused = 0
         self.last_command_s = math.nan
+        self.last_command: str | None = None
         self.realtime_sent = 0
         self.dropped_clients = 0
         self.ports: dict[str, int] = {}
@@ -271,6 +274,7 @@ class UrSimulator:
                 clients={kind: counts.get(kind, 0) for kind in PORT_KINDS},
                 realtime_sent=self.realtime_sent,
                 dropped_clients=self.dropped_clients,
+                last_command=self.last_command,
             )
 
     def _wake(self) -> None:
@@ -378,6 +382,7 @@ class UrSimulator:
                 if reason is None:
                     self.accepted += 1
                     self.last_command_s = effective_s
+                    self.last_command = command.name
             if reason is not None:
                 self._refuse(reason)
 

@@ -95,12 +95,13 @@ class NodeProcess:
     def __init__(
         self,
         work_dir: Path,
-        robot: tuple[str, int],
+        robot: tuple[str, int] | None,
         *args: str,
         name: str | None = None,
         env: dict[str, str] | None = None,
     ) -> None:
-        """`env`: variables over this process's (another master's ROS_MASTER_URI)."""
+        """`env`: variables over this process's (another master's ROS_MASTER_URI); `robot`
+        None: no `_robot` (the node's built-in simulator)."""
         self.name = name or f"ocu_ros_test_{next(_names)}"
         self.log_path = work_dir / f"{self.name}_{next(_names)}.log"
         command = [
@@ -108,7 +109,7 @@ class NodeProcess:
             "-m",
             "ocu.ros.node",
             f"__name:={self.name}",
-            f"_robot:={robot[0]}:{robot[1]}",
+            *([f"_robot:={robot[0]}:{robot[1]}"] if robot is not None else []),
             *args,
         ]
         self._log = self.log_path.open("wb")

@@ -641,6 +641,7 @@ def test_quaternions_round_trip_and_a_pose_gives_its_pitch(core: BridgeCore) -> 
         0.0, math.sin(pitch / 2), 0.0, math.cos(pitch / 2)
     )
     target = core.goal_from_pose((0.5, 0.35, 0.4), quaternion_xyzw(turned))
+    assert isinstance(target, ToolPose)  # the Engineer's arm has five joints: x, y, z, pitch
     assert target.pitch == pytest.approx(-pitch)
     with pytest.raises(ArmError, match="not zero"):
         core.goal_from_pose((0.5, 0.35, 0.4), (0.0, 0.0, 0.0, 0.0))

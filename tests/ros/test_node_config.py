@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pytest
 
+import ocu
 from ocu.profile import RobotProfile
 from ocu.ros.node import (
     CommandLineParams,
@@ -14,6 +16,7 @@ from ocu.ros.node import (
     main,
     read_config,
     read_profile,
+    read_robot,
 )
 
 
@@ -99,6 +102,39 @@ def test_profile_parameter(profile: RobotProfile, tmp_path: Any) -> None:
     assert read_profile(getter({}))[1] is None
     with pytest.raises(ConfigError, match="~profile: cannot read profile"):
         read_profile(getter({"profile": str(tmp_path / "missing.toml")}))
+
+
+def test_a_ur_profile_is_read_as_ocu_reads_it(tmp_path: Any) -> None:
+    """A shipped UR name or a UR file (one with `series`): the UR's RobotProfile, no drive."""
+    profile, path, arm = read_robot(getter({"profile": "ur5e"}))
+    assert arm is not None
+    assert arm.name == profile.name
+    assert path == "ur5e"
+    assert list(profile.channels)[:2] == ["shoulder_pan_joint", "shoulder_lift_joint"]
+    config = read_config(getter({"robot": "10.0.0.7:40000"}), profile, path, arm)
+    assert config.ur_arm is arm
+    assert config.ur_target == "10.0.0.7:40000"
+    assert config.robot is None
+    assert config.bridge.drive is None
+    assert read_config(getter({}), profile, path, arm).ur_target == ""  # the simulator
+    with pytest.raises(ConfigError, match="~robot: not HOST:PORT_BASE"):
+        read_config(getter({"robot": "host:x"}), profile, path, arm)
+    # A UR profile file of the operator's (it has `series`), as `ocu --profile FILE`.
+    own = tmp_path / "my_ur.toml"
+    own.write_text(
+        (Path(ocu.__file__).parent / "profiles/ur/ur5e.toml").read_text(encoding="utf-8"),
+        encoding="utf-8",
+    )
+    _, _, own_arm = read_robot(getter({"profile": str(own)}))
+    assert own_arm is not None
+    assert own_arm.joint_names == arm.joint_names
+
+
+@pytest.mark.parametrize("name", ["camera", "sim_args", "max_linear", "twist_stamped", "extension"])
+def test_chassis_parameters_are_refused_for_a_ur(name: str) -> None:
+    profile, path, arm = read_robot(getter({"profile": "ur10e"}))
+    with pytest.raises(ConfigError, match=f"~{name}: not for a UR arm"):
+        read_config(getter({name: "x"}), profile, path, arm)
 
 
 def test_help_lists_the_parameters(capsys: pytest.CaptureFixture[str]) -> None:
