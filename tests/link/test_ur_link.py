@@ -8,6 +8,7 @@ deadlines; the polling interval is not synchronisation.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import selectors
@@ -188,7 +189,7 @@ def test_the_round_trip_is_measured_from_the_controllers_reaction(rig: Rig) -> N
     for speed in (0.3, 0.0, -0.3, 0.0):  # each from steady speeds: four probes
         link.set_command(Command({WRIST_3: speed}))
         wait_for(moves(sim, 5, speed), f"wrist 3 at {speed} rad/s")
-        wait_for(lambda s=speed: link_sees(rig, s), "the OCU seeing it")
+        wait_for(functools.partial(link_sees, rig, speed), "the OCU seeing it")
     delay = link.stats().delay_s
     assert delay is not None
     assert 0.1 <= delay < 0.6, delay
