@@ -15,8 +15,9 @@ through the UR's URDF (`ArmKinematics`, the console's chain; UR's DH to 1e-6).
   synchronized move (`ArmConsole.move_to_joints`, speedj with the delay-aware feedback). Per
   joint: overshoot past its goal (°, the largest over the joints), when it arrived (stays
   within 0.1° of where it comes to rest, controller time) and the spread of those arrivals
-  (s); the final error. Also with the round trip told to the console (`DelayTold`: UrLink
-  measures none). Against, in the same run: the console's own plan streamed as `servoj` at
+  (s); the final error. Also with the round trip told to the console (`DelayTold`: the
+  simulator's known round trip, against UrLink's own measurement). Against, in the same run:
+  the console's own plan streamed as `servoj` at
   125 Hz by a minimal client writing URScript on the realtime port itself (UrLink sends only
   speedj and stopj), lookahead 0.1 s (default) and 0.03 s (seed 004's figure 6).
 - **speedj vs servoj, command -> arm moving** (seed 004's figures 3-7): the minimal client
@@ -80,7 +81,7 @@ LATENCIES_MS = (0.0, 50.0)
 T = TypeVar("T")
 REACTIONS = 5  # trials of each streamed kind per run
 JOG_METHODS = {
-    "ours": "console (delay as UrLink reports it: none)",
+    "ours": "console (the round trip UrLink measures)",
     "told": "console, round trip told (bench stand-in)",
     "baseline": "resolved rate on the last reading",
 }
