@@ -115,4 +115,8 @@ def test_a_frozen_node_drops_its_joint_goal_instead_of_resuming_it(
     finally:
         code = process.stop()
     assert code == 0, process.output()
-    assert "stalled" in process.output() or "silent" in process.output(), process.output()
+    # Whichever of the core's freeze rules saw it first after SIGCONT: the link's loop
+    # ("link loop frozen"), the control thread's stall watch ("stalled") or the bridge
+    # thread's watch ("silent") - each halts the model, and the goal was dropped (above).
+    output = process.output()
+    assert any(word in output for word in ("frozen", "stalled", "silent")), output
