@@ -253,6 +253,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         pad_mapping = load_pad_mapping(profile, pad_override)
     except PadMappingError as err:
         return refuse_file(str(err))
+    # From here on a stop signal quits in order, also one that comes while the window is
+    # being built (the link may already be running then): see StopSignals.
+    STOP.install()
     # Before Qt, the link or the control core start a thread: threads inherit it.
     log.info("scheduling priority: %s", raise_priority(nice).text)
     if ur_arm is not None:
@@ -351,6 +354,8 @@ def run_console(
             return UdpLink(profile, robot_address, extension=True, description=address_text)
 
         settings, settings_status = open_settings(config_dir)
+        guard = contextlib.ExitStack()
+        guard.enter_context(last_zeros_guard())  # the window starts the link
         window = MainWindow(
             profile,
             make_link,
@@ -366,7 +371,7 @@ def run_console(
             ),
             control_hz=control_hz,
         )
-        with last_zeros_guard():
+        with guard:
             return run_window(app, window, quit_after_s)
     finally:
         recorder.stop()  # after the window's shutdown: the link's closing zeros are in it
@@ -423,6 +428,8 @@ def run_ur_console(
             return ur_component(link)
 
         settings, settings_status = open_settings(config_dir)
+        guard = contextlib.ExitStack()
+        guard.enter_context(last_zeros_guard())  # the window starts the link
         window = MainWindow(
             profile,
             make_link,
@@ -436,7 +443,7 @@ def run_ur_console(
             hardware_for=hardware_for,
             capabilities=UR_CAPABILITIES,
         )
-        with last_zeros_guard():
+        with guard:
             return run_window(app, window, quit_after_s)
     finally:
         if simulator is not None:
@@ -559,22 +566,19 @@ def run_window(app: QApplication, window: MainWindow, quit_after_s: float | None
     from PySide6.QtCore import QTimer
 
     app.aboutToQuit.connect(window.shutdown)
-    # Python runs a signal handler between any two bytecodes of the main thread, e.g. in
-    # the middle of a send that holds the link's lock: the handler only raises a flag, and
-    # a short timer (which also lets Python see the signal at all) quits Qt from the
-    # event loop, so shutdown sends zeros before the process ends.
-    stop_signals: list[int] = []
-    for sig in STOP_SIGNALS:
-        signal.signal(sig, lambda signum, _frame: stop_signals.append(signum))
+    STOP.install()  # main() has done it already; a caller that did not gets it here
+    STOP.looping = True
 
     def quit_on_signal() -> None:
-        if stop_signals:
-            log.info("%s received, quitting", signal.Signals(stop_signals[0]).name)
+        if STOP.received:
+            log.info("%s received, quitting", signal.Signals(STOP.received[0]).name)
             app.quit()
 
     pulse = QTimer()
     pulse.start(SIGNAL_POLL_MS)
     pulse.timeout.connect(quit_on_signal)
+    # A signal that came while the window was being built quits at the loop's first turn.
+    QTimer.singleShot(0, quit_on_signal)
     if quit_after_s is not None:
         QTimer.singleShot(int(quit_after_s * 1000), app.quit)
     if window.layout_restored:
@@ -588,7 +592,44 @@ def run_window(app: QApplication, window: MainWindow, quit_after_s: float | None
     code = app.exec()
     window.shutdown()
     pulse.stop()
+    STOP.looping = False
+    STOP.received.clear()  # handled
     return code
+
+
+class StopSignals:
+    """SIGINT, SIGTERM, SIGHUP and SIGQUIT quit the console in order, from the start of main().
+
+    Python runs a signal handler between any two bytecodes of the main thread, e.g. in the
+    middle of a send that holds the link's lock: the handler only notes the signal, and a
+    short timer of the event loop (which also lets Python see the signal at all) quits Qt,
+    so the window's shutdown sends zeros last. A signal that comes before the loop runs
+    (while the simulator starts or the window is built, with the link perhaps already
+    sending) is noted the same way and quits at the loop's first turn. A second one before
+    the loop runs ends a start that hangs: SystemExit, whose atexit hook still shuts the
+    live links down (ocu.link.guard).
+    """
+
+    def __init__(self) -> None:
+        self.received: list[int] = []
+        self.looping = False
+        self._installed = False
+
+    def install(self) -> None:
+        """Catch the stop signals (main thread only; idempotent)."""
+        if self._installed:
+            return
+        self._installed = True
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, self._handle)
+
+    def _handle(self, signum: int, _frame: object) -> None:
+        self.received.append(signum)
+        if len(self.received) > 1 and not self.looping:
+            raise SystemExit(128 + signum)
+
+
+STOP = StopSignals()
 
 
 if __name__ == "__main__":

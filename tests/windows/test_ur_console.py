@@ -136,6 +136,30 @@ def test_the_engineer_keeps_its_own_key_map(profile: RobotProfile, arm: UrArmPro
     assert load_key_map(ur_robot_profile(arm)).hold["Y"] == HoldBinding("shoulder_lift_joint", 1)
 
 
+def test_a_sigterm_while_the_console_starts_quits_it_in_order(tmp_path: Path) -> None:
+    # The signal comes before the window exists (right after the priority line): the console
+    # notes it, builds the window, quits at the event loop's first turn and sends zeros last
+    # (a CI run once killed it with Python's default SIGTERM while the link was starting).
+    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "PYTHONPATH": str(ROOT)}
+    with subprocess.Popen(
+        [
+            *(sys.executable, "-m", "ocu", "--profile", "ur5e"),
+            *("--config-dir", str(tmp_path), "--no-gamepad"),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    ) as console:
+        assert console.stderr is not None
+        first = console.stderr.readline()
+        assert "scheduling priority" in first, first
+        console.send_signal(signal.SIGTERM)
+        _, rest = console.communicate(timeout=120)
+    assert console.returncode == 0, first + rest
+    assert "SIGTERM received, quitting" in rest
+    assert "link stopped (zeros sent last)" in rest
+
+
 def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(tmp_path: Path) -> None:
     env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "PYTHONPATH": str(ROOT)}
     # Until it says it is connected (however long a loaded machine takes), then SIGTERM: it
