@@ -16,6 +16,13 @@ first, so events land at every phase of the paints. Two phases: the machine as i
 `--hogs` CPU-bound processes beside the console. With `--baseline-tree DIR` the same benchmark
 runs again on another checkout (`git archive main | tar -x -C DIR`) in a child process, and
 the ratios are printed.
+
+`--x11` sends real key events instead, through the X server (XTest, on a connection of the
+benchmark's own), to the console shown on a private Xvfb with the xcb platform: the path an
+operator's keyboard takes, including the X key reader (ocu.windows.x_keys). It runs the
+benchmark twice in children, with the reader and without it (`OCU_X_KEYS=0`: Qt's key
+events only), and prints the ratios; the time is taken when the event is flushed to the
+server.
 """
 
 from __future__ import annotations
@@ -148,9 +155,47 @@ class Phase:
         )
 
 
-def post_key(window: MainWindow, key: Qt.Key, press: bool, text: str = "") -> None:
+def post_qt_key(window: MainWindow, key: Qt.Key, press: bool, text: str = "") -> None:
     kind = QEvent.Type.KeyPress if press else QEvent.Type.KeyRelease
     QCoreApplication.postEvent(window, QKeyEvent(kind, key, Qt.KeyboardModifier.NoModifier, text))
+
+
+# X key codes (evdev + 8) of the keys the trials press.
+X_KEYCODES = {Qt.Key.Key_W: 25, Qt.Key.Key_Space: 65}
+
+
+class XTestKeys:
+    """Real key events through the X server: XTest on a connection of our own ($DISPLAY)."""
+
+    def __init__(self) -> None:
+        import ctypes
+        import ctypes.util
+
+        self.x11 = ctypes.CDLL(ctypes.util.find_library("X11") or "libX11.so.6")
+        self.xtst = ctypes.CDLL(ctypes.util.find_library("Xtst") or "libXtst.so.6")
+        self.x11.XOpenDisplay.restype = ctypes.c_void_p
+        self.x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
+        self.x11.XFlush.argtypes = [ctypes.c_void_p]
+        self.x11.XSync.argtypes = [ctypes.c_void_p, ctypes.c_int]
+        self.x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+        self.xtst.XTestFakeKeyEvent.argtypes = [
+            ctypes.c_void_p,
+            ctypes.c_uint,
+            ctypes.c_int,
+            ctypes.c_ulong,
+        ]
+        self.display = self.x11.XOpenDisplay(None)
+        if not self.display:
+            raise RuntimeError("no X display for XTest")
+
+    def send(self, key: Qt.Key, press: bool) -> float:
+        """Press or release `key`; the time the event left for the server."""
+        self.xtst.XTestFakeKeyEvent(self.display, X_KEYCODES[key], int(press), 0)
+        self.x11.XFlush(self.display)
+        return time.monotonic()
+
+    def close(self) -> None:
+        self.x11.XCloseDisplay(self.display)
 
 
 def until(
@@ -171,8 +216,23 @@ def until(
 
 
 def run_phase(
-    app: QApplication, window: MainWindow, probe: WireProbe, label: str, *, trials: int, seed: int
+    app: QApplication,
+    window: MainWindow,
+    probe: WireProbe,
+    label: str,
+    *,
+    trials: int,
+    seed: int,
+    x11: XTestKeys | None = None,
 ) -> Phase:
+    """`trials` key trials; through the X server with `x11`, else posted to Qt's queue."""
+
+    def post_key(window: MainWindow, key: Qt.Key, press: bool, text: str = "") -> None:
+        if x11 is None:
+            post_qt_key(window, key, press, text)
+        else:
+            x11.send(key, press)
+
     phase = Phase(label)
     rng = random.Random(seed)
     renders0 = window.model_view.frames_rendered
@@ -358,18 +418,30 @@ def measure(args: argparse.Namespace) -> list[Phase]:
         redraw.timeout.connect(window.model_view.request_render)
         redraw.start()
         wait(app, args.warmup)
+        x11 = XTestKeys() if args.x11 else None
+        if x11 is not None:
+            # The keyboard to the console: the X server's focus on its main window.
+            window.raise_()
+            window.activateWindow()
+            QApplication.setActiveWindow(window)
+            wait(app, 1.0)
+            print(f"X key reader: {window.key_filter.x_reader is not None}")  # type: ignore[union-attr]
         sampler = GuiSampler() if args.sample_gui else None
-        phases.append(run_phase(app, window, probe, "idle", trials=args.trials, seed=1))
+        phases.append(run_phase(app, window, probe, "idle", trials=args.trials, seed=1, x11=x11))
         procs = hogs(args.hogs)
         try:
             wait(app, 1.0)
             phases.append(
-                run_phase(app, window, probe, f"{args.hogs} hogs", trials=args.trials, seed=2)
+                run_phase(
+                    app, window, probe, f"{args.hogs} hogs", trials=args.trials, seed=2, x11=x11
+                )
             )
         finally:
             for proc in procs:
                 proc.kill()
                 proc.wait()
+        if x11 is not None:
+            x11.close()
         redraw.stop()
         if sampler is not None:
             sampler.report()
@@ -414,6 +486,11 @@ def main() -> int:
     parser.add_argument(
         "--paint-times", action="store_true", help="also time every paint (a diagnosis)"
     )
+    parser.add_argument(
+        "--x11",
+        action="store_true",
+        help="real key events through a private Xvfb: with the X key reader and without",
+    )
     parser.add_argument("--json", help="write the phases here (the baseline's child run)")
     parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
     parser.add_argument(
@@ -428,6 +505,8 @@ def main() -> int:
     os.setpriority(os.PRIO_PROCESS, 0, args.nice)
     print(f"console at nice {os.getpriority(os.PRIO_PROCESS, 0)}")
     print(f"{os.cpu_count()} cores; load {os.getloadavg()[0]:.1f} before the run")
+    if args.x11 and os.environ.get("QT_QPA_PLATFORM") != "xcb":
+        return run_x11(args)
     if args.paint_times:
         time_paints()
     phases = measure(args)
@@ -470,6 +549,46 @@ def main() -> int:
                 if a and b:
                     ratios.append(f"{name[:-3]} {percentile(b, 99) / percentile(a, 99):.2f}x")
             print(f"  {ours.label}: {', '.join(ratios)}")
+    return 0
+
+
+def run_x11(args: argparse.Namespace) -> int:
+    """The --x11 parent: a private Xvfb, one child with the X key reader and one without."""
+    read_fd, write_fd = os.pipe()
+    server = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1920x1200x24", "-nolisten", "tcp"],
+        pass_fds=(write_fd,),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    os.close(write_fd)
+    with os.fdopen(read_fd) as pipe:
+        display = ":" + pipe.readline().strip()
+    results: dict[str, list[Phase]] = {}
+    try:
+        with tempfile.TemporaryDirectory() as out:
+            for label, switch in (("the X key reader", "1"), ("Qt's key events only", "0")):
+                target = Path(out) / f"{switch}.json"
+                env = dict(os.environ, DISPLAY=display, QT_QPA_PLATFORM="xcb", OCU_X_KEYS=switch)
+                command = [sys.executable, os.path.abspath(__file__), "--x11"]
+                command += ["--trials", str(args.trials), "--hogs", str(args.hogs)]
+                command += ["--warmup", str(args.warmup), "--nice", str(args.nice)]
+                subprocess.run([*command, "--json", str(target)], env=env, check=True)
+                results[label] = [Phase(**p) for p in json.loads(target.read_text("utf-8"))]
+    finally:
+        server.terminate()
+        server.wait(10)
+    for label, phases in results.items():
+        report(f"real X key events, {label}", phases)
+    ours, theirs = results.values()
+    print("p99 ratios Qt's key events only / the X key reader:")
+    for a_phase, b_phase in zip(ours, theirs, strict=True):
+        ratios = []
+        for name in ("press_ms", "release_ms", "space_ms"):
+            a, b = getattr(a_phase, name), getattr(b_phase, name)
+            if a and b:
+                ratios.append(f"{name[:-3]} {percentile(b, 99) / percentile(a, 99):.2f}x")
+        print(f"  {a_phase.label}: {', '.join(ratios)}")
     return 0
 
 

@@ -22,10 +22,12 @@ does not use Qt's flag on presses at all.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
+from typing import cast
 
 from PySide6.QtCore import QEvent, QObject, Qt
 from PySide6.QtGui import QGuiApplication, QKeyEvent
@@ -35,7 +37,9 @@ from PySide6.QtWidgets import (
     QAbstractSpinBox,
     QApplication,
     QComboBox,
+    QDockWidget,
     QLineEdit,
+    QMainWindow,
     QPlainTextEdit,
     QTextEdit,
     QWidget,
@@ -43,8 +47,10 @@ from PySide6.QtWidgets import (
 
 from ocu import hotkeys
 from ocu.console.model import ConsoleModel
+from ocu.core.guard import Guarded
 from ocu.hotkeys import KeyMap
 from ocu.windows.held_keys import XKeymapProbe
+from ocu.windows.x_keys import XKeyReader
 
 log = logging.getLogger("ocu.keys")
 
@@ -285,6 +291,7 @@ class KeyFilter(QObject):
         parent: QObject | None = None,
         *,
         pressed_now: Callable[[], frozenset[str] | None] | None = None,
+        lock: threading.RLock | None = None,
     ) -> None:
         super().__init__(parent)
         self.model = model
@@ -299,12 +306,52 @@ class KeyFilter(QObject):
         self.guard = KeyGuard(pressed_now)
         self._active = False
         self._told: set[str] = set()  # keys the operator was told are ignored until released
+        # The motion keys and Space off the GUI thread, under X11 (ocu.windows.x_keys). Its
+        # handle on the model takes the lock but is no sign of the GUI thread's life.
+        self.x_reader: XKeyReader | None = None
+        if lock is not None and self.platform == "xcb":
+            self.x_reader = XKeyReader.open()
+            if self.x_reader is not None:
+                own = Guarded(cast(Guarded, model).unguarded, lock)
+                self.x_reader.start(own, key_map, lock)
+                QApplication.instance().focusChanged.connect(self._on_focus_widget)  # type: ignore[union-attr]
+
+    def shutdown(self) -> None:
+        """No key acts from now on: the X key reader stopped, the filter removed."""
+        reader, self.x_reader = self.x_reader, None
+        if reader is not None:
+            reader.stop()
+        app = QApplication.instance()
+        if app is not None:
+            app.removeEventFilter(self)
+
+    def _on_focus_widget(self, _old: QWidget | None, new: QWidget | None) -> None:
+        reader = self.x_reader
+        if reader is not None:
+            reader.set_typing(is_text_input(new))
+
+    def _publish_windows(self) -> None:
+        """Tell the X key reader which top-level windows are the console's own."""
+        reader = self.x_reader
+        if reader is None:
+            return
+        windows = {
+            int(widget.winId())
+            for widget in QApplication.topLevelWidgets()
+            if isinstance(widget, (QMainWindow, QDockWidget))
+            and widget.isVisible()
+            and self.owns(widget)
+        }
+        reader.set_windows(frozenset(windows))
 
     def eventFilter(self, watched: QObject, event: QEvent) -> bool:
         """Handle key presses and releases aimed at a widget of the console."""
         kind = event.type()
         if kind in _ACTIVATION_EVENTS:
             self._check_activation()
+            return False
+        if kind in _SHOW_EVENTS and isinstance(watched, QWidget) and watched.isWindow():
+            self._publish_windows()  # a floating dock, the main window shown
             return False
         if kind not in (QEvent.Type.KeyPress, QEvent.Type.KeyRelease):
             return False
@@ -315,6 +362,7 @@ class KeyFilter(QObject):
 
     def _check_activation(self) -> None:
         """Follow whether a console window has the keyboard (the guard's key state)."""
+        self._publish_windows()
         window = QApplication.activeWindow()
         active = window is not None and self.owns(window)
         if active and not self._active:
@@ -343,6 +391,17 @@ class KeyFilter(QObject):
         typing = is_text_input(receiver)
         if pressed and event.isAutoRepeat():
             log.debug("%s auto-repeat flagged by Qt", name)
+        reader = self.x_reader
+        if (
+            reader is not None
+            and (name == hotkeys.ESTOP_KEY or self.key_map.is_bound(name))
+            and not reader.taken.take(name, pressed, int(event.timestamp()))
+        ):
+            return self._acted_by_reader(name, event, pressed, typing)
+        if reader is not None and not event.isAutoRepeat():
+            log.debug(
+                "%s %s at %d (Qt)", name, "pressed" if pressed else "released", event.timestamp()
+            )
         if name == hotkeys.ESTOP_KEY:
             # Space always stops, wherever it is aimed, however long it was held and whatever
             # Qt says: its repeat flag can be a leftover of a release that went elsewhere
@@ -382,7 +441,20 @@ class KeyFilter(QObject):
             return False
         return hotkeys.press(self.model, self.key_map, name)
 
+    def _acted_by_reader(self, name: str, event: QKeyEvent, pressed: bool, typing: bool) -> bool:
+        """The X key reader acted on this event already: only the guard's bookkeeping."""
+        if name == hotkeys.ESTOP_KEY:
+            return True
+        timestamp_ms = int(event.timestamp())
+        if pressed:
+            self.guard.press(name, timestamp_ms, event.isAutoRepeat())
+        else:
+            self.guard.release(name, timestamp_ms, event.isAutoRepeat(), held=False)
+            self._told.discard(name)
+        return not typing
 
+
+_SHOW_EVENTS = (QEvent.Type.Show, QEvent.Type.Hide)
 _ACTIVATION_EVENTS = (
     QEvent.Type.WindowActivate,
     QEvent.Type.WindowDeactivate,

@@ -8,12 +8,11 @@ Where the docks go and what the settings remember: ocu.windows.layout.
 
 The window only wires: the link's events (through its Qt adapter) go into the console model,
 the model's command goes to the link, and the views subscribe to the model. Beside the
-operator: the video panel shows the link's cameras, a Recorder (if given) subscribes to every
-link the window makes, and the ROS toggle lets a ROS 1 planner drive through the model until
-the operator acts. Given a pad mapping, a game controller drives the robot too (the Gamepad
-dock, docs/gamepad.md): the window applies its focus policy. Given a replay (a read-only link)
-instead of a link factory, the same window replays a recording: REPLAY banner, command
-widgets disabled, no hotkeys, no pad, nothing sent.
+operator: the video panel shows the link's cameras, a Recorder (if given) records every link
+the window makes, the ROS toggle lets a ROS 1 planner drive through the model until it acts.
+A game controller drives too, given a pad mapping (docs/gamepad.md), under the window's focus
+policy. Given a replay (a read-only link) instead of a link factory, the same window replays
+a recording: REPLAY banner, command widgets disabled, no hotkeys, no pad, nothing sent.
 """
 
 from __future__ import annotations
@@ -333,7 +332,9 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         app = QApplication.instance()
         assert isinstance(app, QApplication)
         if replay is None:
-            self.key_filter = KeyFilter(self.model, self.key_map, self.owns, parent=self)
+            self.key_filter = KeyFilter(
+                self.model, self.key_map, self.owns, parent=self, lock=self.control.lock
+            )
             app.installEventFilter(self.key_filter)
         app.applicationStateChanged.connect(self._on_application_state)
         app.focusWindowChanged.connect(self._on_focus_window)
@@ -630,6 +631,8 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             return
         if self.gamepad is not None:
             self.gamepad.shutdown()  # no pad state arrives after the halt
+        if self.key_filter is not None:
+            self.key_filter.shutdown()  # no key acts after the halt either
         if self._calibration_panel is not None:
             self._calibration_panel.shutdown()  # its link's zeros before the window goes
         self.model.halt("console closed")
@@ -639,8 +642,6 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self.model_view.release()  # the 3D view's render thread ends with the window
         app = QApplication.instance()
         if isinstance(app, QApplication):
-            if self.key_filter is not None:
-                app.removeEventFilter(self.key_filter)
             app.applicationStateChanged.disconnect(self._on_application_state)
             app.focusWindowChanged.disconnect(self._on_focus_window)
         self._stop_link()  # the link's closing zeros land in a recording

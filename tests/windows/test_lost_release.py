@@ -36,12 +36,17 @@ OCU = (sys.executable, "-X", "faulthandler", "-m", "ocu")
 
 
 def start_ocu(env: dict[str, str], sim: RobotSimulator, log_path: Path) -> subprocess.Popen[bytes]:
-    """The real program on the X display of `env`, connected to `sim`, logging key events."""
+    """The real program on the X display of `env`, connected to `sim`, logging key events.
+
+    Qt's key path is what these tests are about: the X key reader (ocu.windows.x_keys,
+    tests/windows/test_x_keys.py), which acts before Qt and never sees auto-repeats, is off,
+    as it is where the X server has no XInput 2.2.
+    """
     host, port = sim.address
     with log_path.open("w") as log:
         return subprocess.Popen(
             [*OCU, "--robot", f"{host}:{port}", "--quit-after", "60", "--log-level", "DEBUG"],
-            env=env,
+            env={**env, "OCU_X_KEYS": "0"},
             stdout=subprocess.DEVNULL,
             stderr=log,
         )

@@ -1,0 +1,404 @@
+"""The motion keys off the GUI thread: XInput2 raw key events on an X connection of our own.
+
+A key event reaches Qt's key filter only when the GUI thread gets to it: after the paint it
+is in (the map, the plots, the video and the 3D view each take up to 25 ms on a loaded
+machine). The X server also reports every key to any client that asks for XInput2 *raw*
+events on the root window, at once and whatever window has the focus. `XKeyReader` asks for
+them on a connection of its own (libX11 and libXi through ctypes, the libraries Qt's xcb
+plugin and xdotool bring) and acts on them from its own thread, under the model's lock, as
+the control thread and the pad's thread do:
+
+- only while the X server's input focus is one of the console's own top-level windows (the
+  main window, a floating dock; a dialog is not one), which the GUI thread publishes
+  (`set_windows`), and while no text box has the keyboard focus (`set_typing`);
+- Space: the emergency stop;
+- the hold and Cartesian keys of the key map, pressed without Ctrl, Alt or Super: pressed
+  and released; a release is acted on wherever the focus is (a release only stops);
+- Shift: the fine speed.
+
+Raw events are the device's own: a key's auto-repeat makes none, and a key held before the
+console got the focus shows no press, so the reader never mistakes either for a press (what
+`ocu.windows.key_filter.KeyGuard` has to work out from Qt's events).
+
+Qt's key events still come, later. Whichever of the two sees an event first acts on it: both
+ask `take(key, pressed, server_time)` (the raw event and Qt's event carry the same X server
+time), and the one that loses only keeps its bookkeeping. Everything else — command keys,
+the help, Escape, typing, dialogs, a platform that is not X11, an X server without XInput2 —
+goes through Qt's key filter as before. `OCU_X_KEYS=0` turns the reader off (benchmarks
+compare the two paths).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import logging
+import os
+import select
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+from ocu import hotkeys
+from ocu.hotkeys import KeyMap
+from ocu.windows.held_keys import X_KEYCODE_OFFSET
+
+log = logging.getLogger("ocu.keys")
+
+ENV_SWITCH = "OCU_X_KEYS"
+GENERIC_EVENT = 35  # X11 GenericEvent
+XI_RAW_KEY_PRESS = 13
+XI_RAW_KEY_RELEASE = 14
+XI_ALL_MASTER_DEVICES = 1
+POINTER_ROOT = 1  # the input focus follows the pointer
+# X key codes (evdev + 8) of the modifiers: Shift sets the fine speed; with Ctrl, Alt or
+# Super down a key is a shortcut, left to Qt.
+SHIFT_CODES = frozenset({50, 62})
+SHORTCUT_CODES = frozenset({37, 105, 64, 108, 133, 134})
+# Events both paths remember, to tell who acted first (a few seconds of typing).
+TAKEN_KEPT = 256
+STARTED = "X key reader running"  # log line (tests wait on it)
+
+
+class _XGenericEventCookie(ctypes.Structure):
+    _fields_ = [
+        ("type", ctypes.c_int),
+        ("serial", ctypes.c_ulong),
+        ("send_event", ctypes.c_int),
+        ("display", ctypes.c_void_p),
+        ("extension", ctypes.c_int),
+        ("evtype", ctypes.c_int),
+        ("cookie", ctypes.c_uint),
+        ("data", ctypes.c_void_p),
+    ]
+
+
+class _XEvent(ctypes.Union):
+    _fields_ = [
+        ("type", ctypes.c_int),
+        ("cookie", _XGenericEventCookie),
+        ("pad", ctypes.c_long * 24),
+    ]
+
+
+class _XIValuatorState(ctypes.Structure):
+    _fields_ = [
+        ("mask_len", ctypes.c_int),
+        ("mask", ctypes.c_void_p),
+        ("values", ctypes.c_void_p),
+    ]
+
+
+class _XIRawEvent(ctypes.Structure):
+    _fields_ = [
+        ("type", ctypes.c_int),
+        ("serial", ctypes.c_ulong),
+        ("send_event", ctypes.c_int),
+        ("display", ctypes.c_void_p),
+        ("extension", ctypes.c_int),
+        ("evtype", ctypes.c_int),
+        ("time", ctypes.c_ulong),
+        ("deviceid", ctypes.c_int),
+        ("sourceid", ctypes.c_int),
+        ("detail", ctypes.c_int),
+        ("flags", ctypes.c_int),
+        ("valuators", _XIValuatorState),
+        ("raw_values", ctypes.c_void_p),
+    ]
+
+
+class _XIEventMask(ctypes.Structure):
+    _fields_ = [
+        ("deviceid", ctypes.c_int),
+        ("mask_len", ctypes.c_int),
+        ("mask", ctypes.POINTER(ctypes.c_ubyte)),
+    ]
+
+
+def _library(name: str, soname: str) -> ctypes.CDLL | None:
+    for candidate in (ctypes.util.find_library(name), soname):
+        if candidate:
+            try:
+                return ctypes.CDLL(candidate)
+            except OSError:
+                continue
+    return None
+
+
+def _declare(x11: ctypes.CDLL, xi: ctypes.CDLL) -> None:
+    vp, c_int = ctypes.c_void_p, ctypes.c_int
+    x11.XOpenDisplay.restype = vp
+    x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    x11.XCloseDisplay.argtypes = [vp]
+    x11.XDefaultRootWindow.restype = ctypes.c_ulong
+    x11.XDefaultRootWindow.argtypes = [vp]
+    x11.XConnectionNumber.argtypes = [vp]
+    x11.XQueryExtension.argtypes = [vp, ctypes.c_char_p, *([ctypes.POINTER(c_int)] * 3)]
+    x11.XPending.argtypes = [vp]
+    x11.XNextEvent.argtypes = [vp, ctypes.POINTER(_XEvent)]
+    x11.XGetEventData.argtypes = [vp, ctypes.POINTER(_XGenericEventCookie)]
+    x11.XFreeEventData.argtypes = [vp, ctypes.POINTER(_XGenericEventCookie)]
+    x11.XGetInputFocus.argtypes = [vp, ctypes.POINTER(ctypes.c_ulong), ctypes.POINTER(c_int)]
+    x11.XFlush.argtypes = [vp]
+    x11.XQueryPointer.argtypes = [
+        vp,
+        ctypes.c_ulong,
+        *([ctypes.POINTER(ctypes.c_ulong)] * 2),
+        *([ctypes.POINTER(c_int)] * 4),
+        ctypes.POINTER(ctypes.c_uint),
+    ]
+    xi.XIQueryVersion.argtypes = [vp, ctypes.POINTER(c_int), ctypes.POINTER(c_int)]
+    xi.XISelectEvents.argtypes = [vp, ctypes.c_ulong, ctypes.POINTER(_XIEventMask), c_int]
+
+
+class TakenEvents:
+    """Which key events were acted on, by server time: the first to `take` one acts on it."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._taken: OrderedDict[tuple[str, bool, int], None] = OrderedDict()
+
+    def take(self, key: str, pressed: bool, server_ms: int) -> bool:
+        """True for the first caller with this event, False for every later one."""
+        entry = (key, pressed, server_ms & 0xFFFFFFFF)
+        with self._lock:
+            if entry in self._taken:
+                return False
+            self._taken[entry] = None
+            while len(self._taken) > TAKEN_KEPT:
+                self._taken.popitem(last=False)
+            return True
+
+
+class XKeyReader:
+    """The reader of the module docstring: `open()`, then `start()`; `stop()` at the end."""
+
+    def __init__(self, x11: ctypes.CDLL, xi: ctypes.CDLL, display: int, opcode: int) -> None:
+        self._x11 = x11
+        self._xi = xi
+        self._display: int | None = display
+        self._opcode = opcode
+        self.taken = TakenEvents()
+        self.keys: RawKeys | None = None  # set by start()
+        self._windows: frozenset[int] = frozenset()
+        self._typing = False
+        self._wake_r, self._wake_w = os.pipe()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # ---- opening --------------------------------------------------------------------------
+
+    @classmethod
+    def open(cls, display_name: str | None = None) -> XKeyReader | None:
+        """A reader on `display_name` ($DISPLAY); None where raw key events cannot be had."""
+        if os.environ.get(ENV_SWITCH, "1") == "0":
+            log.info("X key reader off (%s=0): keys go through Qt's events", ENV_SWITCH)
+            return None
+        x11 = _library("X11", "libX11.so.6")
+        xi = _library("Xi", "libXi.so.6")
+        if x11 is None or xi is None:
+            log.info("no libX11/libXi: keys go through Qt's events only")
+            return None
+        try:
+            _declare(x11, xi)
+        except AttributeError:
+            return None
+        display = x11.XOpenDisplay(display_name.encode() if display_name else None)
+        if not display:
+            return None
+        opcode, event, error = ctypes.c_int(), ctypes.c_int(), ctypes.c_int()
+        major, minor = ctypes.c_int(2), ctypes.c_int(2)
+        if (
+            not x11.XQueryExtension(
+                display,
+                b"XInputExtension",
+                ctypes.byref(opcode),
+                ctypes.byref(event),
+                ctypes.byref(error),
+            )
+            or xi.XIQueryVersion(display, ctypes.byref(major), ctypes.byref(minor)) != 0
+        ):
+            x11.XCloseDisplay(display)
+            log.info("the X server has no XInput 2.2: keys go through Qt's events only")
+            return None
+        mask_bytes = (ctypes.c_ubyte * 4)()
+        for kind in (XI_RAW_KEY_PRESS, XI_RAW_KEY_RELEASE):
+            mask_bytes[kind // 8] |= 1 << (kind % 8)
+        mask = _XIEventMask(XI_ALL_MASTER_DEVICES, len(mask_bytes), mask_bytes)
+        xi.XISelectEvents(display, x11.XDefaultRootWindow(display), ctypes.byref(mask), 1)
+        x11.XFlush(display)
+        return cls(x11, xi, display, opcode.value)
+
+    # ---- what the GUI thread tells it ---------------------------------------------------------
+
+    def set_windows(self, windows: frozenset[int]) -> None:
+        """The console's top-level X windows (any thread)."""
+        self._windows = windows
+
+    def set_typing(self, typing: bool) -> None:
+        """Whether a text box has the keyboard focus (any thread)."""
+        self._typing = typing
+        if self.keys is not None:
+            self.keys.typing = typing
+
+    # ---- the thread ---------------------------------------------------------------------------
+
+    def start(self, model: Any, key_map: KeyMap, lock: Any) -> None:
+        """Act on `model` (a handle whose calls are safe from this thread) under `lock`."""
+        if self._thread is not None:
+            return
+        self.keys = RawKeys(model, key_map, lock)
+        self.keys.taken = self.taken
+        self.keys.typing = self._typing
+        self._thread = threading.Thread(target=self._run, name="ocu-x-keys", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the thread and close the connection (idempotent)."""
+        self._stop.set()
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"x")
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(2.0)
+        display, self._display = self._display, None
+        if display is not None and (thread is None or not thread.is_alive()):
+            self._x11.XCloseDisplay(display)
+            for fd in (self._wake_r, self._wake_w):
+                os.close(fd)
+
+    def _run(self) -> None:
+        display = self._display
+        assert display is not None
+        x11 = self._x11
+        fd = x11.XConnectionNumber(display)
+        event = _XEvent()
+        log.info(STARTED)
+        try:
+            while not self._stop.is_set():
+                while x11.XPending(display):
+                    x11.XNextEvent(display, ctypes.byref(event))
+                    self._dispatch(display, event)
+                if self._stop.is_set():
+                    break
+                select.select([fd, self._wake_r], [], [])
+        except Exception:
+            log.exception("the X key reader failed: keys go through Qt's events only")
+
+    def _dispatch(self, display: int, event: _XEvent) -> None:
+        cookie = event.cookie
+        if event.type != GENERIC_EVENT or cookie.extension != self._opcode:
+            return
+        if not self._x11.XGetEventData(display, ctypes.byref(cookie)):
+            return
+        try:
+            if cookie.evtype not in (XI_RAW_KEY_PRESS, XI_RAW_KEY_RELEASE):
+                return
+            raw = ctypes.cast(cookie.data, ctypes.POINTER(_XIRawEvent)).contents
+            pressed = cookie.evtype == XI_RAW_KEY_PRESS
+            code, server_ms = raw.detail, raw.time
+        finally:
+            self._x11.XFreeEventData(display, ctypes.byref(cookie))
+        keys = self.keys
+        if keys is None:
+            return
+        try:
+            keys.key(code, pressed, server_ms, self._focused(display))
+        except Exception:
+            log.exception("X key reader: key %d failed", code)
+
+    def _focused(self, display: int) -> bool:
+        focus, revert = ctypes.c_ulong(), ctypes.c_int()
+        self._x11.XGetInputFocus(display, ctypes.byref(focus), ctypes.byref(revert))
+        if focus.value == POINTER_ROOT:
+            # No window has the focus: keys go to the top-level window under the pointer.
+            root, child = ctypes.c_ulong(), ctypes.c_ulong()
+            xy = [ctypes.c_int() for _ in range(4)]
+            mask = ctypes.c_uint()
+            self._x11.XQueryPointer(
+                display,
+                self._x11.XDefaultRootWindow(display),
+                ctypes.byref(root),
+                ctypes.byref(child),
+                *(ctypes.byref(v) for v in xy),
+                ctypes.byref(mask),
+            )
+            focus = child
+        if focus.value not in self._windows:
+            log.debug("X focus 0x%x, not the console's %s", focus.value, sorted(self._windows))
+            return False
+        return True
+
+
+class RawKeys:
+    """What the reader does with one raw key event (Qt-free, no X: tests drive it directly).
+
+    `model` is a handle whose calls are safe from the reader's thread; every action also
+    holds `lock` (the model's), so one key is one step of the model.
+    """
+
+    def __init__(self, model: Any, key_map: KeyMap, lock: Any) -> None:
+        self.model = model
+        self.key_map = key_map
+        self.lock = lock
+        self.taken = TakenEvents()
+        self.typing = False  # a text box has the keyboard focus (the GUI thread sets it)
+        self._shortcut_down: set[int] = set()
+        self._shift_down: set[int] = set()
+        self.acted = 0  # events acted on
+        self.on_action: Callable[[str, bool], None] | None = None  # benchmarks' probe
+
+    def key(self, code: int, pressed: bool, server_ms: int, focused: bool) -> bool:
+        """Act on one raw key event (X key code); True if acted on."""
+        for codes, down in ((SHORTCUT_CODES, self._shortcut_down), (SHIFT_CODES, self._shift_down)):
+            if code in codes:
+                if pressed:
+                    down.add(code)
+                else:
+                    down.discard(code)
+        if code in SHIFT_CODES:
+            if focused and not self.typing:
+                with self.lock:
+                    hotkeys.set_fine(self.model, bool(self._shift_down))
+            return False
+        name = hotkeys.key_for_position(code - X_KEYCODE_OFFSET)
+        key_map = self.key_map
+        if name is None:
+            return False
+        motion = name in key_map.hold or name in key_map.cartesian
+        if name != hotkeys.ESTOP_KEY and not motion:
+            return False  # a command key: Qt's key filter
+        if not pressed:
+            # Wherever the focus is: a release only stops, whoever acted on the press.
+            if name == hotkeys.ESTOP_KEY:
+                return False
+            with self.lock:
+                held = name in self.model.held_keys
+            return held and self._act(name, pressed, server_ms)
+        if not focused or self.typing:
+            log.debug("%s left to Qt (%s)", name, "typing" if focused else "focus elsewhere")
+            return False
+        if name != hotkeys.ESTOP_KEY and self._shortcut_down:
+            return False
+        return self._act(name, pressed, server_ms)
+
+    def _act(self, name: str, pressed: bool, server_ms: int) -> bool:
+        if not self.taken.take(name, pressed, server_ms):
+            log.debug("%s at %d: Qt's key filter was first", name, server_ms)
+            return False
+        model, key_map = self.model, self.key_map
+        with self.lock:
+            if pressed:
+                hotkeys.press(model, key_map, name)
+            else:
+                hotkeys.release(model, key_map, name)
+        self.acted += 1
+        probe = self.on_action
+        if probe is not None:
+            probe(name, pressed)
+        log.debug(
+            "%s %s at %d (X key reader)", name, "pressed" if pressed else "released", server_ms
+        )
+        return True
