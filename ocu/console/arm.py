@@ -9,7 +9,8 @@ channel; a move (a pose goal, a stored pose) also stops for any other operator m
 In Cartesian mode the driving keys jog tool0 (the key map's [cartesian] table): forward/back,
 left/right, up/down and pitch, in the base, tool or camera frame, at the jog speeds (Shift:
 the fine fraction of them). Release = stop. A pose goal (x, y, z, pitch, typed or picked in
-the 3D view) is solved and its path checked first: the ghost shows it, Accept moves there.
+the 3D view; an arm of six joints or more takes the whole orientation: roll, pitch, yaw) is
+solved and its path checked first: the ghost shows it, Accept moves there.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ from ocu.control.arm import ArmController, ArmStatus
 from ocu.kinematics.analytic import BRANCHES
 from ocu.kinematics.arm import FRAMES, ArmError, ToolPose
 from ocu.kinematics.chain import Vector
+from ocu.kinematics.rpy import describe_pose
+from ocu.model.tree import Matrix
 
 JOG_AXES = ("x", "y", "z", "pitch")
 SPEED_STEP = 1.5  # faster / slower keys multiply or divide the jog speeds by this
@@ -162,6 +165,19 @@ class ArmConsole:
         """tool0 by the prediction (None before every arm joint has a reading)."""
         return self.controller.tool_pose(self.host.clock() if now is None else now)
 
+    @property
+    def whole_pose(self) -> bool:
+        """Whether a pose goal may give the whole orientation (an arm of six joints or more)."""
+        return self.kinematics.chain.dof >= 6
+
+    def tool_matrix(self, now: float | None = None) -> Matrix | None:
+        """tool0's whole pose (4x4 in the base frame) by the prediction (None: not known)."""
+        try:
+            current, _ = self.controller.estimate(self.host.clock() if now is None else now)
+        except ArmError:
+            return None
+        return self.kinematics.tool_matrix(current)
+
     # ---- settings ----------------------------------------------------------------------
 
     def set_cartesian(self, on: bool) -> None:
@@ -293,8 +309,12 @@ class ArmConsole:
 
     # ---- goals -------------------------------------------------------------------------
 
-    def preview_pose(self, target: ToolPose, elbow: str | None = None) -> ArmGoal:
-        """Solve a pose goal and check its path; the ghost shows it until Accept or Cancel."""
+    def preview_pose(self, target: ToolPose | Matrix, elbow: str | None = None) -> ArmGoal:
+        """Solve a pose goal and check its path; the ghost shows it until Accept or Cancel.
+
+        `target`: x, y, z and pitch (`ToolPose`), or for an arm of six joints or more the whole
+        pose of tool0 (4x4 in the base frame: position and orientation).
+        """
         if elbow is not None and elbow not in BRANCHES:
             raise ArmError(f"elbow must be one of {', '.join(BRANCHES)}")
         now = self.host.clock()
@@ -302,9 +322,13 @@ class ArmConsole:
             _, start = self.controller.estimate(now)
         except ArmError:
             start = None
-        q = self.kinematics.solve(target, elbow=elbow or self.elbow, current=start)
+        if isinstance(target, ToolPose):
+            q = self.kinematics.solve(target, elbow=elbow or self.elbow, current=start)
+            label = target.describe()
+        else:
+            q = self.kinematics.solve_matrix(target, current=start)
+            label = describe_pose(target)
         move = self.controller.plan_move(q, now)
-        label = target.describe()
         goal = ArmGoal(label, self.kinematics.mapping(q), self.kinematics.tool_pose(q),
                        move.duration_s)  # fmt: skip
         self._set_goal(goal)

@@ -1,5 +1,6 @@
 """The Arm dock and the status bar's arm indicator: Cartesian mode, jog frame and speeds, the
-tool's pose, pose goals (typed or picked in the 3D view, a ghost before Accept), stored poses.
+tool's pose, pose goals (typed or picked in the 3D view, a ghost before Accept; x, y, z and
+pitch, or for an arm of six joints or more x, y, z, roll, pitch, yaw), stored poses.
 
 A view of `ConsoleModel.arm` (ocu.console.arm): it subscribes to the arm's events and writes
 the operator's input back to it; nothing here moves the robot by itself.
@@ -28,6 +29,8 @@ from ocu.console.poses import PoseError
 from ocu.control.arm import OK, SLOW, STOP, ArmStatus
 from ocu.kinematics.analytic import BRANCHES
 from ocu.kinematics.arm import ArmError, ToolPose
+from ocu.kinematics.rpy import pose_from_rpy, rpy_of
+from ocu.model.tree import Matrix
 from ocu.widgets.number_box import NumberBox, NumberError, format_number
 from ocu.windows.velocity import ERROR_TEXT_STYLE
 
@@ -133,12 +136,18 @@ class ArmPanel(QWidget):
         layout.addWidget(self.status_label)
 
         # Pose goal.
-        goal_group = QGroupBox("Pose goal: tool0 in the base frame")
+        # Six joints or more (a UR): the whole orientation, as roll, pitch, yaw (ROS's RPY).
+        self.whole = arm.whole_pose
+        goal_group = QGroupBox(
+            "Pose goal: tool0 in the base frame"
+            + (" (roll, pitch, yaw about its fixed x, y, z)" if self.whole else "")
+        )
         goal_layout = QGridLayout(goal_group)
         self.goal_boxes: dict[str, NumberBox] = {}
-        fields = (("x", "mm"), ("y", "mm"), ("z", "mm"), ("pitch", "°"))
+        angles = ("roll", "pitch", "yaw") if self.whole else ("pitch",)
+        fields = (("x", "mm"), ("y", "mm"), ("z", "mm"), *((a, "°") for a in angles))
         for column, (name, unit) in enumerate(fields):
-            low, high = (-180.0, 180.0) if name == "pitch" else (-REACH_MM, REACH_MM)
+            low, high = (-180.0, 180.0) if unit == "°" else (-REACH_MM, REACH_MM)
             box = NumberBox(low, high, unit, 0 if unit == "mm" else 1)
             box.setObjectName(f"arm_goal_{name}")
             box.setFixedWidth(64)
@@ -165,7 +174,7 @@ class ArmPanel(QWidget):
                        self.cancel_button):  # fmt: skip
             button.setFocusPolicy(Qt.FocusPolicy.NoFocus)
             buttons.addWidget(button)
-        goal_layout.addLayout(buttons, 2, 0, 1, 4)
+        goal_layout.addLayout(buttons, 2, 0, 1, len(fields))
         pick_hint = QLabel("Ctrl+click in the 3D view picks x, y at the height typed in z.")
         pick_hint.setStyleSheet("color:#666;")
         goal_layout.addWidget(pick_hint, 3, 0, 1, 4)
@@ -252,15 +261,15 @@ class ArmPanel(QWidget):
         self.linear_box.setModified(False)
         self.pitch_box.setModified(False)
 
-    def goal_pose(self) -> ToolPose:
-        """The typed goal; NumberError (shown on its box) if one is not a number."""
+    def goal_pose(self) -> ToolPose | Matrix:
+        """The typed goal (the whole pose where the arm takes one); NumberError (shown on its
+        box) if one is not a number."""
         values = {name: box.value() for name, box in self.goal_boxes.items()}
-        return ToolPose(
-            values["x"] / 1000.0,
-            values["y"] / 1000.0,
-            values["z"] / 1000.0,
-            math.radians(values["pitch"]),
-        )
+        x, y, z = (values[axis] / 1000.0 for axis in "xyz")
+        if self.whole:
+            roll, pitch, yaw = (math.radians(values[a]) for a in ("roll", "pitch", "yaw"))
+            return pose_from_rpy((x, y, z), (roll, pitch, yaw))
+        return ToolPose(x, y, z, math.radians(values["pitch"]))
 
     def preview(self) -> ArmGoal | None:
         """Solve the typed goal and show it as a ghost."""
@@ -288,19 +297,25 @@ class ArmPanel(QWidget):
 
     def fill_from_tool(self) -> None:
         """The boxes take where tool0 is now."""
-        pose = self.arm.tool_pose()
+        pose = self.arm.tool_matrix() if self.whole else self.arm.tool_pose()
         if pose is None:
             self.show_error("tool0 unknown: no reading of every arm joint yet")
             return
         self.set_goal_boxes(pose)
 
-    def set_goal_boxes(self, pose: ToolPose) -> None:
+    def set_goal_boxes(self, pose: ToolPose | Matrix) -> None:
         """Show a pose in the goal boxes."""
-        values = {"x": pose.x * 1000, "y": pose.y * 1000, "z": pose.z * 1000,
-                  "pitch": math.degrees(pose.pitch)}  # fmt: skip
+        if isinstance(pose, ToolPose):
+            values = {"x": pose.x * 1000, "y": pose.y * 1000, "z": pose.z * 1000,
+                      "pitch": math.degrees(pose.pitch)}  # fmt: skip
+        else:
+            x, y, z = (float(v) * 1000 for v in pose[:3, 3])
+            roll, pitch, yaw = (math.degrees(v) for v in rpy_of(pose))
+            values = {"x": x, "y": y, "z": z, "roll": roll, "pitch": pitch, "yaw": yaw}
         for name, value in values.items():
-            self.goal_boxes[name].reset_value(value)
-            self.goal_boxes[name].setModified(True)
+            if name in self.goal_boxes:
+                self.goal_boxes[name].reset_value(value)
+                self.goal_boxes[name].setModified(True)
 
     def pick_height_m(self) -> float:
         """The height a pick in the 3D view lands on: the z box, else the tool's."""
@@ -313,6 +328,11 @@ class ArmPanel(QWidget):
 
     def on_point_picked(self, x_m: float, y_m: float, z_m: float) -> None:
         """A point picked in the 3D view: x, y (and z) into the boxes, then a preview."""
+        if self.whole and not all(self.goal_boxes[a].text().strip() for a in ("roll", "yaw")):
+            # The orientation the tool has now: a pick moves it, it does not turn it.
+            matrix = self.arm.tool_matrix()
+            if matrix is not None:
+                self.set_goal_boxes(matrix)
         for name, value in (("x", x_m * 1000), ("y", y_m * 1000), ("z", z_m * 1000)):
             self.goal_boxes[name].reset_value(value)
         if not self.goal_boxes["pitch"].text().strip():

@@ -8,6 +8,7 @@ Space brings the arm to rest; and the window shows only what a UR has.
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -16,6 +17,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 from PySide6.QtCore import QSettings, Qt
 from PySide6.QtTest import QTest
@@ -26,13 +28,14 @@ from ocu.core.hardware import HardwareComponent
 from ocu.gamepad.mapping import load_pad_mapping
 from ocu.hardware.ur import UR_CAPABILITIES, ur_component
 from ocu.hotkeys import HoldBinding, load_key_map
+from ocu.kinematics.rpy import angle_between, describe_pose, pose_from_rpy, rpy_of
 from ocu.link.base import Link
 from ocu.link.ur import UrLink
 from ocu.profile import RobotProfile
 from ocu.profile.ur import UrArmProfile, load_ur_profile
 from ocu.profile.ur_robot import ur_robot_profile
 from ocu.records import LinkState
-from ocu.sim.ur import UrSimulator
+from ocu.sim.ur import UrSimSnapshot, UrSimulator
 from ocu.windows.main_window import MainWindow, MissingCapabilityError
 from tests.windows.console_fixtures import DEADLINE_MS
 
@@ -129,6 +132,48 @@ def test_the_window_shows_what_a_ur_has_and_nothing_of_the_engineer(
     assert not window.nav_status.isVisible()
     joints = [window.joint_panel.table.cell_text(r, "joint") for r in range(6)]
     assert joints == list(load_ur_profile("ur5e").joint_names)
+
+
+def test_a_whole_pose_goal_typed_in_the_arm_dock_turns_the_tool_there(
+    ur_console: MainWindow, ur_sim: UrSimulator, qtbot: QtBot
+) -> None:
+    window = ur_console
+    panel = window.arm_panel
+    assert panel is not None
+    assert list(panel.goal_boxes) == ["x", "y", "z", "roll", "pitch", "yaw"]
+    arm = window.model.arm
+    assert arm is not None
+    qtbot.waitUntil(lambda: arm.tool_matrix() is not None, timeout=DEADLINE_MS)
+    panel.fill_from_tool()
+    start = panel.goal_pose()
+    assert isinstance(start, np.ndarray)
+    # 50 mm sideways, 80 mm down, the tool turned 25° about the base's z and tilted 10°.
+    roll, pitch, yaw = rpy_of(start)
+    goal = pose_from_rpy(
+        start[:3, 3] + (0.0, 0.05, -0.08), (roll + math.radians(10), pitch, yaw + math.radians(25))
+    )
+    panel.set_goal_boxes(goal)
+    typed = panel.goal_pose()  # as the boxes show it: mm and tenths of a degree
+    assert isinstance(typed, np.ndarray)
+    panel.accept()
+    assert "moving to x" in window.event_log.item(window.event_log.count() - 1).text()
+    kinematics = arm.kinematics
+
+    def there(state: UrSimSnapshot) -> bool:
+        reached = kinematics.tool_matrix(np.array(state.q))
+        return (
+            not any(state.qd)
+            and float(np.linalg.norm(reached[:3, 3] - typed[:3, 3])) < 0.001
+            and angle_between(reached, typed) < math.radians(0.2)
+        )
+
+    try:
+        qtbot.waitUntil(lambda: there(ur_sim.snapshot()), timeout=4 * DEADLINE_MS)
+    except AssertionError:
+        reached = kinematics.tool_matrix(np.array(ur_sim.snapshot().q))
+        raise AssertionError(
+            f"the UR simulator's tool0: {describe_pose(reached)}; typed {describe_pose(typed)}"
+        ) from None
 
 
 def test_the_engineer_keeps_its_own_key_map(profile: RobotProfile, arm: UrArmProfile) -> None:
