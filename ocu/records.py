@@ -401,6 +401,10 @@ class LinkStats:
     # Share of the commands (sequenced RCPs) sent over the last 30 s that the robot did not
     # apply, from its echo (ocu.link.stats.UplinkLossEstimator); None: no robot echo.
     uplink_loss: float | None = None
+    # A link that reconnects by itself (a UR's TCP): attempts that failed since the link was
+    # lost, and the seconds until the next one (None: connected, or it does not reconnect).
+    reconnect_failures: int = 0
+    next_attempt_in_s: float | None = None
 
     @classmethod
     def empty(cls, send_rate_hz: float = 0.0) -> LinkStats:

@@ -118,6 +118,7 @@ class UrLink(Link):
         self._last_valid_at: float | None = None
         self._connected_at: float | None = None
         self._attempt = 0
+        self._failures_since_lost = 0  # connection attempts failed since the last connection
         self._next_connect = clock()
         self._next_send = clock()
         self._next_stats = clock() + STATS_PERIOD_S
@@ -463,6 +464,7 @@ class UrLink(Link):
             with self._lock:
                 self._attempt += 1
                 self.failed_connects += 1
+                self._failures_since_lost += 1
                 wait = BACKOFF_S[min(self._attempt, len(BACKOFF_S) - 1)]
                 self._next_connect = self.clock() + wait
             log.info("UR controller %s: %s (next attempt in %.1f s)", self.host, err, wait)
@@ -508,7 +510,7 @@ class UrLink(Link):
             self._last_valid_at = now
             first = self._state is not LinkState.CONNECTED
             if first:
-                self._attempt = 0
+                self._attempt = self._failures_since_lost = 0
         if first:
             version = ".".join(map(str, connection.version))
             self._set_state(LinkState.CONNECTED, f"UR controller {version} at {self.host}")
@@ -627,6 +629,10 @@ class UrLink(Link):
                 send_rate_hz=self._rate_hz,
                 estop_latched=self._estop_latched,
                 delay_s=self._echo.delay_s,
+                reconnect_failures=self._failures_since_lost,
+                next_attempt_in_s=(
+                    None if connection is not None else max(0.0, self._next_connect - now)
+                ),
             )
 
     # ---- shutdown --------------------------------------------------------------------------

@@ -9,6 +9,8 @@ tooltips).
 
 from __future__ import annotations
 
+import time
+
 from PySide6.QtCore import QEvent, QTimer
 from PySide6.QtGui import QResizeEvent
 from PySide6.QtWidgets import QGridLayout, QHBoxLayout, QLabel, QWidget
@@ -75,6 +77,7 @@ class LinkStatus(QWidget):
         # What the state label shows: the model's state as of the last refresh on the GUI
         # thread (the control thread changes the model's first; its event follows).
         self._shown_state = model.robot.link_state
+        self._reconnect: tuple[int, float] | None = None  # (failures, next attempt at)
         layout = QHBoxLayout(self)
         layout.setContentsMargins(2, 2, 2, 2)
         layout.setSpacing(6)
@@ -180,6 +183,14 @@ class LinkStatus(QWidget):
 
     def on_stats(self, stats: LinkStats) -> None:
         """New counters and rates."""
+        # A link that reconnects by itself (a UR): its next attempt, counted down between
+        # two snapshots by the age refresh.
+        self._reconnect = (
+            None
+            if stats.next_attempt_in_s is None
+            else (stats.reconnect_failures, time.monotonic() + stats.next_attempt_in_s)
+        )
+        self._refresh_state()
         self.rates_label.setText(
             f"RCP {stats.rcp_rate_hz:.1f} Hz · telemetry {stats.telemetry_rate_hz:.1f} Hz"
             f" · video {stats.video_rate_hz:.0f} fps"
@@ -242,7 +253,15 @@ class LinkStatus(QWidget):
             self.state_label.setStyleSheet(style)
         self.state_label.setText(STATE_TEXT[state])
         age = self.model.robot.telemetry_age()
-        if age is None:
+        reconnect = self._reconnect if state is not LinkState.CONNECTED else None
+        if reconnect is not None and state is not LinkState.CLOSED:
+            failures, next_at = reconnect
+            tried = (
+                f" · {failures} attempt{'s' if failures != 1 else ''} failed" if failures else ""
+            )
+            wait_s = max(0.0, next_at - time.monotonic())
+            self.age_label.setText(f"reconnecting{tried} · next in {wait_s:.1f} s")
+        elif age is None:
             self.age_label.setText("no telemetry yet")
         else:
             self.age_label.setText(f"telemetry {age:.1f} s ago")

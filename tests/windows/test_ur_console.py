@@ -176,6 +176,19 @@ def test_a_whole_pose_goal_typed_in_the_arm_dock_turns_the_tool_there(
         ) from None
 
 
+def test_the_status_bar_counts_the_reconnection_attempts_of_a_lost_ur(
+    ur_console: MainWindow, ur_sim: UrSimulator, qtbot: QtBot
+) -> None:
+    window = ur_console
+    assert window.link_status.age_label.text().startswith("telemetry")
+    ur_sim.stop()  # the controller goes away: its ports refuse from now on
+    qtbot.waitUntil(lambda: window.link_status.state == LinkState.LOST, timeout=DEADLINE_MS)
+    text = window.link_status.age_label.text
+    qtbot.waitUntil(lambda: "2 attempts failed" in text(), timeout=4 * DEADLINE_MS)
+    assert text().startswith("reconnecting · 2 attempts failed · next in ")
+    assert window.link_status.state_label.text() == "LINK LOST"
+
+
 def test_the_engineer_keeps_its_own_key_map(profile: RobotProfile, arm: UrArmProfile) -> None:
     assert load_key_map(profile).hold["Y"] == HoldBinding("shoulder", 1)
     assert load_key_map(ur_robot_profile(arm)).hold["Y"] == HoldBinding("shoulder_lift_joint", 1)
