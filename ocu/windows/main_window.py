@@ -636,7 +636,6 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         if self._calibration_panel is not None:
             self._calibration_panel.shutdown()  # its link's zeros before the window goes
         self.model.halt("console closed")
-        self.save_layout()
         self.control.shutdown()
         self._view_timer.stop()
         self.model_view.release()  # the 3D view's render thread ends with the window
@@ -645,6 +644,7 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             app.applicationStateChanged.disconnect(self._on_application_state)
             app.focusWindowChanged.disconnect(self._on_focus_window)
         self._stop_link()  # the link's closing zeros land in a recording
+        self.save_layout()  # after the link: a disk that stalls a sync delays no stop
         self.ros.shutdown()
         if self.record_button is not None:
             self.record_button.stop_recording()
