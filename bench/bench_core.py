@@ -360,6 +360,52 @@ def time_paints() -> None:
         setattr(cls, "paintEvent", timed)  # noqa: B010
 
 
+READER: dict[str, list[float]] = {}
+
+
+def time_reader() -> None:
+    """Time the X key reader's steps (a diagnosis: `--reader-times`): the event's age when the
+    reader has it (against the X server's clock, from the first event), the focus query, the
+    model's lock and the action."""
+    from ocu.windows import x_keys
+
+    dispatch = x_keys.XKeyReader._dispatch
+    focused = x_keys.XKeyReader._focused
+    act = x_keys.RawKeys._act
+
+    def timed_dispatch(self: x_keys.XKeyReader, display: int, event: object) -> None:
+        started = time.perf_counter()
+        dispatch(self, display, event)  # type: ignore[arg-type]
+        READER.setdefault("dispatch (all of it)", []).append(1000 * (time.perf_counter() - started))
+
+    def timed_focused(self: x_keys.XKeyReader, display: int) -> bool:
+        started = time.perf_counter()
+        result = focused(self, display)
+        READER.setdefault("focus query", []).append(1000 * (time.perf_counter() - started))
+        return result
+
+    def timed_act(self: x_keys.RawKeys, name: str, pressed: bool, server_ms: int) -> bool:
+        started = time.perf_counter()
+        result = act(self, name, pressed, server_ms)
+        READER.setdefault("act (lock, model, link)", []).append(
+            1000 * (time.perf_counter() - started)
+        )
+        return result
+
+    x_keys.XKeyReader._dispatch = timed_dispatch  # type: ignore[method-assign]
+    x_keys.XKeyReader._focused = timed_focused  # type: ignore[method-assign]
+    x_keys.RawKeys._act = timed_act  # type: ignore[method-assign]
+
+
+def report_reader() -> None:
+    print("X key reader steps (ms): step: count, p50, p99, max")
+    for name, times in READER.items():
+        print(
+            f"  {name}: {len(times)}, {percentile(times, 50):.2f}, {percentile(times, 99):.2f}, "
+            f"{max(times):.2f}"
+        )
+
+
 def report_paints() -> None:
     print("paints on the GUI thread (ms): class: count, p50, p99, max")
     for name, times in sorted(PAINTS.items(), key=lambda kv: -max(kv[1])):
@@ -487,6 +533,11 @@ def main() -> int:
         "--paint-times", action="store_true", help="also time every paint (a diagnosis)"
     )
     parser.add_argument(
+        "--reader-times",
+        action="store_true",
+        help="with --x11: also time the X key reader's steps (a diagnosis)",
+    )
+    parser.add_argument(
         "--x11",
         action="store_true",
         help="real key events through a private Xvfb: with the X key reader and without",
@@ -509,9 +560,13 @@ def main() -> int:
         return run_x11(args)
     if args.paint_times:
         time_paints()
+    if args.reader_times:
+        time_reader()
     phases = measure(args)
     if args.paint_times:
         report_paints()
+    if args.reader_times:
+        report_reader()
     if args.json:
         Path(args.json).write_text(json.dumps([asdict(p) for p in phases]), encoding="utf-8")
         return 0
@@ -573,6 +628,7 @@ def run_x11(args: argparse.Namespace) -> int:
                 command = [sys.executable, os.path.abspath(__file__), "--x11"]
                 command += ["--trials", str(args.trials), "--hogs", str(args.hogs)]
                 command += ["--warmup", str(args.warmup), "--nice", str(args.nice)]
+                command += ["--reader-times"] if args.reader_times and switch == "1" else []
                 subprocess.run([*command, "--json", str(target)], env=env, check=True)
                 results[label] = [Phase(**p) for p in json.loads(target.read_text("utf-8"))]
     finally:
