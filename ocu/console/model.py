@@ -493,7 +493,8 @@ class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoReques
         planner the operator watches in rviz goes on, and so does the pad when
         `pad_background`: its deadman is held and its mapping lets it drive in the
         background, docs/gamepad.md), "GUI silent" (what the GUI feeds stops; position
-        targets, the arm's moves, the pad and planners go on), "LINK LOST". None: every
+        targets, the arm's moves, the pad and planners go on), "LINK LOST", "robot stop" (the
+        robot's controller refuses motion). None: every
         source stops (the window hidden or closed, a disconnect, a stalled control thread,
         the link's own stops).
         """

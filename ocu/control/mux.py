@@ -22,13 +22,14 @@ docs/console.md, "Who commands a channel"), read once at import. A row per sourc
   manual sources (it is one); for the others what it does to them, written as for a lock.
   Whatever this column says, an automatic source or a planner yields a channel to manual
   input on that channel (the priorities).
-- **locks** (`focus lost`, `GUI silent`, `LINK LOST`, `e-stop`): `stops`, `keeps`, or
+- **locks** (`focus lost`, `GUI silent`, `LINK LOST`, `robot stop` - the robot's own
+  controller refuses motion, a UR's protective stop -, `e-stop`): `stops`, `keeps`, or
   `keeps if <condition>` - a condition the model evaluates when the lock comes
   (`background`: the pad's mapping lets it drive in the background, docs/gamepad.md;
   `external`: the assisted mode was started by a planner; `a move`: the arm moves to a goal,
   `a jog`: it jogs under the operator's keys). Nothing resumes by itself after a lock: a
-  stopped source needs new input. The e-stop and LINK LOST columns must say `stops` for every
-  source; the table is refused otherwise.
+  stopped source needs new input. The e-stop, robot stop and LINK LOST columns must say
+  `stops` for every source; the table is refused otherwise.
 
 A new source is one file (its input and its stop, calling `ConsoleModel.set_source_velocities`)
 plus one registration line (`Source.define` and `model.mux.register`) and its row here.
@@ -44,10 +45,10 @@ from pathlib import Path
 TABLE_PATH = Path(__file__).with_name("mux.md")
 
 KINDS = ("manual", "automatic", "planner")
-LOCKS = ("focus lost", "GUI silent", "LINK LOST", "e-stop")
+LOCKS = ("focus lost", "GUI silent", "LINK LOST", "robot stop", "e-stop")
 OPERATOR = "any operator input"
 # Locks every source must stop for (the safety rules: README, docs/console.md "Stopping").
-HARD_LOCKS = ("LINK LOST", "e-stop")
+HARD_LOCKS = ("LINK LOST", "robot stop", "e-stop")
 CONDITIONS = ("background", "external", "a move", "a jog")
 FEEDERS = ("gui", "pad", "ros", "-")
 COLUMNS = ("source", "kind", "priority", "timeout", OPERATOR, *LOCKS)

@@ -113,6 +113,10 @@ def feed(model: ConsoleModel, event: LinkEvent) -> None:
             model.halt("link lost")
     elif isinstance(event, RobotModeReport):
         model.robot.on_robot_mode(event)
+        if not event.may_move:
+            # The mux's "robot stop" lock: every source stops; nothing resumes when the
+            # controller takes motion again (ocu/control/mux.md).
+            model.halt(f"robot controller: {event.text}", lock="robot stop")
     elif isinstance(event, SafetyEvent):
         # The link zeroed the command by itself: the model agrees, nothing resumes.
         model.halt(event.message)

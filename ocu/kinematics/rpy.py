@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ocu.kinematics.chain import Vector
 from ocu.model.tree import Matrix
 
 # Below this the pitch is taken as ±90° (gimbal lock): roll and yaw turn about the same
@@ -20,7 +21,7 @@ from ocu.model.tree import Matrix
 GIMBAL_EPS = 1e-9
 
 
-def pose_from_rpy(position: Sequence[float], rpy: Sequence[float]) -> Matrix:
+def pose_from_rpy(position: Sequence[float] | Vector, rpy: Sequence[float]) -> Matrix:
     """The 4x4 pose: position (x, y, z m) and roll, pitch, yaw (rad) about the fixed x, y, z
     axes."""
     roll, pitch, yaw = (float(v) for v in rpy)

@@ -72,6 +72,7 @@ def test_the_shipped_rules() -> None:
     always = lambda source, condition: True  # noqa: E731
     assert mux.stopped_by("e-stop", always) == list(mux.sources)
     assert mux.stopped_by("LINK LOST", always) == list(mux.sources)
+    assert mux.stopped_by("robot stop", always) == list(mux.sources)
     assert "ros" not in mux.stopped_by("focus lost", never)
     assert "gamepad" in mux.stopped_by("focus lost", never)
     assert "gamepad" not in mux.stopped_by("focus lost", always)
@@ -97,7 +98,11 @@ def test_the_shipped_rules() -> None:
         (with_cell("slider", OPERATOR, "stops"), r"'slider', column any operator input"),
         (with_cell("ros", "timeout", "-1"), r"'ros', column timeout: gui, pad, ros, - or"),
         (with_cell("ros", "timeout", "nan"), r"'ros', column timeout"),
-        (SHIPPED + "| ros | planner | 1 | ros | stops | keeps | keeps | stops | stops |", "second"),
+        (
+            SHIPPED + "| ros | planner | 1 | ros | stops | keeps | keeps | stops | stops | stops |",
+            "second",
+        ),
+        (with_cell("ros", "robot stop", "keeps"), r"'ros', column robot stop: every source"),
         (SHIPPED + "| x | planner | 1 | ros | stops |\n", r"table row 11: 5 cells"),
     ],
 )
@@ -146,7 +151,7 @@ def test_a_silent_gui_stops_what_it_feeds_and_nothing_else(profile: RobotProfile
 
 # ---- a new source: one class, one registration line, one row ------------------------------
 
-REMOTE_ROW = "| remote | planner | 1 | 0.3 | stops | keeps | stops | stops | stops |\n"
+REMOTE_ROW = "| remote | planner | 1 | 0.3 | stops | keeps | stops | stops | stops | stops |\n"
 
 
 class RemoteTeleop:
@@ -210,3 +215,25 @@ def test_a_new_source_plugs_in_with_a_row_and_a_registration(profile: RobotProfi
     assert model.velocities() == {}
     with pytest.raises(ValueError, match="no manual source"):
         model.set_source_velocities(Source.SLIDER, {"waist": 0.1})
+
+
+def test_the_robots_own_stop_is_a_lock_every_source_obeys(profile: RobotProfile) -> None:
+    """A RobotModeReport that refuses motion (a UR's protective stop) halts every source
+    through the mux's "robot stop" column, and nothing resumes when it clears."""
+    from ocu.core.feed import feed
+    from ocu.records import RobotModeReport
+
+    model = ConsoleModel(profile)
+    model.set_target("shoulder", 0.5)  # an automatic source
+    model.hotkey_down("Q", "waist", 1)  # the operator's hands
+    model.set_external_velocities({"neck": 0.1})  # a planner (ROS), after them
+    assert set(model.velocities()) >= {"neck", "waist"}
+    feed(model, RobotModeReport("RUNNING", "PROTECTIVE_STOP", False, ("protective stop",)))
+    assert model.velocities() == {}
+    assert not model.targets
+    assert not model.held_keys
+    assert model.robot.robot_mode is not None
+    assert not model.robot.robot_mode.may_move
+    feed(model, RobotModeReport("RUNNING", "NORMAL", True))
+    model.update()
+    assert model.velocities() == {}  # nothing resumed

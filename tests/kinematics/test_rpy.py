@@ -42,7 +42,8 @@ def test_the_rotation_is_tf2s_and_its_angles_come_back(
 def test_gimbal_lock_and_a_plain_description() -> None:
     pose = pose_from_rpy((0.5, 0, 0.25), (0.4, math.pi / 2, 0.1))
     roll, pitch, yaw = rpy_of(pose)
-    assert math.isclose(pitch, math.pi / 2) and roll == 0.0
+    assert math.isclose(pitch, math.pi / 2)
+    assert roll == 0.0
     assert angle_between(pose, pose_from_rpy((0, 0, 0), (roll, pitch, yaw))) < 1e-9
     tool_down = pose_from_rpy((0.512, -0.003, 0.28), (math.pi, 0, -math.pi / 2))
     assert describe_pose(tool_down) == "x 512 y -3 z 280 mm, roll 180.0° pitch 0.0° yaw -90.0°"
