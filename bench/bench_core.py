@@ -50,6 +50,8 @@ from PySide6.QtCore import QCoreApplication, QEvent, QObject, QSettings, Qt, QTi
 from PySide6.QtGui import QKeyEvent
 from PySide6.QtWidgets import QApplication
 
+from ocu.gamepad.mapping import load_pad_mapping
+from ocu.gamepad.virtual import VirtualPad
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile, load_profile
 from ocu.protocol import RemoteControlPacket
@@ -67,6 +69,8 @@ FPS = 30
 SIZE_PX = (640, 480)
 HOG = "while True: pass"
 SLOW_QUEUE_S = 0.010
+# Left stick positions that drive forward above the servos' starting speed (bench_gamepad).
+STICK_SPEEDS = (-26214, -29491, -32768)
 SLOW_QUEUES: list[tuple[float, float]] = []  # (posted, dispatched) of keys that waited long
 
 
@@ -140,6 +144,10 @@ class Phase:
     press_ms: list[float] = field(default_factory=list)
     release_ms: list[float] = field(default_factory=list)
     space_ms: list[float] = field(default_factory=list)
+    # The left stick (deadman held): moved to a driving speed -> the first RCP driving; back
+    # to rest -> the first RCP with the drive at zero.
+    stick_ms: list[float] = field(default_factory=list)
+    stick_release_ms: list[float] = field(default_factory=list)
     # Of every trial: the key posted -> the GUI thread dispatching it.
     dispatch_ms: list[float] = field(default_factory=list)
     cpu_percent: float = 0.0
@@ -224,6 +232,7 @@ def run_phase(
     trials: int,
     seed: int,
     x11: XTestKeys | None = None,
+    pad: VirtualPad | None = None,
 ) -> Phase:
     """`trials` key trials; through the X server with `x11`, else posted to Qt's queue."""
 
@@ -257,12 +266,33 @@ def run_phase(
             post_key(window, Qt.Key.Key_Space, False, " ")
             post_key(window, Qt.Key.Key_W, False, "w")
             wait(app, 0.05)
+            if pad is not None:
+                # After an e-stop the pad acts again only on a fresh press of its deadman.
+                pad.set_button("leftshoulder", False)
+                wait(app, 0.05)
+                pad.set_button("leftshoulder", True)
+                deadline = time.monotonic() + WAIT_S
+                while not window.teleop.engaged and time.monotonic() < deadline:
+                    wait(app, 0.01)
             continue
         released = probe.arm("drive zero")
         post_key(window, Qt.Key.Key_W, False, "w")
         at = until(app, probe, phase)
         if at is not None:
             phase.release_ms.append(1000 * (at - released))
+        if pad is not None:
+            wait(app, rng.uniform(0.005, 0.15))
+            moved = probe.arm("moving")
+            pad.set_axis("lefty", rng.choice(STICK_SPEEDS))
+            at = until(app, probe, phase)
+            if at is not None:
+                phase.stick_ms.append(1000 * (at - moved))
+            wait(app, rng.uniform(0.03, 0.12))
+            rested = probe.arm("drive zero")
+            pad.set_axis("lefty", 0)
+            at = until(app, probe, phase)
+            if at is not None:
+                phase.stick_release_ms.append(1000 * (at - rested))
     elapsed = time.monotonic() - t0
     phase.cpu_percent = 100 * (cpu_s() - cpu0) / elapsed
     phase.model_fps = (window.model_view.frames_rendered - renders0) / elapsed
@@ -437,8 +467,12 @@ def measure(args: argparse.Namespace) -> list[Phase]:
             link.subscribe(probe.on_event)
             return link
 
-        extra = {"control_hz": args.control_hz} if args.control_hz else {}
-        window = MainWindow(profile, make_link, "simulator", settings, **extra)
+        extra: dict[str, object] = {"control_hz": args.control_hz} if args.control_hz else {}
+        pad = VirtualPad() if not args.no_pad else None
+        if pad is not None:
+            pad.__enter__()
+            extra["pad_mapping"] = load_pad_mapping(profile)
+        window = MainWindow(profile, make_link, "simulator", settings, **extra)  # type: ignore[arg-type]
         window.resize(*WINDOW_SIZE)
         window.show()
         window.activateWindow()
@@ -449,6 +483,14 @@ def measure(args: argparse.Namespace) -> list[Phase]:
         deadline = time.monotonic() + 10.0
         while window.link_status.state != LinkState.CONNECTED and time.monotonic() < deadline:
             wait(app, 0.05)
+        if pad is not None:
+            deadline = time.monotonic() + 10.0
+            while window.teleop.info is None and time.monotonic() < deadline:
+                wait(app, 0.05)
+            pad.set_button("leftshoulder", True)  # the deadman, held for the whole run
+            while not window.teleop.engaged and time.monotonic() < deadline:
+                wait(app, 0.05)
+            print(f"pad engaged: {window.teleop.engaged}")
         window.video_panel.set_grid(True)
         window.map_dock.setFloating(True)
         window.map_dock.show()
@@ -473,13 +515,22 @@ def measure(args: argparse.Namespace) -> list[Phase]:
             wait(app, 1.0)
             print(f"X key reader: {window.key_filter.x_reader is not None}")  # type: ignore[union-attr]
         sampler = GuiSampler() if args.sample_gui else None
-        phases.append(run_phase(app, window, probe, "idle", trials=args.trials, seed=1, x11=x11))
+        phases.append(
+            run_phase(app, window, probe, "idle", trials=args.trials, seed=1, x11=x11, pad=pad)
+        )
         procs = hogs(args.hogs)
         try:
             wait(app, 1.0)
             phases.append(
                 run_phase(
-                    app, window, probe, f"{args.hogs} hogs", trials=args.trials, seed=2, x11=x11
+                    app,
+                    window,
+                    probe,
+                    f"{args.hogs} hogs",
+                    trials=args.trials,
+                    seed=2,
+                    x11=x11,
+                    pad=pad,
                 )
             )
         finally:
@@ -494,6 +545,8 @@ def measure(args: argparse.Namespace) -> list[Phase]:
         window.close()
         window.shutdown()
         app.processEvents()
+        if pad is not None:
+            pad.__exit__(None, None, None)
     return phases
 
 
@@ -507,6 +560,8 @@ def report(title: str, phases: list[Phase]) -> None:
         print(phase.line("W press -> RCP", phase.press_ms))
         print(phase.line("release -> zero", phase.release_ms))
         print(phase.line("Space -> zeros", phase.space_ms))
+        print(phase.line("stick -> RCP", phase.stick_ms))
+        print(phase.line("stick rest -> zero", phase.stick_release_ms))
         print(phase.line("(of which queued)", phase.dispatch_ms))
 
 
@@ -541,6 +596,9 @@ def main() -> int:
         "--x11",
         action="store_true",
         help="real key events through a private Xvfb: with the X key reader and without",
+    )
+    parser.add_argument(
+        "--no-pad", action="store_true", help="no virtual game controller, no stick trials"
     )
     parser.add_argument("--json", help="write the phases here (the baseline's child run)")
     parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
@@ -599,7 +657,7 @@ def main() -> int:
         print("p99 ratios baseline / this tree:")
         for ours, theirs in zip(phases, base, strict=True):
             ratios = []
-            for name in ("press_ms", "release_ms", "space_ms"):
+            for name in ("press_ms", "release_ms", "space_ms", "stick_ms", "stick_release_ms"):
                 a, b = getattr(ours, name), getattr(theirs, name)
                 if a and b:
                     ratios.append(f"{name[:-3]} {percentile(b, 99) / percentile(a, 99):.2f}x")
@@ -640,7 +698,7 @@ def run_x11(args: argparse.Namespace) -> int:
     print("p99 ratios Qt's key events only / the X key reader:")
     for a_phase, b_phase in zip(ours, theirs, strict=True):
         ratios = []
-        for name in ("press_ms", "release_ms", "space_ms"):
+        for name in ("press_ms", "release_ms", "space_ms", "stick_ms", "stick_release_ms"):
             a, b = getattr(a_phase, name), getattr(b_phase, name)
             if a and b:
                 ratios.append(f"{name[:-3]} {percentile(b, 99) / percentile(a, 99):.2f}x")
