@@ -117,11 +117,18 @@ class _XIEventMask(ctypes.Structure):
     ]
 
 
-def _library(name: str, soname: str) -> ctypes.CDLL | None:
+def _library(name: str, soname: str, *, holding_gil: bool = False) -> ctypes.CDLL | None:
+    """The library; with `holding_gil` its functions are called holding the GIL
+    (ctypes.PyDLL). The reader's local calls (taking an event already read, its data) are
+    short, and a call that let go of the GIL would wait for it again afterwards, behind
+    whichever thread got it meanwhile (up to Python's switch interval each time, several
+    times per key). Its round trips to the server (the focus, the pointer) let go of it: a
+    slow or remote X server must not hold up the control thread."""
+    kind = ctypes.PyDLL if holding_gil else ctypes.CDLL
     for candidate in (ctypes.util.find_library(name), soname):
         if candidate:
             try:
-                return ctypes.CDLL(candidate)
+                return kind(candidate)
             except OSError:
                 continue
     return None
@@ -177,6 +184,7 @@ class XKeyReader:
 
     def __init__(self, x11: ctypes.CDLL, xi: ctypes.CDLL, display: int, opcode: int) -> None:
         self._x11 = x11
+        self._events = x11  # open(): the same library, its calls holding the GIL
         self._xi = xi
         self._display: int | None = display
         self._opcode = opcode
@@ -196,13 +204,15 @@ class XKeyReader:
         if os.environ.get(ENV_SWITCH, "1") == "0":
             log.info("X key reader off (%s=0): keys go through Qt's events", ENV_SWITCH)
             return None
+        events = _library("X11", "libX11.so.6", holding_gil=True)  # the reader's local calls
         x11 = _library("X11", "libX11.so.6")
         xi = _library("Xi", "libXi.so.6")
-        if x11 is None or xi is None:
+        if x11 is None or xi is None or events is None:
             log.info("no libX11/libXi: keys go through Qt's events only")
             return None
         try:
             _declare(x11, xi)
+            _declare(events, xi)
         except AttributeError:
             return None
         display = x11.XOpenDisplay(display_name.encode() if display_name else None)
@@ -229,7 +239,9 @@ class XKeyReader:
         mask = _XIEventMask(XI_ALL_MASTER_DEVICES, len(mask_bytes), mask_bytes)
         xi.XISelectEvents(display, x11.XDefaultRootWindow(display), ctypes.byref(mask), 1)
         x11.XFlush(display)
-        return cls(x11, xi, display, opcode.value)
+        reader = cls(x11, xi, display, opcode.value)
+        reader._events = events
+        return reader
 
     # ---- what the GUI thread tells it ---------------------------------------------------------
 
@@ -272,14 +284,14 @@ class XKeyReader:
     def _run(self) -> None:
         display = self._display
         assert display is not None
-        x11 = self._x11
-        fd = x11.XConnectionNumber(display)
+        events = self._events
+        fd = events.XConnectionNumber(display)
         event = _XEvent()
         log.info(STARTED)
         try:
             while not self._stop.is_set():
-                while x11.XPending(display):
-                    x11.XNextEvent(display, ctypes.byref(event))
+                while events.XPending(display):
+                    events.XNextEvent(display, ctypes.byref(event))
                     self._dispatch(display, event)
                 if self._stop.is_set():
                     break
@@ -291,7 +303,7 @@ class XKeyReader:
         cookie = event.cookie
         if event.type != GENERIC_EVENT or cookie.extension != self._opcode:
             return
-        if not self._x11.XGetEventData(display, ctypes.byref(cookie)):
+        if not self._events.XGetEventData(display, ctypes.byref(cookie)):
             return
         try:
             if cookie.evtype not in (XI_RAW_KEY_PRESS, XI_RAW_KEY_RELEASE):
@@ -300,7 +312,7 @@ class XKeyReader:
             pressed = cookie.evtype == XI_RAW_KEY_PRESS
             code, server_ms = raw.detail, raw.time
         finally:
-            self._x11.XFreeEventData(display, ctypes.byref(cookie))
+            self._events.XFreeEventData(display, ctypes.byref(cookie))
         keys = self.keys
         if keys is None:
             return
