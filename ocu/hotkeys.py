@@ -26,13 +26,16 @@ USER_KEY_MAP_NAME = "hotkeys.toml"
 ESTOP_KEY = "Space"
 CLOSE_HELP_KEY = "Escape"
 TABLES = ("options", "hold", "commands", "cartesian")
-# What a [cartesian] key moves: tool0 along an axis of the jog frame, or its pitch.
-CARTESIAN_AXES = ("x", "y", "z", "pitch")
+# What a [cartesian] key moves: tool0 along an axis of the jog frame, or its pitch; an arm of
+# six joints or more also turns it about the frame's x (roll) and z (yaw), pitch being y.
+CARTESIAN_AXES = ("x", "y", "z", "pitch", "roll", "yaw")
 CARTESIAN_WORDS = {
     "x": ("forward", "back"),
     "y": ("left", "right"),
     "z": ("up", "down"),
     "pitch": ("pitch up", "pitch down"),
+    "roll": ("roll +", "roll -"),
+    "yaw": ("turn left", "turn right"),
 }
 OPTIONS = ("fine_factor",)
 

@@ -82,8 +82,8 @@ def test_arm_keys_use_only_their_own_keys(key_map: KeyMap) -> None:
 
 
 def test_cartesian_table_errors(profile: RobotProfile) -> None:
-    with pytest.raises(KeyMapError, match=r'cartesian\.W: \'roll \+\' must be "AXIS \+"'):
-        hotkeys.parse_key_map({"cartesian": {"W": "roll +"}}, profile)
+    with pytest.raises(KeyMapError, match=r'cartesian\.W: \'spin \+\' must be "AXIS \+"'):
+        hotkeys.parse_key_map({"cartesian": {"W": "spin +"}}, profile)
     with pytest.raises(KeyMapError, match="Space is the emergency stop"):
         hotkeys.parse_key_map({"cartesian": {"Space": "x +"}}, profile)
     with pytest.raises(KeyMapError, match="bound to the command 'cartesian_mode' and to a"):

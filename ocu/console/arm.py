@@ -33,6 +33,8 @@ from ocu.kinematics.rpy import describe_pose
 from ocu.model.tree import Matrix
 
 JOG_AXES = ("x", "y", "z", "pitch")
+# An arm of six joints or more: the whole pose, turned about the jog frame's x, y and z.
+WHOLE_JOG_AXES = ("x", "y", "z", "roll", "pitch", "yaw")
 SPEED_STEP = 1.5  # faster / slower keys multiply or divide the jog speeds by this
 
 
@@ -239,10 +241,15 @@ class ArmConsole:
     # ---- jog ---------------------------------------------------------------------------
 
     def jog_key_down(self, key: str, axis: str, direction: int) -> bool:
-        """A jog key went down; False if it was held already."""
-        if axis not in JOG_AXES or direction not in (-1, 1):
-            raise ValueError(f"a jog key moves one of {JOG_AXES} by +1 or -1")
+        """A jog key went down; False if it was held already (or moves what this arm cannot)."""
+        if axis not in WHOLE_JOG_AXES or direction not in (-1, 1):
+            raise ValueError(f"a jog key moves one of {WHOLE_JOG_AXES} by +1 or -1")
         if key in self._held:
+            return False
+        if axis not in self._axes:
+            self.events.message.emit(
+                f"{key}: {axis} needs an arm of six joints; this one jogs x, y, z and pitch"
+            )
             return False
         self._held[key] = (axis, direction)
         self._apply_jog()
@@ -269,17 +276,24 @@ class ArmConsole:
 
     def twist(self) -> Vector:
         """The twist the held keys ask for, in the jog frame (m/s, rad/s)."""
-        twist = np.zeros(4)
+        axes = self._axes
+        twist = np.zeros(len(axes))
         for axis, direction in self._held.values():
-            twist[JOG_AXES.index(axis)] += direction
+            if axis in axes:
+                twist[axes.index(axis)] += direction
         twist = np.clip(twist, -1.0, 1.0)
-        norm = float(np.linalg.norm(twist[:3]))
-        if norm > 0.0:
-            twist[:3] /= norm  # diagonal keys move at the same speed, not √2 faster
+        for part in (slice(0, 3), slice(3, None)):
+            norm = float(np.linalg.norm(twist[part]))
+            if norm > 0.0:
+                twist[part] /= norm  # diagonal keys move at the same speed, not √2 faster
         factor = self.host.fine_factor if self.host.fine else 1.0
         twist[:3] *= self._linear * factor
-        twist[3] *= self._pitch * factor
+        twist[3:] *= self._pitch * factor  # the turning speed (the dock's "pitch" °/s)
         return twist
+
+    @property
+    def _axes(self) -> tuple[str, ...]:
+        return WHOLE_JOG_AXES if self.whole_pose else JOG_AXES
 
     def _apply_jog(self) -> None:
         now = self.host.clock()

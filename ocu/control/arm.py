@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from ocu.control.arm_task import Reference, TaskSpace, task_for, task_rows
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionController
 from ocu.kinematics.arm import ArmError, ArmKinematics, ToolPose
@@ -105,10 +106,12 @@ class ArmStatus:
 
 @dataclass
 class _Jog:
-    twist: Vector  # vx, vy, vz (m/s), pitch rate (rad/s) in `frame`
+    # vx, vy, vz (m/s), then the pitch rate, or wx, wy, wz (rad/s), in `frame`
+    twist: Vector
     frame: str
     expires_at: float | None
-    reference: Vector | None = None  # x, y, z, pitch the tool should be at
+    task: TaskSpace
+    reference: Reference | None = None  # where the tool should be, in the task space
 
 
 @dataclass
@@ -243,14 +246,20 @@ class ArmController:
         *,
         expires_after_s: float | None = None,
     ) -> None:
-        """Move tool0 at a twist (vx, vy, vz m/s, pitch rad/s) in a frame; zero stops the jog.
+        """Move tool0 at a twist in a frame; zero stops the jog. Four values: vx, vy, vz (m/s)
+        and the pitch rate (rad/s); six, for an arm of six joints or more: vx, vy, vz and wx,
+        wy, wz (rad/s about the frame's axes), the whole pose held (ocu.control.arm_task).
 
         With `expires_after_s` the jog stops by itself that long after the last call (a
         streamed command); without, it lasts until the next call (a held key).
         """
         values = np.asarray(twist, dtype=float)
-        if values.shape != (4,) or not np.all(np.isfinite(values)):
-            raise ArmError("a twist is four finite numbers: vx, vy, vz (m/s), pitch rate (rad/s)")
+        sizes = (4, 6) if self.kinematics.chain.dof >= 6 else (4,)
+        if values.ndim != 1 or values.size not in sizes or not np.all(np.isfinite(values)):
+            raise ArmError(
+                "a twist is four finite numbers: vx, vy, vz (m/s), pitch rate (rad/s)"
+                + ("; or six: vx, vy, vz, wx, wy, wz (rad/s)" if len(sizes) > 1 else "")
+            )
         self.kinematics.frame_rotation(frame, np.zeros(len(self.joints)), self._others)
         if not np.any(values):
             if self._jog is not None:
@@ -260,12 +269,13 @@ class ArmController:
         if self._move is not None:
             self._finish_move(f"arm: move to {self._move.label} cancelled by a jog")
         expires = None if expires_after_s is None else now + expires_after_s
-        if self._jog is not None and self._jog.frame == frame:
-            # Same frame: the reference pose carries on from where it is.
-            self._jog.twist = values
-            self._jog.expires_at = expires
+        jog = self._jog
+        if jog is not None and jog.frame == frame and jog.task.rows == task_rows(values.size):
+            # Same frame and task: the reference pose carries on from where it is.
+            jog.twist = values
+            jog.expires_at = expires
         else:
-            self._jog = _Jog(values, frame, expires)
+            self._jog = _Jog(values, frame, expires, task_for(self.kinematics, values.size))
 
     def stop(self, reason: str = "") -> bool:
         """Stop every arm motion at once; True if something was moving."""
@@ -457,19 +467,18 @@ class ArmController:
     def _jog_step(
         self, jog: _Jog, current: Vector, eventual: Vector, now: float, dt: float
     ) -> Vector:
-        kin = self.kinematics
-        pose = kin.tool_pose(eventual)
-        actual = np.array([pose.x, pose.y, pose.z, pose.pitch])
+        kin, task = self.kinematics, jog.task
+        actual = task.actual(eventual)
         if jog.reference is None:
             jog.reference = actual.copy()
         rotation = kin.frame_rotation(jog.frame, current, self.others(now))
-        wanted = np.concatenate([rotation @ jog.twist[:3], jog.twist[3:]])
-        jac = kin.task_jacobian(eventual)
+        wanted = task.wanted(rotation, jog.twist)
+        jac = task.jacobian(eventual)
         # While the chassis drives the robot does not turn the waist: the jog does without it
         # (its sideways part is left out), and the reference follows what the arm can do.
         locked = self._locked_now()
         jac[:, locked] = 0.0
-        weights = np.array([1.0 / kin.length_scale_m] * 3 + [1.0])
+        weights = task.weights()
         inverse = damped_pseudo_inverse(jac * weights[:, None], JOG_DAMPING) * weights[None, :]
         direction = inverse @ wanted
         scale, level, reason, condition, clearance = self._safety(eventual, direction, now)
@@ -502,10 +511,8 @@ class ArmController:
             jog.reference = actual.copy()
             return np.zeros(len(self.joints))
         moving = wanted * scale
-        reference: Vector = jog.reference + moving * dt
-        jog.reference = reference
-        error = reference - actual
-        error[3] = math.remainder(error[3], math.tau)
+        jog.reference = task.advance(jog.reference, moving, dt)
+        error = task.error(jog.reference, actual)
         gain = self.position.gain_per_s
         velocities: Vector = inverse @ (moving + gain * error)
         return velocities

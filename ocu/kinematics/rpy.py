@@ -51,7 +51,9 @@ def rpy_of(pose: Matrix) -> tuple[float, float, float]:
 def angle_between(a: Matrix, b: Matrix) -> float:
     """The angle (rad) of the rotation that takes one orientation to the other."""
     r = np.asarray(a, dtype=float)[:3, :3].T @ np.asarray(b, dtype=float)[:3, :3]
-    return math.acos(max(-1.0, min(1.0, (float(np.trace(r)) - 1.0) / 2.0)))
+    # atan2 of the sine (the skew part) and the cosine: exact near 0 where acos is not.
+    sine = float(np.linalg.norm([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])) / 2
+    return math.atan2(sine, (float(np.trace(r)) - 1.0) / 2.0)
 
 
 def describe_pose(pose: Matrix) -> str:

@@ -12,6 +12,7 @@ import pytest
 from ocu.console.model import ConsoleModel
 from ocu.control.arm import OK
 from ocu.kinematics.arm import ArmError, ToolPose
+from ocu.kinematics.rpy import angle_between
 from ocu.profile import RobotProfile
 from ocu.profile.ur import load_ur_profile
 from ocu.profile.ur_robot import ur_robot_profile
@@ -66,6 +67,51 @@ def test_a_jog_moves_tool0_along_the_line_and_keeps_it_pointing_down(
     )
     assert deviation < 0.001  # within 1 mm of the line (0.013 mm measured)
     assert rig.truth().pitch == pytest.approx(start.pitch, abs=math.radians(0.5))
+
+
+@pytest.mark.parametrize(("axis", "column"), [("yaw", 2), ("roll", 0), ("pitch", 1)])
+def test_a_turning_key_turns_tool0_about_its_own_axis_and_keeps_it_in_place(
+    ur5e: RobotProfile, tmp_path: Path, axis: str, column: int
+) -> None:
+    # In the tool frame over a 50 ms link at 10 Hz: the tool turns about its own x, y or z
+    # axis, tool0 stays where it is and the other two axes keep their line.
+    rig = Rig(ur5e, tmp_path, start=_start(ur5e, WRIST_DOWN))
+    rig.arm.set_cartesian(True)
+    rig.arm.set_frame("tool")
+    kin = rig.kinematics
+    before = kin.tool_matrix(kin.vector(rig.robot.joints))
+    assert rig.arm.jog_key_down("turn", axis, 1)
+    trace = []
+    for _ in range(40):  # 2 s at the turning speed
+        rig.tick()
+        trace.append(kin.tool_matrix(kin.vector(rig.robot.joints)))
+        assert rig.arm.status.level == OK, rig.arm.status
+    assert rig.arm.jog_key_up("turn")
+    rig.run(0.5)
+    after = kin.tool_matrix(kin.vector(rig.robot.joints))
+    drift = max(float(np.linalg.norm(m[:3, 3] - before[:3, 3])) for m in trace)
+    assert drift < 0.001  # tool0 stays within 1 mm while it turns
+    turned = angle_between(before, after)
+    assert turned > math.radians(20.0)
+    # About its own axis: that axis keeps its direction.
+    assert float(after[:3, column] @ before[:3, column]) > math.cos(math.radians(0.5))
+    # Turning the other way brings it back.
+    assert rig.arm.jog_key_down("back", axis, -1)
+    for _ in range(40):
+        rig.tick()
+    assert rig.arm.jog_key_up("back")
+    rig.run(0.5)
+    assert angle_between(before, kin.tool_matrix(kin.vector(rig.robot.joints))) < 0.1 * turned
+
+
+def test_a_four_joint_arm_refuses_the_turning_keys_with_a_reason(
+    profile: RobotProfile, tmp_path: Path
+) -> None:
+    rig = Rig(profile, tmp_path)
+    rig.arm.set_cartesian(True)
+    assert not rig.arm.jog_key_down("Q", "yaw", 1)
+    assert rig.arm_velocities() == {}
+    assert "yaw needs an arm of six joints" in rig.messages[-1]
 
 
 def test_a_pose_goal_reaches_position_and_pitch_and_keeps_the_tools_roll(

@@ -176,6 +176,35 @@ def test_a_whole_pose_goal_typed_in_the_arm_dock_turns_the_tool_there(
         ) from None
 
 
+def test_cartesian_keys_turn_the_tool_in_place_on_the_ur_simulator(
+    ur_console: MainWindow, ur_sim: UrSimulator, qtbot: QtBot
+) -> None:
+    window = ur_console
+    arm = window.model.arm
+    assert arm is not None
+    qtbot.waitUntil(lambda: arm.tool_matrix() is not None, timeout=DEADLINE_MS)
+    kinematics = arm.kinematics
+    before = kinematics.tool_matrix(np.array(ur_sim.snapshot().q))
+    window.activateWindow()
+    window.velocity_panel.setFocus()
+    QTest.keyClick(window, Qt.Key.Key_C)  # Cartesian mode
+    QTest.keyClick(window, Qt.Key.Key_V)  # the tool frame
+    assert arm.cartesian
+    assert arm.frame == "tool"
+    QTest.keyPress(window, Qt.Key.Key_Q)  # yaw +: about tool0's own z
+    wait_sim(
+        qtbot,
+        ur_sim,
+        lambda s: angle_between(before, kinematics.tool_matrix(np.array(s.q))) > 0.2,
+        "the tool turned by 0.2 rad",
+    )
+    QTest.keyRelease(window, Qt.Key.Key_Q)
+    wait_sim(qtbot, ur_sim, lambda s: not any(s.qd), "at rest after the release")
+    after = kinematics.tool_matrix(np.array(ur_sim.snapshot().q))
+    assert float(np.linalg.norm(after[:3, 3] - before[:3, 3])) < 0.002  # it stayed in place
+    assert float(after[:3, 2] @ before[:3, 2]) > math.cos(math.radians(1.0))  # about its z
+
+
 def test_the_status_bar_counts_the_reconnection_attempts_of_a_lost_ur(
     ur_console: MainWindow, ur_sim: UrSimulator, qtbot: QtBot
 ) -> None:
