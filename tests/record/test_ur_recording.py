@@ -10,8 +10,8 @@ URScript commands, its controller clock).
 
 from __future__ import annotations
 
+import itertools
 import json
-import math
 import struct
 import tomllib
 from collections.abc import Iterator
@@ -135,7 +135,7 @@ def test_the_file_says_it_is_a_ur5e_and_holds_its_profile(session: Session) -> N
 
 def test_every_realtime_packet_is_in_the_file_as_the_controller_sent_it(session: Session) -> None:
     topics = session.topics
-    assert_monotonic(topics)  # type: ignore[arg-type]
+    assert_monotonic(topics)
     realtime = topics[s.RAW_UR_REALTIME]
     assert len(realtime) >= MOVE_S * REALTIME_HZ
     times: list[float] = []
@@ -149,7 +149,7 @@ def test_every_realtime_packet_is_in_the_file_as_the_controller_sent_it(session:
         assert s.stamp_ns(raw.send_stamp) == message.publish_time == round(time_s * 1e9)
         assert s.stamp_ns(raw.receive_stamp) == message.log_time
         times.append(time_s)
-    steps = [round((b - a) * REALTIME_HZ) for a, b in zip(times, times[1:], strict=False)]
+    steps = [round((b - a) * REALTIME_HZ) for a, b in itertools.pairwise(times)]
     # One controller period apart, except across the mute: the periods it sent nothing.
     gaps = [step for step in steps if step != 1]
     assert len(gaps) == 1, gaps
@@ -280,7 +280,9 @@ def test_the_replay_plays_the_recorded_states_through_the_links_decoder(
     last = frames[-1]
     assert [last.readings[n].angle_rad for n in JOINTS] == pytest.approx(session.at_rest.q)
     reports = [e for e in events if isinstance(e, RobotModeReport)]
-    assert reports and reports[0].mode == "RUNNING" and reports[0].may_move
+    assert reports
+    assert reports[0].mode == "RUNNING"
+    assert reports[0].may_move
     sent = [e.command for e in events if isinstance(e, CommandSent)]
     assert any(c.velocity("shoulder_pan_joint") == PAN_RAD_S for c in sent)
     assert "EMERGENCY STOP (operator)" in collector.safety
@@ -330,7 +332,7 @@ def _write_ur_file(path: Path, profile_toml: bytes, realtime: list[bytes]) -> No
             writer.add_message(
                 channel, log_time=1_000_000 * (index + 1), data=encode(message), publish_time=0
             )
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
 
 
 def test_a_broken_ur_profile_in_the_file_is_refused_with_the_reason(
@@ -342,7 +344,7 @@ def test_a_broken_ur_profile_in_the_file_is_refused_with_the_reason(
     assert broken != text.encode()
     path = tmp_path / "broken.mcap"
     _write_ur_file(path, broken, [])
-    with pytest.raises(RecordingError, match="recorded UR profile unusable: .*name"):
+    with pytest.raises(RecordingError, match=r"recorded UR profile unusable: .*name"):
         open_replay(path)
     assert inspect_main([str(path)]) == 1
     assert "recorded UR profile unusable" in capsys.readouterr().err
