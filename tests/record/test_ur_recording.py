@@ -14,7 +14,7 @@ import itertools
 import json
 import struct
 import tomllib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +33,7 @@ from ocu.record.replay_link import ReplayLink
 from ocu.record.ur_replay import UrReplayLink, open_replay
 from ocu.records import Command, CommandSent, LinkEvent, LinkState, RobotModeReport
 from ocu.sim.ur import UrSimSnapshot, UrSimulator
+from tests.link.test_ur_link import GarbageProxy
 from tests.record.helpers import Collector, Message, assert_monotonic, poll_until, read_finished
 
 JOINTS = (
@@ -379,3 +380,76 @@ def _realtime_packet(elbow_rad: float) -> bytes:
     values[95:101] = [253.0] * 6  # joint modes
     values[101] = 1.0  # safety mode NORMAL (offset 812)
     return struct.pack(">i152d", REALTIME_BYTES, *values)
+
+
+def _record(
+    path: Path, sim: UrSimulator, ports: tuple[int, int, int], act: Callable[[Collector], None]
+) -> None:
+    """Record a UrLink to `sim` (at `ports`) while `act` runs."""
+    arm = sim.profile
+    profile = ur_robot_profile(arm)
+    link = UrLink(arm, "127.0.0.1", profile=profile, ports=ports, gui_alive_timeout_s=None)
+    recorder = Recorder(profile, flush_period_s=0.2)
+    collector = Collector()
+    link.subscribe(collector)
+    recorder.attach(link)
+    recorder.start(path)
+    link.start()
+    try:
+        assert collector.wait(lambda: LinkState.CONNECTED in collector.states)
+        assert poll_until(lambda: link.robot_status is not None)  # the secondary port heard
+        act(collector)
+    finally:
+        link.shutdown()
+        recorder.stop()
+
+
+def test_bytes_that_are_no_packet_are_kept_on_raw_other(tmp_path: Path) -> None:
+    sim = UrSimulator(load_ur_profile("ur5e"), host="127.0.0.1", ports=(0, 0, 0))
+    sim.start()
+    proxy = GarbageProxy(sim.host, sim.ports["realtime"])
+    size = sim.realtime_size
+
+    def inject(collector: Collector) -> None:
+        proxy.inject(b"\xff" * 300)
+        proxy.inject(size.to_bytes(4, "big") + b"\x7f" * (size - 4))
+        assert collector.wait(lambda: bool(collector.stats) and collector.stats[-1].malformed >= 2)
+
+    try:
+        ports = (sim.ports["primary"], sim.ports["secondary"], proxy.port)
+        _record(tmp_path / "garbage.mcap", sim, ports, inject)
+    finally:
+        proxy.close()
+        sim.stop()
+    topics, _ = read_finished(tmp_path / "garbage.mcap")
+    other = b"".join(bytes(m.decoded.data) for m in topics[s.RAW_OTHER])
+    assert other.count(b"\xff") >= 300
+    assert other.count(b"\x7f") >= size - 4
+    assert all(m.decoded.source == "robot" for m in topics[s.RAW_OTHER])
+    assert all(len(bytes(m.decoded.data)) == size for m in topics[s.RAW_UR_REALTIME])
+
+
+def test_the_controllers_own_stop_is_recorded_and_counted(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sim = UrSimulator(load_ur_profile("ur5e"), host="127.0.0.1", ports=(0, 0, 0))
+    sim.start()
+
+    def press_the_red_button(collector: Collector) -> None:
+        sim.emergency_stop(True)
+        assert collector.wait(lambda: any("EMERGENCY_STOP" in m for m in collector.safety))
+        sim.emergency_stop(False)
+        assert collector.wait(lambda: any("ready" in m for m in collector.safety))
+
+    try:
+        ports = (sim.ports["primary"], sim.ports["secondary"], sim.ports["realtime"])
+        _record(tmp_path / "stop.mcap", sim, ports, press_the_red_button)
+    finally:
+        sim.stop()
+    topics, _ = read_finished(tmp_path / "stop.mcap")
+    modes = [m.decoded.state for m in topics[s.EVENTS] if m.decoded.kind == "robot_mode"]
+    assert modes == ["RUNNING · NORMAL", "EMERGENCY STOP", "RUNNING · NORMAL"]
+    assert inspect_main([str(tmp_path / "stop.mcap"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["controller_stops"] == 1
+    assert summary["estops"] == 0  # the operator pressed nothing
