@@ -414,6 +414,8 @@ def test_bytes_that_are_no_packet_are_kept_on_raw_other(tmp_path: Path) -> None:
         proxy.inject(b"\xff" * 300)
         proxy.inject(size.to_bytes(4, "big") + b"\x7f" * (size - 4))
         assert collector.wait(lambda: bool(collector.stats) and collector.stats[-1].malformed >= 2)
+        # Closed before the link: a proxy left forwarding would write to a closed socket.
+        proxy.close()
 
     try:
         ports = (sim.ports["primary"], sim.ports["secondary"], proxy.port)
@@ -453,3 +455,29 @@ def test_the_controllers_own_stop_is_recorded_and_counted(
     summary = json.loads(capsys.readouterr().out)
     assert summary["controller_stops"] == 1
     assert summary["estops"] == 0  # the operator pressed nothing
+
+
+def test_a_seek_plays_on_from_the_moment_sought(session: Session) -> None:
+    realtime = session.topics[s.RAW_UR_REALTIME]
+    start_ns = min(m.log_time for topic in session.topics.values() for m in topic)
+    middle = realtime[len(realtime) // 2]
+    target_s = (middle.log_time - start_ns) / 1e9
+    # The controller times of the packets recorded from the target on.
+    later = {
+        realtime_fields(bytes(m.decoded.data))[1] for m in realtime if m.log_time >= middle.log_time
+    }
+    collector = Collector()
+    source = open_replay(session.path, on_finished=collector.mark_finished)
+    source.subscribe(collector)
+    source.start()
+    try:
+        source.seek(target_s)
+        source.play()
+        assert collector.wait(lambda: collector.finished)
+    finally:
+        source.shutdown()
+    assert collector.telemetry
+    times = [frame.packet.state.time_s for frame in collector.telemetry]  # type: ignore[attr-defined]
+    assert set(times) <= later
+    # The command in force at the target came back from the last speedj before it.
+    assert source.command.velocity("shoulder_pan_joint") in (0.0, PAN_RAD_S)
