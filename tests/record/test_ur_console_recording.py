@@ -44,7 +44,7 @@ from ocu.record.ur_replay import UrReplayLink, open_replay
 from ocu.records import LinkState
 from ocu.sim.ur import UrSimulator
 from ocu.windows.main_window import MainWindow
-from tests.record.helpers import poll_until
+from tests.record.helpers import Collector, poll_until
 from tests.test_integration_record import read_messages
 from tests.windows.console_fixtures import DEADLINE_MS, qt_complaints, run_ocu, settings
 
@@ -221,6 +221,31 @@ def test_the_record_button_records_a_ur_console(
     assert lifts
     lifted = [realtime_q(bytes(m.data))[1] for t, m in messages if t == s.RAW_UR_REALTIME]
     assert lifted[-1] > lifted[0]
+    # Started after the link connected: no version message in the file. The replay takes
+    # any known realtime layout then, and shows the lift.
+    assert counts[s.RAW_UR_PRIMARY] == 0
+    collector = Collector()
+    source = open_replay(path, on_finished=collector.mark_finished)
+    source.subscribe(collector)
+    source.start()
+    try:
+        source.set_speed(4.0)
+        source.play()
+        assert collector.wait(lambda: collector.finished)
+    finally:
+        source.shutdown()
+    replayed = [f.readings["shoulder_lift_joint"].angle_rad for f in collector.telemetry]
+    assert replayed
+    assert replayed[-1] == lifted[-1]
+
+
+def test_a_ur_console_refuses_an_unwritable_recording_before_any_window(tmp_path: Path) -> None:
+    target = tmp_path / "no" / "such" / "x.mcap"
+    result = run_ocu(tmp_path, "--profile", "ur5e", "--record", str(target), "--quit-after", "5")
+    assert result.returncode == 1
+    assert f"cannot record to {target}" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert "link started" not in result.stderr
 
 
 def test_a_killed_ur_recording_stays_readable(tmp_path: Path) -> None:
