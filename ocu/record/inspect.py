@@ -16,6 +16,7 @@ link (ocu.link.stats.tick_loss): the median of the tick steps near the shortest 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import statistics
@@ -30,7 +31,13 @@ from ocu.link.stats import UplinkLossEstimator, tick_loss
 from ocu.link.ur_wire import UrDecoder
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.protocol.extended import StatusPacket
-from ocu.protocol.ur import UrProtocolError, VersionMessage, decode_primary, realtime_size
+from ocu.protocol.ur import (
+    UrProtocolError,
+    VersionMessage,
+    decode_primary,
+    parse_script_line,
+    realtime_size,
+)
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.reader import Recording
@@ -269,14 +276,14 @@ class UrFigures:
                 if math.isfinite(state.time_s):
                     ticks.append(round(state.time_s * self.tick_hz))
         elif topic == s.RAW_UR_SCRIPT:
-            self.stopj += data.lstrip().startswith(b"stopj(")
+            # A line that is not the link's is counted as sent all the same.
+            with contextlib.suppress(UnicodeDecodeError, UrProtocolError):
+                self.stopj += parse_script_line(data.decode("ascii")).name == "stopj"
         elif topic == s.RAW_UR_PRIMARY:
-            try:
+            with contextlib.suppress(UrProtocolError):
                 decoded = decode_primary(data)
                 if isinstance(decoded, VersionMessage):
                     self.decoder = UrDecoder(realtime_size(decoded.version))
-            except UrProtocolError:
-                pass
 
 
 def _size(count: int) -> str:

@@ -9,6 +9,10 @@ shown, and their echoes measure the delay as they did live).
 Frames carry `received_at` = the replay's monotonic time of emission (freshness checks and
 plots work as live) and `wall_time` = the wall-clock time of the recording.
 
+A UR arm's recording plays through `UrReplayLink` (ocu.record.ur_replay), which overrides
+the decoding steps (`_sent`, `_received`, `_reset_decoding`); `open_replay` there picks the
+one a file needs.
+
 A named thread ("ocu-replay") reads one chunk at a time and waits between messages so they
 come out at the recorded pace times `speed`. It starts paused at the beginning. No Qt.
 """
