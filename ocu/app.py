@@ -256,16 +256,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     STOP.install()
     # Before Qt, the link or the control core start a thread: threads inherit it.
     log.info("scheduling priority: %s", raise_priority(nice).text)
-    if args.replay is not None:
-        return run_replay(
-            profile,
-            args.replay,
-            args.quit_after,
-            config_dir=config_dir,
-            key_map=key_map,
-            control_hz=args.control_hz,
-        )
-    if ur_arm is not None:
+    if ur_arm is not None and args.replay is None:
         return run_ur_console(
             ur_arm,
             profile,
@@ -275,6 +266,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             key_map=key_map,
             record_path=args.record,
             pad_mapping=None if args.no_gamepad else pad_mapping,
+            control_hz=args.control_hz,
+        )
+    if args.replay is not None:
+        return run_replay(
+            profile,
+            args.replay,
+            args.quit_after,
+            config_dir=config_dir,
+            key_map=key_map,
             control_hz=args.control_hz,
         )
     return run_console(

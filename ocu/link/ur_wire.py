@@ -5,7 +5,9 @@
 robot mode, safety mode, the stop flags at 10 Hz) and the realtime port (30003: joints and TCP
 at 125 or 500 Hz, and where the URScript goes). Reading never raises on bad bytes: a packet
 that does not decode is counted in `malformed` and dropped. No threads here; the link's loop
-calls `read_realtime` / `read_secondary` when a socket is readable.
+calls `read_realtime` / `read_secondary` when a socket is readable. The bytes-to-states step is
+`UrDecoder`, which a replay and `ocu inspect` use too; a connection's `tap` is handed every
+packet read and every URScript line written, for a recording (docs/recordings.md).
 """
 
 from __future__ import annotations

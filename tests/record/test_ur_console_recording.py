@@ -99,10 +99,13 @@ def test_ocu_inspect_and_ocu_replay_of_the_urs_file(ur_recording: Path, tmp_path
     assert "profile ur5e" in inspect.stdout
     assert "URScript lines sent" in inspect.stdout
     assert ", 0 lost: drop 0.00 %" in inspect.stdout
-    replay = run_ocu(tmp_path, "--replay", str(ur_recording), "--quit-after", "1.5")
-    assert replay.returncode == 0, replay.stderr
-    assert "replay started" in replay.stderr
-    assert qt_complaints(replay.stderr) == []
+    # The file says which robot it is: with or without a --profile naming it.
+    for profile in ((), ("--profile", "ur5e")):
+        replay = run_ocu(tmp_path, *profile, "--replay", str(ur_recording), "--quit-after", "1.5")
+        assert replay.returncode == 0, replay.stderr
+        assert "replay started" in replay.stderr
+        assert "UR link" not in replay.stderr  # no live link, no simulator
+        assert qt_complaints(replay.stderr) == []
 
 
 def test_the_console_replays_a_ur_recording_as_a_ur(
