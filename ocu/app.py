@@ -215,14 +215,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         profile = ur_robot_profile(ur_arm) if ur_arm is not None else load_profile(args.profile)
     except ProfileError as err:
         return refuse_file(str(err))
-    if ur_arm is not None:
-        for given, option in (
-            (args.replay, "--replay"),
-            (args.record, "--record"),
-            (args.sim_arg, "--sim-arg"),
-        ):
-            if given:
-                parser.error(f"{option} is not available for a UR arm yet (docs/ur.md)")
+    if ur_arm is not None and args.sim_arg:
+        parser.error("--sim-arg is not available for a UR arm yet (docs/ur.md)")
+    if args.replay is not None:
+        from ocu.record.ur_replay import recorded_profile
+
+        profile = recorded_profile(args.replay, profile)  # a UR's keys for a UR's recording
     robot = None
     if args.robot and ur_arm is None:
         try:
@@ -258,7 +256,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     STOP.install()
     # Before Qt, the link or the control core start a thread: threads inherit it.
     log.info("scheduling priority: %s", raise_priority(nice).text)
-    if ur_arm is not None:
+    if ur_arm is not None and args.replay is None:
         return run_ur_console(
             ur_arm,
             profile,
@@ -266,6 +264,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.quit_after,
             config_dir=config_dir,
             key_map=key_map,
+            record_path=args.record,
             pad_mapping=None if args.no_gamepad else pad_mapping,
             control_hz=args.control_hz,
         )
@@ -387,6 +386,7 @@ def run_ur_console(
     *,
     config_dir: Path,
     key_map: KeyMap,
+    record_path: Path | None = None,
     pad_mapping: PadMapping | None = None,
     control_hz: float = DEFAULT_CONTROL_HZ,
 ) -> int:
@@ -399,11 +399,20 @@ def run_ur_console(
     from ocu.hardware.ur import UR_CAPABILITIES, parse_host, ur_component
     from ocu.link.base import Link, LinkError
     from ocu.link.ur import UrLink
+    from ocu.record.errors import RecordingError
+    from ocu.record.recorder import Recorder
     from ocu.sim.ur import UrSimulator
     from ocu.windows.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
+    recorder = Recorder(profile)
+    if record_path is not None:
+        try:
+            recorder.start(record_path)
+        except RecordingError as err:
+            log.error("%s", err)
+            return 1
     simulator: UrSimulator | None = None
     try:
         if robot is None:
@@ -437,6 +446,7 @@ def run_ur_console(
             settings,
             key_map,
             settings_status=settings_status,
+            recorder=recorder,
             pad_mapping=pad_mapping,
             pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
             control_hz=control_hz,
@@ -446,6 +456,7 @@ def run_ur_console(
         with guard:
             return run_window(app, window, quit_after_s)
     finally:
+        recorder.stop()  # after the window's shutdown: the link's closing stopj is in it
         if simulator is not None:
             simulator.stop()
 
@@ -462,18 +473,20 @@ def run_replay(
     """The console on a recording: no simulator, no link; plays from the start."""
     from PySide6.QtWidgets import QApplication
 
+    from ocu.hardware.replay import replay_hardware
     from ocu.link.base import LinkError
     from ocu.record.errors import RecordingError
-    from ocu.record.replay_link import ReplayLink
+    from ocu.record.ur_replay import open_replay
     from ocu.windows.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
     try:
-        source = ReplayLink(path, profile)
+        source = open_replay(path, profile)
     except (RecordingError, LinkError) as err:
         log.error("%s", err)
         return 1
+    hardware_for, capabilities = replay_hardware(source)
     settings, settings_status = open_settings(config_dir)
     window = MainWindow(
         source.profile,
@@ -484,6 +497,8 @@ def run_replay(
         replay=source,
         settings_status=settings_status,
         control_hz=control_hz,
+        hardware_for=hardware_for,
+        capabilities=capabilities,
     )
     source.play()
     return run_window(app, window, quit_after_s)

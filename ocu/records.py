@@ -462,6 +462,11 @@ VIDEO_FRAGMENT = "video_fragment"
 STATUS = "status"
 SCAN = "scan"
 OTHER = "other"
+# A UR controller's (ocu.link.ur): URScript sent, and the packets of its three TCP ports.
+UR_SCRIPT = "ur_script"
+UR_PRIMARY = "ur_primary"
+UR_SECONDARY = "ur_secondary"
+UR_REALTIME = "ur_realtime"
 
 
 @dataclass(frozen=True)

@@ -457,7 +457,9 @@ class UrLink(Link):
             self._lose(f"no realtime packet from the controller for {now - last:.2f} s")
 
     def _connect(self) -> None:
-        connection = UrConnection(self.host, self.ports, CONNECT_TIMEOUT_S)
+        connection = UrConnection(
+            self.host, self.ports, CONNECT_TIMEOUT_S, tap=self.emit, clock=self.clock
+        )
         try:
             connection.open()
         except OSError as err:

@@ -5,7 +5,9 @@
 robot mode, safety mode, the stop flags at 10 Hz) and the realtime port (30003: joints and TCP
 at 125 or 500 Hz, and where the URScript goes). Reading never raises on bad bytes: a packet
 that does not decode is counted in `malformed` and dropped. No threads here; the link's loop
-calls `read_realtime` / `read_secondary` when a socket is readable.
+calls `read_realtime` / `read_secondary` when a socket is readable. The bytes-to-states step is
+`UrDecoder`, which a replay and `ocu inspect` use too; a connection's `tap` is handed every
+packet read and every URScript line written, for a recording (docs/recordings.md).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import socket
 import statistics
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from ocu.protocol.ur import (
@@ -29,7 +31,19 @@ from ocu.protocol.ur import (
     decode_primary,
     realtime_size,
 )
-from ocu.records import JointReading, RobotModeReport, TelemetryFrame
+from ocu.records import (
+    OTHER,
+    UR_PRIMARY,
+    UR_REALTIME,
+    UR_SCRIPT,
+    UR_SECONDARY,
+    DatagramReceived,
+    DatagramSent,
+    JointReading,
+    Listener,
+    RobotModeReport,
+    TelemetryFrame,
+)
 
 RECV_BYTES = 65536
 #: Sends that cannot be written within this long mean the connection is dead.
@@ -227,8 +241,16 @@ def robot_status(packet: RobotState) -> UrRobotStatus | None:
     )
 
 
-def read_version(host: str, port: int, timeout_s: float) -> VersionMessage:
-    """Connect to the primary port and read the version message it sends first."""
+def read_version(
+    host: str,
+    port: int,
+    timeout_s: float,
+    *,
+    tap: Listener | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> VersionMessage:
+    """Connect to the primary port and read the version message it sends first (`tap`: each
+    packet read, as a DatagramReceived, for a recording)."""
     deadline = time.monotonic() + timeout_s
     splitter = StreamSplitter.primary()
     try:
@@ -241,38 +263,61 @@ def read_version(host: str, port: int, timeout_s: float) -> VersionMessage:
                 data = sock.recv(RECV_BYTES)
                 if not data:
                     raise UrConnectionError(f"{host}:{port} closed before its version message")
-                for packet in splitter.feed(data):
+                packets = splitter.feed(data)
+                _tap_skipped(tap, splitter, clock)
+                for packet in packets:
                     try:
                         decoded = decode_primary(packet)
                     except UrProtocolError:
+                        _tap(tap, packet, clock(), OTHER)
                         continue
+                    _tap(tap, packet, clock(), UR_PRIMARY)
                     if isinstance(decoded, VersionMessage):
                         return decoded
     except TimeoutError as err:
         raise UrConnectionError(f"no version message on {host}:{port} in {timeout_s} s") from err
 
 
-def _connect(host: str, port: int, timeout_s: float) -> socket.socket:
-    sock = socket.create_connection((host, port), timeout=timeout_s)
-    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-    sock.settimeout(SEND_TIMEOUT_S)
-    return sock
+def _tap(
+    tap: Listener | None, data: bytes, at: float, kind: str, robot_time_s: float | None = None
+) -> None:
+    if tap is not None:
+        tap(DatagramReceived(data, at, kind, robot_time_s))
 
 
-class UrConnection:
-    """One session with the controller: the version, then the secondary and realtime sockets."""
+def _tap_skipped(
+    tap: Listener | None, splitter: StreamSplitter, clock: Callable[[], float]
+) -> None:
+    skipped = splitter.take_skipped()
+    if skipped:
+        _tap(tap, skipped, clock(), OTHER)
 
-    def __init__(self, host: str, ports: Sequence[int], timeout_s: float) -> None:
-        if len(ports) != 3:
-            raise ValueError("ports: primary, secondary and realtime, three of them")
-        self.host = host
-        self.ports = tuple(ports)
-        self.timeout_s = timeout_s
-        self.version: tuple[int, int, int] = (0, 0, 0)
-        self.realtime_size = 0
-        self.secondary: socket.socket | None = None
-        self.realtime: socket.socket | None = None
-        self._realtime_splitter = StreamSplitter.realtime()
+
+class UrDecoder:
+    """Realtime and secondary packets to states, for the live link, a replay and `ocu inspect`.
+
+    Bytes go through the stream splitters (a recorded packet is one whole packet) and the
+    codecs of ocu.protocol.ur; a packet that does not decode is counted in `malformed` and
+    dropped. `tap` is handed each packet as a DatagramReceived of its port's kind (OTHER:
+    skipped bytes and packets that did not decode), with the controller's own time where the
+    packet has one. `realtime_size` None: any of the known layouts (a recording started after
+    the version message).
+    """
+
+    def __init__(
+        self,
+        realtime_size: int | None = None,
+        *,
+        tap: Listener | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.realtime_size = realtime_size
+        self.tap = tap
+        self.clock = clock
+        sizes = None if realtime_size is None else {realtime_size}
+        self._realtime_splitter = (
+            StreamSplitter.realtime() if sizes is None else StreamSplitter.realtime(sizes)
+        )
         self._secondary_splitter = StreamSplitter.primary()
         self.decode_errors = 0
 
@@ -285,15 +330,95 @@ class UrConnection:
             + self.decode_errors
         )
 
+    def realtime(self, data: bytes) -> list[RealtimeState]:
+        """The realtime states in these bytes (and those held from before)."""
+        packets = self._realtime_splitter.feed(data)
+        now = self.clock()
+        _tap_skipped(self.tap, self._realtime_splitter, self.clock)
+        states: list[RealtimeState] = []
+        for packet in packets:
+            try:
+                state = RealtimeState.decode(packet, expected_size=self.realtime_size)
+            except UrProtocolError:
+                self.decode_errors += 1
+                _tap(self.tap, packet, now, OTHER)
+                continue
+            stamp = state.time_s if math.isfinite(state.time_s) else None
+            _tap(self.tap, packet, now, UR_REALTIME, stamp)
+            states.append(state)
+        return states
+
+    def secondary(self, data: bytes) -> list[UrRobotStatus]:
+        """The robot statuses in these secondary-port bytes."""
+        packets = self._secondary_splitter.feed(data)
+        now = self.clock()
+        _tap_skipped(self.tap, self._secondary_splitter, self.clock)
+        statuses: list[UrRobotStatus] = []
+        for packet in packets:
+            try:
+                decoded = decode_primary(packet)
+                status = robot_status(decoded) if isinstance(decoded, RobotState) else None
+            except (UrProtocolError, ValueError):
+                self.decode_errors += 1
+                _tap(self.tap, packet, now, OTHER)
+                continue
+            mode = decoded.robot_mode if isinstance(decoded, RobotState) else None
+            stamp = None if mode is None else mode.timestamp_us / 1e6
+            _tap(self.tap, packet, now, UR_SECONDARY, stamp)
+            if status is not None:
+                statuses.append(status)
+        return statuses
+
+
+def _connect(host: str, port: int, timeout_s: float) -> socket.socket:
+    sock = socket.create_connection((host, port), timeout=timeout_s)
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    sock.settimeout(SEND_TIMEOUT_S)
+    return sock
+
+
+class UrConnection:
+    """One session with the controller: the version, then the secondary and realtime sockets."""
+
+    def __init__(
+        self,
+        host: str,
+        ports: Sequence[int],
+        timeout_s: float,
+        *,
+        tap: Listener | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if len(ports) != 3:
+            raise ValueError("ports: primary, secondary and realtime, three of them")
+        self.host = host
+        self.ports = tuple(ports)
+        self.timeout_s = timeout_s
+        # Every packet read and every script sent, as DatagramReceived / DatagramSent.
+        self.tap = tap
+        self.clock = clock
+        self.version: tuple[int, int, int] = (0, 0, 0)
+        self.realtime_size = 0
+        self.secondary: socket.socket | None = None
+        self.realtime: socket.socket | None = None
+        self.decoder = UrDecoder(tap=tap, clock=clock)
+
+    @property
+    def malformed(self) -> int:
+        """Byte runs skipped by the splitters plus packets that did not decode."""
+        return self.decoder.malformed
+
     def open(self) -> None:
         """Connect: version from primary, then secondary and realtime; UrConnectionError/OSError."""
-        message = read_version(self.host, self.ports[0], self.timeout_s)
+        message = read_version(
+            self.host, self.ports[0], self.timeout_s, tap=self.tap, clock=self.clock
+        )
         self.version = (message.major, message.minor, message.bugfix)
         try:
             self.realtime_size = realtime_size(message.version)
         except UrProtocolError as err:
             raise UrConnectionError(str(err)) from err
-        self._realtime_splitter = StreamSplitter.realtime({self.realtime_size})
+        self.decoder = UrDecoder(self.realtime_size, tap=self.tap, clock=self.clock)
         try:
             self.secondary = _connect(self.host, self.ports[1], self.timeout_s)
             self.realtime = _connect(self.host, self.ports[2], self.timeout_s)
@@ -314,36 +439,22 @@ class UrConnection:
         if sock is None:
             raise ConnectionError("not connected")
         sock.sendall(data)
+        if self.tap is not None:
+            self.tap(DatagramSent(data, self.clock(), UR_SCRIPT))
 
     def read_realtime(self) -> list[RealtimeState] | None:
         """The realtime packets now complete; None when the controller closed the port."""
         data = self._recv(self.realtime)
         if data is None:
             return None
-        states: list[RealtimeState] = []
-        for packet in self._realtime_splitter.feed(data):
-            try:
-                states.append(RealtimeState.decode(packet, expected_size=self.realtime_size))
-            except UrProtocolError:
-                self.decode_errors += 1
-        return states
+        return self.decoder.realtime(data)
 
     def read_secondary(self) -> list[UrRobotStatus] | None:
         """The robot statuses in the secondary packets now complete; None when it closed."""
         data = self._recv(self.secondary)
         if data is None:
             return None
-        statuses: list[UrRobotStatus] = []
-        for packet in self._secondary_splitter.feed(data):
-            try:
-                decoded = decode_primary(packet)
-                status = robot_status(decoded) if isinstance(decoded, RobotState) else None
-            except (UrProtocolError, ValueError):
-                self.decode_errors += 1
-                continue
-            if status is not None:
-                statuses.append(status)
-        return statuses
+        return self.decoder.secondary(data)
 
     @staticmethod
     def _recv(sock: socket.socket | None) -> bytes | None:

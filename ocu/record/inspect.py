@@ -16,6 +16,7 @@ link (ocu.link.stats.tick_loss): the median of the tick steps near the shortest 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import statistics
@@ -27,8 +28,16 @@ from dataclasses import asdict, dataclass, field
 
 from ocu.link.receiver import Receiver
 from ocu.link.stats import UplinkLossEstimator, tick_loss
+from ocu.link.ur_wire import UrDecoder
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.protocol.extended import StatusPacket
+from ocu.protocol.ur import (
+    UrProtocolError,
+    VersionMessage,
+    decode_primary,
+    parse_script_line,
+    realtime_size,
+)
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.reader import Recording
@@ -117,6 +126,10 @@ class Summary:
     jitter_median_ms: float | None = None
     # Commands the robot never applied, from its echo (status version 3); None: no echo.
     rcp_loss: float | None = None
+    # A UR arm's recording: its commands are URScript lines, its telemetry realtime packets.
+    ur: bool = False
+    stopj_sent: int = 0
+    controller_stops: int = 0
 
     @property
     def telemetry_loss(self) -> float | None:
@@ -166,8 +179,10 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
             sequences[event.camera] = (first, last)
             completed[event.camera] += 1
 
-    # The live link's own receiver decodes the recorded datagrams, on the recording's clock.
+    # The live link's own receiver decodes the recorded datagrams, on the recording's clock;
+    # a UR's packets go through the UR link's decoder.
     receiver = Receiver(profile, count, extension=True)
+    ur = UrFigures(tick_hz)
     last_stats = None
     round_trips: list[float] = []
     jitters: list[float] = []
@@ -183,6 +198,8 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
             if raw.source == s.SOURCE_ROBOT:
                 at = message.log_time_ns / 1e9
                 receiver.received(bytes(raw.data), at, at)
+        elif topic in s.RAW_UR_TOPICS:
+            ur.add(topic, bytes(recording.decode(message).data), ticks)
         elif topic == s.LINK_STATS:
             last_stats = recording.decode(message)
             round_trips.append(float(getattr(last_stats, "delay_s", math.nan)) * 1e3)
@@ -193,15 +210,19 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
             summary.events.append((offset_s, event.kind, event.state, event.message))
             if event.kind == s.EVENT_SAFETY and event.message.startswith("EMERGENCY STOP"):
                 summary.estops += 1
+            elif event.kind == s.EVENT_ROBOT_MODE and "STOP" in event.state:
+                summary.controller_stops += 1
     summary.corrupt_chunks = recording.corrupt_chunks
     summary.channels = sorted(channels.values(), key=lambda c: c.topic)
 
-    rcp = channels.get(s.RAW_RCP)
+    summary.ur = recording.ur_arm() is not None
+    summary.stopj_sent = ur.stopj
+    rcp = channels.get(s.RAW_UR_SCRIPT if summary.ur else s.RAW_RCP)
     if rcp is not None:
         summary.rcp_sent = rcp.messages
         summary.rcp_rate_hz = rcp.rate_hz
         summary.rcp_longest_gap_s = rcp.longest_gap_s
-    raw_telemetry = channels.get(s.RAW_TELEMETRY)
+    raw_telemetry = channels.get(s.RAW_UR_REALTIME if summary.ur else s.RAW_TELEMETRY)
     if raw_telemetry is not None:
         summary.telemetry_rate_hz = raw_telemetry.rate_hz
         summary.telemetry_longest_gap_s = raw_telemetry.longest_gap_s
@@ -238,6 +259,31 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
     if known:
         summary.jitter_median_ms = statistics.median(known)
     return summary
+
+
+class UrFigures:
+    """A UR's raw packets counted: realtime controller times as ticks, stopj lines sent."""
+
+    def __init__(self, tick_hz: float) -> None:
+        self.tick_hz = tick_hz
+        self.decoder = UrDecoder()
+        self.stopj = 0
+
+    def add(self, topic: str, data: bytes, ticks: list[int]) -> None:
+        """One recorded packet or script line."""
+        if topic == s.RAW_UR_REALTIME:
+            for state in self.decoder.realtime(data):
+                if math.isfinite(state.time_s):
+                    ticks.append(round(state.time_s * self.tick_hz))
+        elif topic == s.RAW_UR_SCRIPT:
+            # A line that is not the link's is counted as sent all the same.
+            with contextlib.suppress(UnicodeDecodeError, UrProtocolError):
+                self.stopj += parse_script_line(data.decode("ascii")).name == "stopj"
+        elif topic == s.RAW_UR_PRIMARY:
+            with contextlib.suppress(UrProtocolError):
+                decoded = decode_primary(data)
+                if isinstance(decoded, VersionMessage):
+                    self.decoder = UrDecoder(realtime_size(decoded.version))
 
 
 def _size(count: int) -> str:
@@ -284,13 +330,21 @@ def render(summary: Summary) -> str:
         if summary.rcp_loss is None
         else f"drop {_percent(summary.rcp_loss)} (the robot's echo of its sequenced RCPs)"
     )
+    sent = (
+        f"{summary.rcp_sent} URScript lines sent ({summary.stopj_sent} stopj)"
+        if summary.ur
+        else f"{summary.rcp_sent} RCPs sent"
+    )
+    watchdog = "speedj t" if summary.ur else "robot watchdog"
     lines += [
         "",
         "link (packet drop = packets sent that never arrived, as in seed 002 section 7)",
-        f"  OCU -> robot  {summary.rcp_sent} RCPs sent, {summary.rcp_rate_hz:.1f}/s, "
+        f"  OCU -> robot  {sent}, {summary.rcp_rate_hz:.1f}/s, "
         f"longest gap {summary.rcp_longest_gap_s:.2f} s "
-        f"(robot watchdog {summary.robot_watchdog_s:.1f} s); {rcp_drop}",
-        f"  robot -> OCU  telemetry {summary.telemetry_received} received, "
+        f"({watchdog} {summary.robot_watchdog_s:.2f} s); "
+        + ("drop n/a (TCP: delivered, or the connection is lost)" if summary.ur else rcp_drop),
+        f"  robot -> OCU  {'realtime packets' if summary.ur else 'telemetry'} "
+        f"{summary.telemetry_received} received, "
         f"{summary.telemetry_lost} lost: drop {_percent(summary.telemetry_loss)}; "
         f"{summary.telemetry_rate_hz:.1f}/s, longest gap {summary.telemetry_longest_gap_s:.2f} s, "
         f"{summary.telemetry_duplicates} duplicates, {summary.telemetry_reordered} reordered",
@@ -316,7 +370,8 @@ def render(summary: Summary) -> str:
             f"max {summary.round_trip_max_ms:.0f} ms; jitter median "
             f"{'n/a' if jitter is None else f'{jitter:.0f} ms'} (link statistics)"
         )
-    lines += ["", f"events ({summary.estops} emergency stop(s))"]
+    stops = f", {summary.controller_stops} controller stop(s)" if summary.ur else ""
+    lines += ["", f"events ({summary.estops} emergency stop(s){stops})"]
     for offset_s, kind, event_state, message in summary.events:
         detail = f"{event_state}: {message}" if event_state else message
         lines.append(f"  {offset_s:+9.3f} s  {kind:<10} {detail}")

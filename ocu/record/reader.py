@@ -45,6 +45,8 @@ from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 
 from ocu.profile import ProfileError, RobotProfile, parse_profile
+from ocu.profile.ur import UrArmProfile, load_ur_profile, parse_ur_profile, shipped_ur_profiles
+from ocu.profile.ur_robot import ur_robot_profile
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 
@@ -285,8 +287,33 @@ class Recording:
         channel = self.channels.get(channel_id)
         return None if channel is None else channel.topic
 
+    def ur_arm(self) -> UrArmProfile | None:
+        """The UR arm the recording was made with (its attached profile is a UR's: it has a
+        `series`; a shipped one by its name when none is attached), else None."""
+        if self.profile_toml is None:
+            name = self.metadata.get("profile_name", "")
+            return load_ur_profile(name) if name in shipped_ur_profiles() else None
+        try:
+            data = tomllib.loads(self.profile_toml.decode("utf-8"))
+        except (UnicodeDecodeError, tomllib.TOMLDecodeError):
+            return None  # profile() says what is wrong with it
+        if "series" not in data:
+            return None
+        try:
+            arm = parse_ur_profile(data, source=f"{self.path}:{s.PROFILE_ATTACHMENT}")
+        except ProfileError as err:
+            raise RecordingError(f"{self.path}: recorded UR profile unusable: {err}") from err
+        if arm.name in shipped_ur_profiles():
+            shipped = load_ur_profile(arm.name)
+            if Path(shipped.source).read_bytes() == self.profile_toml:
+                return shipped  # the same file: its URDF, key map and pad mapping beside it
+        return arm
+
     def profile(self, fallback: RobotProfile | None = None) -> RobotProfile:
         """The robot profile the recording was made with, else `fallback`."""
+        arm = self.ur_arm()
+        if arm is not None:
+            return ur_robot_profile(arm)
         if self.profile_toml is not None:
             try:
                 data = tomllib.loads(self.profile_toml.decode("utf-8"))

@@ -52,6 +52,7 @@ from ocu.records import (
     LinkEvent,
     LinkStateChanged,
     LinkStats,
+    RobotModeReport,
     SafetyEvent,
     StatusFrame,
     TelemetryFrame,
@@ -202,6 +203,10 @@ class Recorder:
         elif isinstance(event, ExtensionChanged):
             state = "active" if event.active else "inactive"
             self.put((EVENT, self.clock(), s.EVENT_EXTENSION, state, event.reason), 0)
+        elif isinstance(event, RobotModeReport):
+            detail = f"robot {event.mode}, safety {event.safety}"
+            detail += "".join(f", {stop}" for stop in event.stops)
+            self.put((EVENT, self.clock(), s.EVENT_ROBOT_MODE, event.text, detail), 0)
 
     # ---- control ---------------------------------------------------------------------------
 

@@ -9,6 +9,10 @@ shown, and their echoes measure the delay as they did live).
 Frames carry `received_at` = the replay's monotonic time of emission (freshness checks and
 plots work as live) and `wall_time` = the wall-clock time of the recording.
 
+A UR arm's recording plays through `UrReplayLink` (ocu.record.ur_replay), which overrides
+the decoding steps (`_sent`, `_received`, `_reset_decoding`); `open_replay` there picks the
+one a file needs.
+
 A named thread ("ocu-replay") reads one chunk at a time and waits between messages so they
 come out at the recorded pace times `speed`. It starts paused at the beginning. No Qt.
 """
@@ -96,6 +100,9 @@ class ReplayLink(Link):
     """
 
     read_only = True
+    #: The topics played, and the one whose latest message before a seek gives the command.
+    replayed_topics = REPLAYED_TOPICS
+    command_topic: str = s.RAW_RCP
 
     def __init__(
         self,
@@ -386,7 +393,7 @@ class ReplayLink(Link):
     def _feed(self, message: RecordedMessage) -> None:
         """Emit what one recorded message stands for."""
         topic = message.topic
-        if topic not in REPLAYED_TOPICS:
+        if topic not in self.replayed_topics:
             return
         decoded = self.recording.decode(message)
         if topic == s.LINK_STATS:
@@ -395,13 +402,25 @@ class ReplayLink(Link):
             self._event(decoded.kind, decoded.state, decoded.message)
         elif decoded.source == s.SOURCE_OCU:
             now = self.clock()
-            command = self.receiver.sent(bytes(decoded.data), now)
+            command = self._sent(message, bytes(decoded.data), now)
             if command is not None:
                 with self._cond:
                     self._command = command
                 self.emit(CommandSent(command, now))
         else:
-            self.receiver.received(bytes(decoded.data), self.clock(), message.log_time_ns / 1e9)
+            self._received(message, bytes(decoded.data))
+
+    def _sent(self, message: RecordedMessage, data: bytes, now: float) -> Command | None:
+        """What the OCU sent, decoded: the command it carried (None: none)."""
+        return self.receiver.sent(data, now)
+
+    def _received(self, message: RecordedMessage, data: bytes) -> None:
+        """What the robot sent, through the live link's receiver."""
+        self.receiver.received(data, self.clock(), message.log_time_ns / 1e9)
+
+    def _reset_decoding(self) -> None:
+        """Forget what the decoding held (a seek)."""
+        self.receiver = self._new_receiver()
 
     def _stats(self, stats: LinkStats) -> None:
         self._last_stats = stats
@@ -430,8 +449,9 @@ class ReplayLink(Link):
     def _do_seek(self, target_ns: int) -> None:
         recording = self.recording
         index = recording.chunk_at(target_ns)
-        self.receiver = self._new_receiver()
-        stats = rcp = None
+        self._reset_decoding()
+        stats: Any | None = None
+        rcp: RecordedMessage | None = None
         self._pending.clear()
         if index < len(recording.chunks):
             messages = recording.read_chunk(index)
@@ -447,8 +467,8 @@ class ReplayLink(Link):
             for message in reversed(before):
                 if stats is None and message.topic == s.LINK_STATS:
                     stats = recording.decode(message)
-                elif rcp is None and message.topic == s.RAW_RCP:
-                    rcp = recording.decode(message)
+                elif rcp is None and message.topic == self.command_topic:
+                    rcp = message
             if (stats is not None and rcp is not None) or lookback <= 0:
                 break
             if index - lookback >= LOOKBACK_CHUNKS:
@@ -457,10 +477,11 @@ class ReplayLink(Link):
             before = recording.read_chunk(lookback)
         self._restore(stats, rcp)
 
-    def _restore(self, stats: Any | None, rcp: Any | None) -> None:
+    def _restore(self, stats: Any | None, rcp: RecordedMessage | None) -> None:
         """Put the listeners in the state the link had at a seek target."""
         if rcp is not None:
-            command = self.receiver.sent(bytes(rcp.data), self.clock())
+            data = bytes(self.recording.decode(rcp).data)
+            command = self._sent(rcp, data, self.clock())
             if command is not None:
                 with self._cond:
                     self._command = command

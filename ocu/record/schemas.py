@@ -37,6 +37,13 @@ RAW_TOPICS: Final = (
     RAW_SCAN,
     RAW_OTHER,
 )
+# A UR controller's: URScript lines sent, and each packet of its three TCP ports. Registered
+# when first written (an Engineer's file has none of them).
+RAW_UR_SCRIPT: Final = "/raw/ur/script"
+RAW_UR_PRIMARY: Final = "/raw/ur/primary"
+RAW_UR_SECONDARY: Final = "/raw/ur/secondary"
+RAW_UR_REALTIME: Final = "/raw/ur/realtime"
+RAW_UR_TOPICS: Final = (RAW_UR_SCRIPT, RAW_UR_PRIMARY, RAW_UR_SECONDARY, RAW_UR_REALTIME)
 
 # Decoded channels.
 CMD_VEL: Final = "/cmd_vel_sent"
@@ -53,6 +60,8 @@ EVENT_SAFETY: Final = "safety"
 EVENT_LINK_STATE: Final = "link_state"
 EVENT_EXTENSION: Final = "extension"
 EVENT_RECORDING: Final = "recording"
+# The robot controller's own mode changed (a UR: robot mode, safety mode, stops).
+EVENT_ROBOT_MODE: Final = "robot_mode"
 
 METADATA_NAME: Final = "ocu.recording"
 PROFILE_ATTACHMENT: Final = "profile.toml"
@@ -165,8 +174,9 @@ LINK_STATS_TYPE = MessageType(
 EVENT = MessageType(
     "ocu_msgs/msg/Event",
     _concatenate(
-        "# kind: safety (e-stop, watchdogs), link_state, extension or recording.\n"
-        "# state: the new link state, 'active'/'inactive' for the extension, else empty.\n"
+        "# kind: safety (e-stop, watchdogs), link_state, extension, recording or robot_mode.\n"
+        "# state: the new link state, 'active'/'inactive' for the extension, the robot\n"
+        "# controller's mode ('RUNNING · NORMAL', 'PROTECTIVE STOP'), else empty.\n"
         "builtin_interfaces/Time stamp\n"
         "string kind\nstring state\nstring message\n",
         ("builtin_interfaces/Time", _TIME),

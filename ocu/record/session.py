@@ -44,13 +44,16 @@ EVENT = 6
 COMMAND = 7
 
 # The raw channel of each kind of datagram (ocu.records).
-SENT_TOPICS = {r.RCP: s.RAW_RCP, r.HELLO: s.RAW_HELLO}
+SENT_TOPICS = {r.RCP: s.RAW_RCP, r.HELLO: s.RAW_HELLO, r.UR_SCRIPT: s.RAW_UR_SCRIPT}
 RECEIVED_TOPICS = {
     r.TELEMETRY: s.RAW_TELEMETRY,
     r.VIDEO: s.RAW_VIDEO,
     r.VIDEO_FRAGMENT: s.RAW_VIDEO_FRAGMENT,
     r.STATUS: s.RAW_STATUS,
     r.SCAN: s.RAW_SCAN,
+    r.UR_PRIMARY: s.RAW_UR_PRIMARY,
+    r.UR_SECONDARY: s.RAW_UR_SECONDARY,
+    r.UR_REALTIME: s.RAW_UR_REALTIME,
 }
 
 Item = tuple[Any, ...]
@@ -195,7 +198,7 @@ class RecordingFile:
         return self.wall0_ns + round((mono - self.mono0) * 1e9)
 
     def _add(self, mono: float, topic: str, message: Any, publish_ns: int | None = None) -> None:
-        channel_id, type_name = self._channels.get(topic) or self._camera_channel(topic)
+        channel_id, type_name = self._channels.get(topic) or self._late_channel(topic)
         data = self._encoders[type_name](message)
         self._sequence += 1
         log_ns = self.wall_ns(mono)
@@ -204,7 +207,10 @@ class RecordingFile:
             (mono, self._sequence, channel_id, data, log_ns if publish_ns is None else publish_ns),
         )
 
-    def _camera_channel(self, topic: str) -> tuple[int, str]:
+    def _late_channel(self, topic: str) -> tuple[int, str]:
+        # A UR's raw channels, and a camera the profile does not name: registered when used.
+        if topic in s.RAW_UR_TOPICS:
+            return self._channel(topic, s.RAW_PACKET.name)
         return self._channel(topic, s.COMPRESSED_IMAGE.name)
 
     def convert(self, item: Item, dropped: int) -> None:

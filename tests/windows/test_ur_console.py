@@ -273,7 +273,7 @@ def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(tmp_path: Path) 
     assert console.returncode == 0, "".join(lines) + rest
     assert "link stopped (zeros sent last)" in rest
     refused = subprocess.run(
-        [sys.executable, "-m", "ocu", "--profile", "ur5e", "--record", str(tmp_path / "a.mcap")],
+        [sys.executable, "-m", "ocu", "--profile", "ur5e", "--sim-arg=--latency-ms=50"],
         capture_output=True,
         text=True,
         timeout=120,
@@ -281,7 +281,7 @@ def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(tmp_path: Path) 
         check=False,
     )
     assert refused.returncode == 2
-    assert "--record is not available for a UR arm yet" in refused.stderr
+    assert "--sim-arg is not available for a UR arm yet" in refused.stderr
 
 
 def test_the_controllers_own_stop_is_shown_and_nothing_resumes_after_it(

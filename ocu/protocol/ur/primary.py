@@ -478,6 +478,10 @@ def decode_primary(data: bytes) -> PrimaryPackage:
 # ---- the stream splitter ---------------------------------------------------------------------
 
 
+#: Skipped bytes kept for take_skipped() at most (a reader that never takes them).
+MAX_KEPT_SKIPPED = 65536
+
+
 class StreamSplitter:
     """Whole packets out of a TCP byte stream that arrives in arbitrary pieces.
 
@@ -491,6 +495,7 @@ class StreamSplitter:
         self._sizes = frozenset(sizes) if sizes is not None else None
         self._buffer = bytearray()
         self._in_garbage = False
+        self._skipped = bytearray()
         self.malformed = 0
         self.skipped_bytes = 0
         self.packets = 0
@@ -529,6 +534,8 @@ class StreamSplitter:
                 if not self._in_garbage:
                     self._in_garbage = True
                     self.malformed += 1
+                if len(self._skipped) < MAX_KEPT_SKIPPED:
+                    self._skipped.append(self._buffer[offset])
                 offset += 1
                 self.skipped_bytes += 1
                 continue
@@ -541,3 +548,9 @@ class StreamSplitter:
         del self._buffer[:offset]
         self.packets += len(packets)
         return packets
+
+    def take_skipped(self) -> bytes:
+        """The bytes skipped since the last call, in order (a recording keeps them)."""
+        skipped = bytes(self._skipped)
+        self._skipped.clear()
+        return skipped
