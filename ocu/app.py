@@ -33,14 +33,18 @@ from ocu.priority import (
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.profile.ur import UrArmProfile
 from ocu.profile.ur_robot import load_ur_arm, ur_robot_profile
+from ocu.profile.xarm import load_xarm_arm
+from ocu.profile.xarm_robot import xarm_robot_profile
 from ocu.windows.settings_file import SETTINGS_FILE
 
 if TYPE_CHECKING:
     from PySide6.QtCore import QSettings
     from PySide6.QtWidgets import QApplication
 
+    from ocu.core.hardware import HardwareComponent
     from ocu.gamepad.mapping import PadMapping
     from ocu.hotkeys import KeyMap
+    from ocu.link.base import Link
     from ocu.windows.main_window import MainWindow
     from ocu.windows.settings_file import SettingsStatus
 
@@ -211,20 +215,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
     try:
-        ur_arm = load_ur_arm(args.profile)
-        profile = ur_robot_profile(ur_arm) if ur_arm is not None else load_profile(args.profile)
+        ur_arm, xarm = load_ur_arm(args.profile), load_xarm_arm(args.profile)
+        if xarm is not None:
+            profile = xarm_robot_profile(xarm)
+        else:
+            profile = ur_robot_profile(ur_arm) if ur_arm is not None else load_profile(args.profile)
     except ProfileError as err:
         return refuse_file(str(err))
-    if ur_arm is not None:
+    if ur_arm is not None or xarm is not None:
+        docs = "a UR arm yet (docs/ur.md)" if ur_arm is not None else "the xArm yet (docs/xarm.md)"
         for given, option in (
             (args.replay, "--replay"),
             (args.record, "--record"),
             (args.sim_arg, "--sim-arg"),
         ):
             if given:
-                parser.error(f"{option} is not available for a UR arm yet (docs/ur.md)")
+                parser.error(f"{option} is not available for {docs}")
     robot = None
-    if args.robot and ur_arm is None:
+    if args.robot and ur_arm is None and xarm is None:
         try:
             robot = parse_robot(args.robot, profile.link.port)
         except argparse.ArgumentTypeError as err:
@@ -258,6 +266,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     STOP.install()
     # Before Qt, the link or the control core start a thread: threads inherit it.
     log.info("scheduling priority: %s", raise_priority(nice).text)
+    if xarm is not None:
+        from ocu.hardware.xarm import XARM_CAPABILITIES, ConsoleLinks
+
+        try:
+            links = ConsoleLinks(xarm, profile, args.robot)
+        except OSError as err:
+            log.error("%s", err)
+            return 1
+        try:
+            return run_arm_window(
+                profile,
+                (links.make_link, links.hardware_for, XARM_CAPABILITIES),
+                links.where,
+                args.quit_after,
+                config_dir=config_dir,
+                key_map=key_map,
+                pad_mapping=None if args.no_gamepad else pad_mapping,
+                control_hz=args.control_hz,
+            )
+        finally:
+            links.close()
     if ur_arm is not None:
         return run_ur_console(
             ur_arm,
@@ -309,7 +338,7 @@ def run_console(
     from PySide6.QtWidgets import QApplication
 
     from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
-    from ocu.link.base import Link, LinkError
+    from ocu.link.base import LinkError
     from ocu.link.live import UdpLink
     from ocu.record.errors import RecordingError
     from ocu.record.recorder import Recorder
@@ -394,13 +423,10 @@ def run_ur_console(
     simulator in this process on 127.0.0.1 (docs/ur.md)."""
     from PySide6.QtWidgets import QApplication
 
-    from ocu.core.hardware import HardwareComponent
-    from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
     from ocu.hardware.ur import UR_CAPABILITIES, parse_host, ur_component
-    from ocu.link.base import Link, LinkError
+    from ocu.link.base import LinkError
     from ocu.link.ur import UrLink
     from ocu.sim.ur import UrSimulator
-    from ocu.windows.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
@@ -427,27 +453,60 @@ def run_ur_console(
             assert isinstance(link, UrLink)
             return ur_component(link)
 
-        settings, settings_status = open_settings(config_dir)
-        guard = contextlib.ExitStack()
-        guard.enter_context(last_zeros_guard())  # the window starts the link
-        window = MainWindow(
+        return run_arm_window(
             profile,
-            make_link,
+            (make_link, hardware_for, UR_CAPABILITIES),
             where,
-            settings,
-            key_map,
-            settings_status=settings_status,
+            quit_after_s,
+            config_dir=config_dir,
+            key_map=key_map,
             pad_mapping=pad_mapping,
-            pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
             control_hz=control_hz,
-            hardware_for=hardware_for,
-            capabilities=UR_CAPABILITIES,
         )
-        with guard:
-            return run_window(app, window, quit_after_s)
     finally:
         if simulator is not None:
             simulator.stop()
+
+
+def run_arm_window(
+    profile: RobotProfile,
+    hardware: tuple[Callable[[], Link], Callable[[Link], HardwareComponent], frozenset[str]],
+    where: str,
+    quit_after_s: float | None,
+    *,
+    config_dir: Path,
+    key_map: KeyMap,
+    pad_mapping: PadMapping | None,
+    control_hz: float,
+) -> int:
+    """The console's window on an arm (a UR, an xArm): `hardware` is its link factory, its
+    component factory and its capabilities; the window starts the link, zeros are last."""
+    from PySide6.QtWidgets import QApplication
+
+    from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
+    from ocu.windows.main_window import MainWindow
+
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    assert isinstance(app, QApplication)
+    make_link, hardware_for, capabilities = hardware
+    settings, settings_status = open_settings(config_dir)
+    guard = contextlib.ExitStack()
+    guard.enter_context(last_zeros_guard())  # the window starts the link
+    window = MainWindow(
+        profile,
+        make_link,
+        where,
+        settings,
+        key_map,
+        settings_status=settings_status,
+        pad_mapping=pad_mapping,
+        pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
+        control_hz=control_hz,
+        hardware_for=hardware_for,
+        capabilities=capabilities,
+    )
+    with guard:
+        return run_window(app, window, quit_after_s)
 
 
 def run_replay(

@@ -100,3 +100,35 @@ def simulated(
         simulator.stop()
         raise
     return SimulatedXarm(simulator, link)
+
+
+class ConsoleLinks:
+    """What the console needs to drive an xArm: its links and their component, on serial
+    device `robot`, else on the simulator started here (stopped by `close`)."""
+
+    def __init__(self, arm: XarmProfile, profile: RobotProfile, robot: str | None) -> None:
+        self.arm = arm
+        self.profile = profile
+        self.simulator: XarmSimulator | None = None
+        if robot is None:
+            self.simulator = XarmSimulator(arm)
+            self.path = self.simulator.start()
+            self.where = f"xArm simulator on {self.path}"
+        else:
+            check_port(robot)
+            self.path = robot
+            self.where = f"xArm {arm.name} on {robot}"
+
+    def make_link(self) -> Link:
+        """A new link to the board (the window starts it)."""
+        return XarmLink(self.arm, self.path, profile=self.profile)
+
+    def hardware_for(self, link: Link) -> HardwareComponent:
+        """The link as the control core's component."""
+        assert isinstance(link, XarmLink)
+        return xarm_component(link)
+
+    def close(self) -> None:
+        """Stop the simulator started here, if any (after the window's link is shut down)."""
+        if self.simulator is not None:
+            self.simulator.stop()

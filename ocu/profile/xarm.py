@@ -107,10 +107,27 @@ class XarmProfile:
         return CENTRE_UNITS + joint.offset_units + joint.sign * angle_rad * self.units_per_rad
 
 
+# Files beside the xArm profiles that are not profiles (ocu.profile.companion_file).
+_COMPANIONS = ("hotkeys.toml", "gamepad.toml")
+
+
 def shipped_xarm_profiles() -> tuple[str, ...]:
     """The names of the shipped xArm profiles."""
     folder = resources.files("ocu") / "profiles" / "xarm"
-    return tuple(sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml")))
+    return tuple(
+        sorted(
+            p.name[:-5]
+            for p in folder.iterdir()
+            if p.name.endswith(".toml") and p.name not in _COMPANIONS
+        )
+    )
+
+
+def load_xarm_arm(name: str | None) -> XarmProfile | None:
+    """The xArm `--profile` names (a shipped name), else None; ProfileError for a bad one."""
+    if name is None or name not in shipped_xarm_profiles():
+        return None
+    return load_xarm_profile(name)
 
 
 def load_xarm_profile(name_or_path: str | Path) -> XarmProfile:
