@@ -2,8 +2,8 @@
 
 Its joints are the six servos: each reports its position (and a speed derived from two
 readings) and takes a velocity command, which the link turns into short moves
-(ocu.link.xarm). Its capability is the battery; the Arm dock waits for the xArm's URDF and
-IK (docs/xarm.md "Left for issue 23").
+(ocu.link.xarm). Its capabilities: the arm (its URDF and seed 003's IK: the Arm dock, the 3D
+model, stored poses) and the battery.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from ocu.sim.xarm import XarmSimulator
 
 log = logging.getLogger("ocu.hardware")
 
-XARM_CAPABILITIES = frozenset({"battery"})
+XARM_CAPABILITIES = frozenset({"arm", "battery"})
 
 
 def xarm_joints(arm: XarmProfile) -> tuple[JointInterfaces, ...]:

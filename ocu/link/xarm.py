@@ -119,6 +119,7 @@ class XarmLink(Link):
         self.clock = clock
         self._open_port = open_port
         self.timing = arm.timing
+        self._jog_period_s = arm.timing.jog_period_s
         # None disables the GUI-alive watchdog (a caller with its own timeout, e.g. ROS).
         self.gui_alive_timeout_s = (
             profile.link.gui_alive_timeout_s
@@ -250,11 +251,22 @@ class XarmLink(Link):
     def rate_hz(self) -> float:
         """How often jog moves are sent."""
         with self._lock:
-            return 1.0 / self.timing.jog_period_s
+            return 1.0 / self._jog_period_s
 
     def set_rate_hz(self, rate_hz: float) -> None:
-        """The jog rate is the profile's (each move's time is chosen with it): refused."""
-        raise ValueError(f"the xArm's jog rate is its profile's ({self.rate_hz:g} Hz)")
+        """Send jog moves this often: within the profile's bounds, and more often than a
+        move lasts (else the stream would stop between moves)."""
+        low, high = self.profile.link.send_rate_min_hz, self.profile.link.send_rate_max_hz
+        if not low <= rate_hz <= high or 1.0 / rate_hz >= self.timing.jog_move_s:
+            raise ValueError(
+                f"jog rate must be within {low:g}-{high:g} Hz and above "
+                f"{1.0 / self.timing.jog_move_s:g} Hz (a move lasts "
+                f"{self.timing.jog_move_s:g} s), got {rate_hz!r}"
+            )
+        with self._lock:
+            self._jog_period_s = 1.0 / rate_hz
+            self._next_jog = min(self._next_jog, self.clock() + self._jog_period_s)
+        self._wake()
 
     @property
     def extension_active(self) -> bool:
@@ -405,7 +417,7 @@ class XarmLink(Link):
             moving = self._command.is_motion or any(r.moving(now) for r in self._ramps.values())
             jog_due = connected and now >= self._next_jog
             if jog_due:
-                self._next_jog = max(self._next_jog + self.timing.jog_period_s, now)
+                self._next_jog = max(self._next_jog + self._jog_period_s, now)
             estops = [t for t in self._estop_due if t <= now]
             self._estop_due = [t for t in self._estop_due if t > now]
             if self._read_sent_at is not None and now - self._read_sent_at > READ_TIMEOUT_S:

@@ -2,17 +2,19 @@
 
 Six motors that report their position (the servos, device ID = servo ID, raw = servo units),
 six velocity channels named after the joints (rad/s: the link turns them into short moves),
-and link timing from the xArm profile's [timing]. No chassis, drive, cameras, torch or
-protocol extension. The assumed values are listed in `assumptions`.
+link timing from the xArm profile's [timing], the arm's Cartesian settings and its URDF
+(ocu.profile.xarm_urdf). No chassis, drive, cameras, torch or protocol extension. The assumed
+values are listed in `assumptions`.
 """
 
 from __future__ import annotations
 
 import math
 
-from ocu.profile.description import Motor, RobotProfile
+from ocu.profile.description import ArmSettings, Motor, RobotProfile
 from ocu.profile.hardware import Channel, FrameTypes, LinkSettings
 from ocu.profile.xarm import CENTRE_UNITS, XarmProfile
+from ocu.profile.xarm_urdf import ARM_JOINTS, xarm_urdf_path
 
 #: No heartbeat from the commanding thread for this long: motion stops (as the Engineer).
 XARM_GUI_ALIVE_TIMEOUT_S = 0.5
@@ -33,6 +35,7 @@ XARM_ASSUMPTIONS = (
     "link.estop_window_s",
     "channels.*.default_max",
     "motors.*.zero_offset_ticks",
+    "arm",
 )
 
 
@@ -103,5 +106,32 @@ def xarm_robot_profile(arm: XarmProfile, port: str = "") -> RobotProfile:
         assumptions=XARM_ASSUMPTIONS,
         extension=None,
         cameras=(),
-        arm=None,  # the Arm dock needs the xArm's URDF and IK: docs/xarm.md "Left"
+        arm=xarm_arm_settings(),
+        # Its description: the URDF written from the profile (ocu.profile.xarm_urdf).
+        urdf=xarm_urdf_path(arm),
+    )
+
+
+def xarm_arm_settings() -> ArmSettings:
+    """The xArm in Cartesian space: seed 003's four joints, speeds for a desk-sized arm."""
+    return ArmSettings(
+        base_link="base_link",
+        tool_link="tool0",
+        camera_link=None,
+        joints=ARM_JOINTS,
+        linear_speed_m_s=0.02,
+        max_linear_speed_m_s=0.1,
+        pitch_speed_rad_s=0.2,
+        max_pitch_speed_rad_s=0.5,
+        acceleration_rad_s2=2.0,
+        joint_limit_margin_rad=math.radians(2.0),
+        # Condition numbers in units of the longest link, as the Engineer's and the UR's.
+        singularity_slow=17.0,
+        singularity_stop=30.0,
+        clearance_m=0.02,
+        slow_distance_m=0.05,
+        ground_z_m=0.0,  # the table the arm stands on
+        twist_timeout_s=0.1,
+        poses={},
+        tool_axis="x",
     )
