@@ -51,7 +51,9 @@ def xarm_link_settings(arm: XarmProfile, port: str = "") -> LinkSettings:
         send_rate_max_hz=max(50.0, send_rate),
         # A jog move's time: how long the servos go on after the last move (robot side).
         robot_watchdog_s=timing.jog_move_s,
-        telemetry_rate_hz=1.0 / timing.read_period_s,
+        # While the arm moves (when the console's controllers judge the readings' age) the
+        # positions come at the slower rate.
+        telemetry_rate_hz=1.0 / max(timing.read_period_s, timing.read_period_moving_s),
         telemetry_tick_hz=1.0 / timing.read_period_s,
         link_lost_after_s=timing.link_lost_after_s,
         gui_alive_timeout_s=XARM_GUI_ALIVE_TIMEOUT_S,
