@@ -299,7 +299,7 @@ class XarmLink(Link):
                     stops[joint.servo] = self._hold(ramp, here, now)
                 continue
             step = joint.sign * velocity * self.arm.units_per_rad * move_s
-            target = self._limited(joint, here + step)
+            target = self._limited(joint, here, step)
             jogs[joint.servo] = target
             self._ramps[joint.servo] = Ramp(here, target, now, move_s)
             sent[joint.name] = velocity
@@ -313,8 +313,15 @@ class XarmLink(Link):
         )
 
     @staticmethod
-    def _limited(joint: XarmJoint, units: float) -> int:
-        return int(max(joint.min_units, min(joint.max_units, round(units))))
+    def _limited(joint: XarmJoint, here: float, step: float) -> int:
+        """Where a jog step from `here` may go: never further out past a limit (a servo found
+        beyond one, or carried past it, stays there until jogged back in), and never
+        backwards to the limit (a jog outward from beyond it does not pull the joint in)."""
+        if step > 0:
+            target = min(here + step, max(joint.max_units, here))
+        else:
+            target = max(here + step, min(joint.min_units, here))
+        return int(max(POSITION_MIN, min(POSITION_MAX, round(target))))
 
     def _hold(self, ramp: Ramp, here: float, now: float) -> int:
         """Stop a setpoint where it is (lock held): the target of the stop move."""
@@ -558,7 +565,8 @@ class XarmLink(Link):
                     fault = f"servo {joint.servo} reported {raw}, outside its range"
                 elif joint.servo not in self._ramps:
                     # The first reading: the setpoint the board holds is where the servo is.
-                    self._ramps[joint.servo] = Ramp(raw, raw, now, 0.0)
+                    held = max(POSITION_MIN, min(POSITION_MAX, raw))
+                    self._ramps[joint.servo] = Ramp(held, held, now, 0.0)
                 speed = 0.0
                 previous = self._last_units.get(joint.servo)
                 if fault is None:

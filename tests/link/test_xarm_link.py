@@ -6,6 +6,7 @@ and nothing resuming, an impossible reading not believed; under latency, garbage
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 import threading
@@ -328,4 +329,25 @@ def test_shutdown_sends_the_stop_move_last(arm: XarmProfile) -> None:
         wait_for(lambda: simulator.snapshot().setpoints[1] == snapshot.targets[1], "stopped")
         assert link.state is LinkState.CLOSED
     finally:
+        simulator.stop()
+
+
+def test_a_joint_beyond_its_limit_is_not_pushed_further_nor_pulled_back(
+    arm: XarmProfile,
+) -> None:
+    """The base's limit at 700 units, the servo found at 800 (set by hand, say): a jog
+    outward leaves it where it is (no move back to the limit either), a jog inward moves it."""
+    base = dataclasses.replace(arm.joint("base"), max_units=700)
+    limited = dataclasses.replace(
+        arm, joints=tuple(base if j.name == "base" else j for j in arm.joints)
+    )
+    simulator, link, _ = start(limited, initial={BASE: 800})
+    try:
+        link.set_command(Command({"base": 0.3}))  # outward
+        wait_for(lambda: simulator.snapshot().moves >= 5, "jog moves")
+        assert simulator.snapshot().targets[BASE] == 800
+        link.set_command(Command({"base": -0.3}))  # inward
+        wait_for(lambda: simulator.snapshot().targets[BASE] < 790, "the base coming back in")
+    finally:
+        link.shutdown()
         simulator.stop()
