@@ -19,7 +19,10 @@ class SerialPort:
     """The serial device, opened raw with pyserial: bytes in and out, a file descriptor."""
 
     def __init__(self, path: str, baud: int) -> None:
-        import serial  # pyserial; imported here so that the codec and the simulator need not
+        try:
+            import serial  # pyserial; imported here so that the codec and the simulator need not
+        except ImportError as err:
+            raise OSError(f"{path}: pyserial is not installed ({err})") from err
 
         try:
             self._serial = serial.Serial(path, baudrate=baud, timeout=0, write_timeout=0.5)

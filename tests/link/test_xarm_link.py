@@ -351,3 +351,21 @@ def test_a_joint_beyond_its_limit_is_not_pushed_further_nor_pulled_back(
     finally:
         link.shutdown()
         simulator.stop()
+
+
+def test_a_port_that_cannot_be_opened_is_link_lost_and_retried(
+    arm: XarmProfile, tmp_path: Path
+) -> None:
+    events = Events()
+    link = XarmLink(arm, str(tmp_path / "ttyUSB9"), listener=events.append)
+    link.start()
+    try:
+        wait_for(lambda: link.state is LinkState.LOST, "LINK LOST")
+        changes = [e for e in events.of(LinkStateChanged) if isinstance(e, LinkStateChanged)]
+        assert "cannot open" in changes[-1].reason
+        assert str(tmp_path / "ttyUSB9") in changes[-1].reason
+        link.set_command(Command({"base": 0.3}))
+        assert not link.command.is_motion  # held, not sent: nothing to send it to
+    finally:
+        link.shutdown()
+    assert link.state is LinkState.CLOSED
