@@ -1,7 +1,8 @@
 """`ocu-ros _profile:=xarm1s` against a real roscore: the xArm in ROS (issue 23, item 3).
 
 The xArm simulator runs in this process on a pseudo-terminal and the node opens it as its
-serial device (`_robot:=/dev/pts/N`): what the servos received is read from the simulator.
+serial device (`_robot:=/dev/pts/N`): what the servos received is read from the simulator;
+the board's battery is on /diagnostics.
 """
 
 from __future__ import annotations
@@ -32,14 +33,24 @@ def board() -> Iterator[XarmSimulator]:
     simulator.stop()
 
 
+def battery_shown(message: Any) -> bool:
+    """A /diagnostics message whose link status carries the board's battery (7.4 V)."""
+    for status in message.status:
+        if status.name == "ocu: robot link":
+            return {kv.key: kv.value for kv in status.values}.get("battery") == "7.40 V"
+    return False
+
+
 def test_the_xarm_in_ros_moves_on_a_joint_goal_and_stops_last(
     ros_master: RosMaster, ros_client: None, board: XarmSimulator, tmp_path: Path
 ) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState
 
     node = NodeProcess(tmp_path, None, "_profile:=xarm1s", f"_robot:={board.path}")
     goals: Any = None
     states = Collector("joint_states", JointState)
+    diagnostics = Collector("/diagnostics", DiagnosticArray)
     try:
         import rospy
 
@@ -48,6 +59,8 @@ def test_the_xarm_in_ros_moves_on_a_joint_goal_and_stops_last(
         states.wait_connected(node.name)
         message = states.wait(lambda m: list(m.name) == XARM_JOINTS)
         assert list(message.position) == pytest.approx([0.0] * 6, abs=1e-9)
+        diagnostics.wait_connected(node.name)
+        diagnostics.wait(battery_shown, 10.0)
         goals.publish(JointState(name=["base"], position=[math.radians(20.0)]))
         arm = load_xarm_profile("xarm1s")
         target_units = arm.raw_units(arm.joint("base"), math.radians(20.0))
@@ -65,6 +78,7 @@ def test_the_xarm_in_ros_moves_on_a_joint_goal_and_stops_last(
         if goals is not None:
             goals.unregister()
         states.close()
+        diagnostics.close()
         node.stop()
     assert code == 0, node.output()
     assert "link shut down, the stop move sent last" in node.output()
