@@ -28,6 +28,7 @@ import collections
 import contextlib
 import heapq
 import logging
+import math
 import os
 import random
 import select
@@ -432,6 +433,20 @@ def step_figures(samples: Sequence[tuple[float, float]], final: float) -> tuple[
         if abs(value - final) > 0.02 * abs(final):
             settled = when
     return overshoot, settled
+
+
+def phase_margin_deg(profile: XarmProfile, delay_s: float = 0.0) -> float:
+    """The phase margin of the servo model taken as an open loop (seed 003 §4.1 does so),
+    with a pure delay: where |G(jω)| = 1, 180° plus G's phase minus ωτ."""
+    zeta = profile.servo.damping_ratio
+    omega_n = profile.servo.natural_frequency_rad_s
+    # |G(jω)| = 1  <=>  ω⁴ + (4ζ² - 2) ωn² ω² = 0: ω² = (2 - 4ζ²) ωn².
+    squared = (2.0 - 4.0 * zeta * zeta) * omega_n * omega_n
+    if squared <= 0.0:
+        return math.inf  # |G| never reaches 1 again: no crossover
+    omega = math.sqrt(squared)
+    phase = -math.atan2(2.0 * zeta * omega_n * omega, omega_n * omega_n - squared)
+    return math.degrees(math.pi + phase - omega * delay_s)
 
 
 def is_xarm_profile(argv: Sequence[str]) -> bool:

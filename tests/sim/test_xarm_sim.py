@@ -29,7 +29,7 @@ from ocu.protocol.xarm import (
     read_positions,
     servo_move,
 )
-from ocu.sim.xarm import XarmSimulator, step_figures, step_response
+from ocu.sim.xarm import XarmSimulator, phase_margin_deg, step_figures, step_response
 
 SEED_EXAMPLE = bytes.fromhex("55 55 08 03 01 E8 03 03 20 03")  # servo 3 to 800 in 1000 ms
 DEADLINE_S = 10.0
@@ -278,3 +278,10 @@ def test_ocu_sim_cli_prints_its_terminal_and_mutes_on_sigusr1() -> None:
         for pipe in (process.stdin, process.stdout):
             if pipe is not None:
                 pipe.close()
+
+
+def test_phase_margins_are_seed_003s(profile: XarmProfile) -> None:
+    """Seed 003 §4.1: servo 6's model has a phase margin of 29.5°, 15.8° with 30 ms of delay:
+    the published G(s) (the shipped model) gives both, which is why it is the one shipped."""
+    assert phase_margin_deg(profile) == pytest.approx(29.5, abs=0.1)
+    assert phase_margin_deg(profile, 0.030) == pytest.approx(15.8, abs=0.1)
