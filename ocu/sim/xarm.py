@@ -69,6 +69,8 @@ MAX_WAIT_S = 0.005
 DEFAULT_BATTERY_MV = 7400
 #: Moves remembered for `moves_since`.
 MOVE_LOG = 4096
+#: How often `main` looks at the signals its handlers noted.
+SIGNAL_POLL_S = 0.1
 
 
 class Servo:
@@ -525,7 +527,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         threading.Thread(target=wait_for_parent, name="xarm-sim-stdin", daemon=True).start()
     path = simulator.start()
     print(f"ocu-sim {profile.name} on {path}", flush=True)
-    stop.wait()
+    # Woken now and then: a signal the kernel hands to another thread (the simulator's, the
+    # stdin reader's) runs its Python handler only when the main thread next runs.
+    while not stop.wait(SIGNAL_POLL_S):
+        pass
     simulator.stop()
     return 0
 
