@@ -9,12 +9,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes
-import ctypes.util
 import logging
-import signal
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -22,6 +19,7 @@ from ocu.console.poses import CONFIG_DIR_ENV, default_config_dir
 from ocu.core.manager import DEFAULT_RATE_HZ as DEFAULT_CONTROL_HZ
 from ocu.core.manager import MAX_RATE_HZ as MAX_CONTROL_HZ
 from ocu.core.manager import MIN_RATE_HZ as MIN_CONTROL_HZ
+from ocu.lifecycle import STOP, last_zeros_guard, run_window
 from ocu.priority import (
     DEFAULT_NICE,
     NICE_ENV,
@@ -33,23 +31,21 @@ from ocu.priority import (
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.profile.ur import UrArmProfile
 from ocu.profile.ur_robot import load_ur_arm, ur_robot_profile
+from ocu.profile.xarm import load_xarm_arm
+from ocu.profile.xarm_robot import xarm_robot_profile
 from ocu.windows.settings_file import SETTINGS_FILE
 
 if TYPE_CHECKING:
     from PySide6.QtCore import QSettings
-    from PySide6.QtWidgets import QApplication
 
+    from ocu.core.hardware import HardwareComponent
     from ocu.gamepad.mapping import PadMapping
     from ocu.hotkeys import KeyMap
-    from ocu.windows.main_window import MainWindow
+    from ocu.link.base import Link
+    from ocu.record.recorder import Recorder
     from ocu.windows.settings_file import SettingsStatus
 
 log = logging.getLogger("ocu")
-
-SIGNAL_POLL_MS = 100
-# Each quits the console in order, zeros last: Ctrl-C, kill, a closed terminal or a dropped
-# SSH session, Ctrl-\\.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
 
 
 def parse_robot(text: str, default_port: int) -> tuple[str, int]:
@@ -211,18 +207,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
     try:
-        ur_arm = load_ur_arm(args.profile)
-        profile = ur_robot_profile(ur_arm) if ur_arm is not None else load_profile(args.profile)
+        ur_arm, xarm = load_ur_arm(args.profile), load_xarm_arm(args.profile)
+        if xarm is not None:
+            profile = xarm_robot_profile(xarm)
+        else:
+            profile = ur_robot_profile(ur_arm) if ur_arm is not None else load_profile(args.profile)
     except ProfileError as err:
         return refuse_file(str(err))
     if ur_arm is not None and args.sim_arg:
         parser.error("--sim-arg is not available for a UR arm yet (docs/ur.md)")
+    if xarm is not None:
+        for given, option in ((args.replay, "--replay"), (args.record, "--record"),
+                              (args.sim_arg, "--sim-arg")):  # fmt: skip
+            if given:
+                parser.error(f"{option} is not available for the xArm yet (docs/xarm.md)")
     if args.replay is not None:
         from ocu.record.ur_replay import recorded_profile
 
         profile = recorded_profile(args.replay, profile)  # a UR's keys for a UR's recording
     robot = None
-    if args.robot and ur_arm is None:
+    if args.robot and ur_arm is None and xarm is None:
         try:
             robot = parse_robot(args.robot, profile.link.port)
         except argparse.ArgumentTypeError as err:
@@ -256,6 +260,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     STOP.install()
     # Before Qt, the link or the control core start a thread: threads inherit it.
     log.info("scheduling priority: %s", raise_priority(nice).text)
+    if xarm is not None:
+        from ocu.hardware.xarm import XARM_CAPABILITIES, ConsoleLinks
+
+        try:
+            links = ConsoleLinks(xarm, profile, args.robot)
+        except OSError as err:
+            log.error("%s", err)
+            return 1
+        try:
+            return run_arm_window(
+                profile,
+                (links.make_link, links.hardware_for, XARM_CAPABILITIES),
+                links.where,
+                args.quit_after,
+                config_dir=config_dir,
+                key_map=key_map,
+                pad_mapping=None if args.no_gamepad else pad_mapping,
+                control_hz=args.control_hz,
+            )
+        finally:
+            links.close()
     if ur_arm is not None and args.replay is None:
         return run_ur_console(
             ur_arm,
@@ -308,7 +333,7 @@ def run_console(
     from PySide6.QtWidgets import QApplication
 
     from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
-    from ocu.link.base import Link, LinkError
+    from ocu.link.base import LinkError
     from ocu.link.live import UdpLink
     from ocu.record.errors import RecordingError
     from ocu.record.recorder import Recorder
@@ -394,15 +419,12 @@ def run_ur_console(
     simulator in this process on 127.0.0.1 (docs/ur.md)."""
     from PySide6.QtWidgets import QApplication
 
-    from ocu.core.hardware import HardwareComponent
-    from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
     from ocu.hardware.ur import UR_CAPABILITIES, parse_host, ur_component
-    from ocu.link.base import Link, LinkError
+    from ocu.link.base import LinkError
     from ocu.link.ur import UrLink
     from ocu.record.errors import RecordingError
     from ocu.record.recorder import Recorder
     from ocu.sim.ur import UrSimulator
-    from ocu.windows.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
@@ -436,29 +458,64 @@ def run_ur_console(
             assert isinstance(link, UrLink)
             return ur_component(link)
 
-        settings, settings_status = open_settings(config_dir)
-        guard = contextlib.ExitStack()
-        guard.enter_context(last_zeros_guard())  # the window starts the link
-        window = MainWindow(
+        return run_arm_window(
             profile,
-            make_link,
+            (make_link, hardware_for, UR_CAPABILITIES),
             where,
-            settings,
-            key_map,
-            settings_status=settings_status,
+            quit_after_s,
+            config_dir=config_dir,
+            key_map=key_map,
             recorder=recorder,
             pad_mapping=pad_mapping,
-            pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
             control_hz=control_hz,
-            hardware_for=hardware_for,
-            capabilities=UR_CAPABILITIES,
         )
-        with guard:
-            return run_window(app, window, quit_after_s)
     finally:
         recorder.stop()  # after the window's shutdown: the link's closing stopj is in it
         if simulator is not None:
             simulator.stop()
+
+
+def run_arm_window(
+    profile: RobotProfile,
+    hardware: tuple[Callable[[], Link], Callable[[Link], HardwareComponent], frozenset[str]],
+    where: str,
+    quit_after_s: float | None,
+    *,
+    config_dir: Path,
+    key_map: KeyMap,
+    pad_mapping: PadMapping | None,
+    control_hz: float,
+    recorder: Recorder | None = None,
+) -> int:
+    """The console's window on an arm (a UR, an xArm): `hardware` is its link factory, its
+    component factory and its capabilities; the window starts the link, zeros are last."""
+    from PySide6.QtWidgets import QApplication
+
+    from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
+    from ocu.windows.main_window import MainWindow
+
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    assert isinstance(app, QApplication)
+    make_link, hardware_for, capabilities = hardware
+    settings, settings_status = open_settings(config_dir)
+    guard = contextlib.ExitStack()
+    guard.enter_context(last_zeros_guard())  # the window starts the link
+    window = MainWindow(
+        profile,
+        make_link,
+        where,
+        settings,
+        key_map,
+        settings_status=settings_status,
+        recorder=recorder,
+        pad_mapping=pad_mapping,
+        pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
+        control_hz=control_hz,
+        hardware_for=hardware_for,
+        capabilities=capabilities,
+    )
+    with guard:
+        return run_window(app, window, quit_after_s)
 
 
 def run_replay(
@@ -504,62 +561,6 @@ def run_replay(
     return run_window(app, window, quit_after_s)
 
 
-@contextlib.contextmanager
-def last_zeros_guard() -> Iterator[None]:
-    """The live links send zeros last however the process ends (ocu.link.guard), including
-    an X server that dies: Xlib ends the process from its fatal I/O error handler."""
-    from ocu.link.guard import ExitGuard, shutdown_live_links
-
-    with ExitGuard(), on_x_server_loss(lambda: shutdown_live_links("X server connection lost")):
-        yield
-
-
-XIOErrorHandler = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p)
-
-
-@contextlib.contextmanager
-def on_x_server_loss(action: Callable[[], None]) -> Iterator[None]:
-    """Run `action` when Xlib reports the X connection lost, before it exits the process.
-
-    Xlib calls its I/O error handler and then C's exit(), which skips Python's atexit hooks
-    and Qt's teardown; this handler runs first, then the one it replaced (Xlib's default
-    prints the "XIO: fatal IO error" line). Nothing to do on other platforms (offscreen).
-    """
-    from PySide6.QtGui import QGuiApplication
-
-    xlib = _xlib() if QGuiApplication.platformName() == "xcb" else None
-    if xlib is None:
-        yield
-        return
-    previous: list[int | None] = [None]
-
-    def handler(display: int | None) -> int:
-        try:
-            action()
-        except Exception:
-            log.exception("X connection lost: the last-chance action failed")
-        chained = previous[0]
-        return XIOErrorHandler(chained)(display) if chained else 0
-
-    callback = XIOErrorHandler(handler)
-    previous[0] = xlib.XSetIOErrorHandler(callback)
-    try:
-        yield
-    finally:
-        xlib.XSetIOErrorHandler(XIOErrorHandler(previous[0] or 0))
-
-
-def _xlib() -> ctypes.CDLL | None:
-    """libX11 as loaded by Qt's xcb plugin (the same library instance), or None."""
-    try:
-        xlib = ctypes.CDLL(ctypes.util.find_library("X11") or "libX11.so.6")
-    except OSError:
-        return None
-    xlib.XSetIOErrorHandler.restype = ctypes.c_void_p
-    xlib.XSetIOErrorHandler.argtypes = [XIOErrorHandler]
-    return xlib
-
-
 def open_settings(config_dir: Path) -> tuple[QSettings, SettingsStatus]:
     """The window layout file in the config directory (created if needed), and whether it may
     be saved: an unreadable one is moved aside first, a read-only folder keeps the layout
@@ -574,77 +575,6 @@ def open_settings(config_dir: Path) -> tuple[QSettings, SettingsStatus]:
     except ConfigDirError as err:  # checked at start; changed since
         status = SettingsStatus(path, writable=False, notes=(f"{err}: the layout is not saved",))
     return QSettings(str(path), QSettings.Format.IniFormat), status
-
-
-def run_window(app: QApplication, window: MainWindow, quit_after_s: float | None) -> int:
-    """Show the console, run Qt's event loop until quit (signals, --quit-after), shut down."""
-    from PySide6.QtCore import QTimer
-
-    app.aboutToQuit.connect(window.shutdown)
-    STOP.install()  # main() has done it already; a caller that did not gets it here
-    STOP.looping = True
-
-    def quit_on_signal() -> None:
-        if STOP.received:
-            log.info("%s received, quitting", signal.Signals(STOP.received[0]).name)
-            app.quit()
-
-    pulse = QTimer()
-    pulse.start(SIGNAL_POLL_MS)
-    pulse.timeout.connect(quit_on_signal)
-    # A signal that came while the window was being built quits at the loop's first turn.
-    QTimer.singleShot(0, quit_on_signal)
-    if quit_after_s is not None:
-        QTimer.singleShot(int(quit_after_s * 1000), app.quit)
-    if window.layout_restored:
-        window.show()
-    else:
-        # First run: the whole screen for the cockpit (also without a window manager).
-        screen = window.screen()
-        if screen is not None:
-            window.resize(screen.availableGeometry().size())
-        window.showMaximized()
-    code = app.exec()
-    window.shutdown()
-    pulse.stop()
-    STOP.looping = False
-    STOP.received.clear()  # handled
-    return code
-
-
-class StopSignals:
-    """SIGINT, SIGTERM, SIGHUP and SIGQUIT quit the console in order, from the start of main().
-
-    Python runs a signal handler between any two bytecodes of the main thread, e.g. in the
-    middle of a send that holds the link's lock: the handler only notes the signal, and a
-    short timer of the event loop (which also lets Python see the signal at all) quits Qt,
-    so the window's shutdown sends zeros last. A signal that comes before the loop runs
-    (while the simulator starts or the window is built, with the link perhaps already
-    sending) is noted the same way and quits at the loop's first turn. A second one before
-    the loop runs ends a start that hangs: SystemExit, whose atexit hook still shuts the
-    live links down (ocu.link.guard).
-    """
-
-    def __init__(self) -> None:
-        self.received: list[int] = []
-        self.looping = False
-        self._installed = False
-
-    def install(self) -> None:
-        """Catch the stop signals (main thread only; idempotent)."""
-        if self._installed:
-            return
-        self._installed = True
-        for sig in STOP_SIGNALS:
-            signal.signal(sig, self._handle)
-
-    def _handle(self, signum: int, _frame: object) -> None:
-        self.received.append(signum)
-        if len(self.received) > 1 and not self.looping:
-            raise SystemExit(128 + signum)
-
-
-STOP = StopSignals()
 
 
 if __name__ == "__main__":

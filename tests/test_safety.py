@@ -25,7 +25,7 @@ from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QWidget
 from pytestqt.qtbot import QtBot
 
-from ocu.app import SIGNAL_POLL_MS
+from ocu.lifecycle import SIGNAL_POLL_MS
 from ocu.profile import RobotProfile
 from ocu.records import LinkState
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator

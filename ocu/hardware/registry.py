@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ocu.core.hardware import HardwareRegistry
-from ocu.hardware import engineer, ur
+from ocu.hardware import engineer, ur, xarm
 
 HARDWARE = HardwareRegistry()
 HARDWARE.register("engineer", engineer.over_udp)
@@ -11,3 +11,5 @@ HARDWARE.register("engineer-sim", engineer.simulated)
 HARDWARE.register("engineer-recording", engineer.recording)
 HARDWARE.register("ur", ur.over_tcp)
 HARDWARE.register("ur-sim", ur.simulated)
+HARDWARE.register("xarm", xarm.over_serial)
+HARDWARE.register("xarm-sim", xarm.simulated)

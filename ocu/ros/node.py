@@ -34,6 +34,8 @@ from ocu.priority import nice_from_env, raise_priority
 from ocu.profile import ProfileError, RobotProfile, load_profile
 from ocu.profile.ur import UrArmProfile
 from ocu.profile.ur_robot import load_ur_arm, ur_robot_profile
+from ocu.profile.xarm import XarmProfile, load_xarm_arm
+from ocu.profile.xarm_robot import xarm_robot_profile
 from ocu.ros.convert import (
     DEFAULT_CMD_VEL_TIMEOUT_S,
     DEFAULT_RATE_HZ,
@@ -111,9 +113,10 @@ class NodeConfig:
     extension: bool
     camera: int | None = None
     arm_poses_path: Path | None = None
-    #: A UR arm's profile (None: an Engineer); its controller is at `ur_target`
-    #: (HOST[:PORT_BASE]), or its simulator runs in the node when that is empty.
-    ur_arm: UrArmProfile | None = None
+    #: A UR arm's or an xArm's profile (None: an Engineer); its controller is at `ur_target`
+    #: (HOST[:PORT_BASE]; an xArm: its serial device), or its simulator runs in the node
+    #: when that is empty.
+    ur_arm: UrArmProfile | XarmProfile | None = None
     ur_target: str = ""
 
 
@@ -160,14 +163,19 @@ def parse_address(text: str, default_port: int) -> tuple[str, int]:
     return host, int(port_text)
 
 
-def read_robot(get: ParamGetter) -> tuple[RobotProfile, str | None, UrArmProfile | None]:
-    """The profile named by ~profile (the shipped one if empty), and the UR arm's profile
-    when it names one (read as `ocu --profile` reads it: ocu.profile.ur_robot.load_ur_arm)."""
+def read_robot(
+    get: ParamGetter,
+) -> tuple[RobotProfile, str | None, UrArmProfile | XarmProfile | None]:
+    """The profile named by ~profile (the shipped one if empty), and the UR arm's or the
+    xArm's profile when it names one (read as `ocu --profile` reads it)."""
     path = _text(get, "profile") or None
     try:
         arm = load_ur_arm(path)
         if arm is not None:
             return ur_robot_profile(arm), path, arm
+        xarm = load_xarm_arm(path)
+        if xarm is not None:
+            return xarm_robot_profile(xarm), path, xarm
         return load_profile(path), path, None
     except ProfileError as err:
         raise ConfigError(f"~profile: {err}") from err
@@ -196,7 +204,10 @@ _UNSET = object()
 
 
 def read_ur_config(
-    get: ParamGetter, profile: RobotProfile, profile_path: str | None, arm: UrArmProfile
+    get: ParamGetter,
+    profile: RobotProfile,
+    profile_path: str | None,
+    arm: UrArmProfile | XarmProfile,
 ) -> NodeConfig:
     """The parameters for a UR arm, checked; those of a chassis are refused (NOT_FOR_UR)."""
     from ocu.hardware.ur import parse_host
@@ -205,11 +216,12 @@ def read_ur_config(
     given = [name for name in NOT_FOR_UR if get(name, _UNSET) is not _UNSET]
     if given:
         raise ConfigError(
-            f"{', '.join('~' + n for n in given)}: not for a UR arm ({arm.name}: no chassis, "
-            "cameras or protocol extension; its simulator runs in the node)"
+            f"{', '.join('~' + n for n in given)}: not for "
+            f"{'a UR arm' if isinstance(arm, UrArmProfile) else 'an xArm'} ({arm.name}: no "
+            "chassis, cameras or protocol extension; its simulator runs in the node)"
         )
     target = _text(get, "robot")
-    if target:
+    if target and isinstance(arm, UrArmProfile):
         try:
             parse_host(target)
         except LinkError as err:
@@ -236,7 +248,7 @@ def read_config(
     get: ParamGetter,
     profile: RobotProfile,
     profile_path: str | None,
-    ur_arm: UrArmProfile | None = None,
+    ur_arm: UrArmProfile | XarmProfile | None = None,
 ) -> NodeConfig:
     """Every private parameter, checked; `get(name, default)` reads one (rospy.get_param)."""
     if ur_arm is not None:
@@ -546,6 +558,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
 
     simulator: SimulatorProcess | None = None
+    kind = ""
     console: HeadlessConsole | None = None
     sink: ModelSink | None = None
     bridge: RosBridge | None = None
@@ -554,7 +567,8 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         if config.ur_arm is not None:
             # A UR arm: its controller over TCP, or its simulator in this process (free
             # ports on 127.0.0.1), which the hardware's shutdown stops after the last stopj.
-            plugin = "ur" if config.ur_target else "ur-sim"
+            kind = "ur" if isinstance(config.ur_arm, UrArmProfile) else "xarm"
+            plugin = kind if config.ur_target else f"{kind}-sim"
             try:
                 hardware = HARDWARE.create(plugin, profile, config.ur_target, arm=config.ur_arm)
             except (LinkError, HardwareError, OSError) as err:
@@ -566,9 +580,11 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
                     str(ports[k]) for k in ("primary", "secondary", "realtime")
                 )
                 log.info("built-in %s", where)
+            elif kind == "xarm":
+                where = f"xArm {config.ur_arm.name} on {config.ur_target or 'its simulator'}"
             else:
                 where = f"UR {config.ur_arm.name} at {config.ur_target}"
-            hardware_id = config.ur_target or f"ur-sim {SIM_HOST}"
+            hardware_id = config.ur_target or (f"ur-sim {SIM_HOST}" if kind == "ur" else plugin)
         else:
             if robot is None:
                 try:
@@ -651,7 +667,10 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
             sink.close()
         if console is not None:
             console.stop()
-            log.info("link shut down, %s sent last", "stopj" if config.ur_arm else "zeros")
+            last = (
+                "zeros" if config.ur_arm is None else "the stop move" if kind == "xarm" else "stopj"
+            )
+            log.info("link shut down, %s sent last", last)
         if simulator is not None:
             simulator.stop()
 

@@ -10,7 +10,8 @@ Topics (relative names resolve in the node's namespace; /diagnostics is global):
 - in  `joint_goals`    sensor_msgs/JointState: name[] with position[] in radians
 - out `joint_states`   sensor_msgs/JointState: radians, rad/s, effort = motor current (A)
 - out `camera/compressed` and `camera/<name>/image/compressed`  sensor_msgs/CompressedImage
-- out `/diagnostics`   diagnostic_msgs/DiagnosticArray: link health and the bridge's state;
+- out `/diagnostics`   diagnostic_msgs/DiagnosticArray: link health (with the battery when
+                        the robot reports one) and the bridge's state;
   for a UR also its controller's robot mode, safety mode and stop flags
 
 The arm (docs/arm.md), when the profile has an [arm] table:
@@ -163,6 +164,7 @@ class RosBridge:
         self.on_step = on_step
         self._life_lock = threading.Lock()
         self._link: Link | None = None
+        self._battery_v: float | None = None  # the newest status report's, for /diagnostics
         self._subscribers: list[Any] = []
         self._publishers: Publishers | None = None
         self._thread: threading.Thread | None = None
@@ -285,6 +287,8 @@ class RosBridge:
             self.on_video_frame(event)
         elif isinstance(event, ScanFrame):
             self.on_robot_scan(event)
+        elif isinstance(event, StatusFrame) and event.voltage_v is not None:
+            self._battery_v = event.voltage_v
         navigator = self.navigator
         if navigator is None or not self.feed_navigator:
             return
@@ -490,10 +494,10 @@ class RosBridge:
             bridge.values.append(KeyValue(key="safety zones", value=self.navigator.zones.text))
             sources = ", ".join(self.navigator.scan_sources()) or "none"
             bridge.values.append(KeyValue(key="scan sources", value=sources))
-        message.status = [
-            diagnostic_status(link_report(link.state, link.stats(), self.hardware_id)),
-            bridge,
-        ]
+        link_status = diagnostic_status(link_report(link.state, link.stats(), self.hardware_id))
+        if self._battery_v is not None:
+            link_status.values.append(KeyValue(key="battery", value=f"{self._battery_v:.2f} V"))
+        message.status = [link_status, bridge]
         if isinstance(link, UrLink):
             # The UR's robot and safety modes: what the controller lets move (docs/ur.md).
             report = controller_report(link.robot_status, self.hardware_id)

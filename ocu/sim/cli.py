@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from ocu.nav.world import DEFAULT_WORLD, WorldError, load_world
 from ocu.net.transport import TransportError
 from ocu.profile import ProfileError, default_profile_path, load_profile_data, parse_profile
-from ocu.sim import ur
+from ocu.sim import ur, xarm
 from ocu.sim.extended import DEFAULT_DRAIN_PERCENT_PER_S, DEFAULT_STATUS_HZ
 from ocu.sim.faults import FaultConfig
 from ocu.sim.rangefinder import (
@@ -277,6 +277,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the simulator until SIGINT or SIGTERM; returns the exit code."""
     if ur.is_ur_profile(sys.argv[1:] if argv is None else argv):
         return ur.main(argv)  # `ocu-sim --profile ur5e`: the UR controller (docs/ur.md)
+    if xarm.is_xarm_profile(sys.argv[1:] if argv is None else argv):
+        return xarm.main(argv)  # `ocu-sim --profile xarm1s`: the xArm's board (docs/xarm.md)
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.scramble is None and (args.scramble_ids or args.scramble_out):
