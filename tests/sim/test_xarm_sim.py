@@ -257,8 +257,9 @@ def test_ocu_sim_cli_prints_its_terminal_and_mutes_on_sigusr1() -> None:
             port.send(read_battery())
             assert port.wait_frame(Cmd.GET_BATTERY_VOLTAGE) is not None
             process.send_signal(signal.SIGUSR1)
-            # Muted once the signal is handled: two requests in a row unanswered.
-            deadline = time.monotonic() + DEADLINE_S
+            # Muted once the signal is handled: two requests in a row unanswered (each waited
+            # for a second: a loaded machine may take several rounds to get there).
+            deadline = time.monotonic() + 3 * DEADLINE_S
             silent = 0
             while silent < 2:
                 port.send(read_battery())
