@@ -36,6 +36,7 @@ import ctypes.util
 import logging
 import os
 import select
+import socket
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -134,6 +135,10 @@ def _library(name: str, soname: str, *, holding_gil: bool = False) -> ctypes.CDL
     return None
 
 
+# void (*)(Display *, void *): what Xlib calls when a connection is lost (libX11 >= 1.7).
+_IOErrorExitHandler = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)
+
+
 def _declare(x11: ctypes.CDLL, xi: ctypes.CDLL) -> None:
     vp, c_int = ctypes.c_void_p, ctypes.c_int
     x11.XOpenDisplay.restype = vp
@@ -149,6 +154,9 @@ def _declare(x11: ctypes.CDLL, xi: ctypes.CDLL) -> None:
     x11.XFreeEventData.argtypes = [vp, ctypes.POINTER(_XGenericEventCookie)]
     x11.XGetInputFocus.argtypes = [vp, ctypes.POINTER(ctypes.c_ulong), ctypes.POINTER(c_int)]
     x11.XFlush.argtypes = [vp]
+    if hasattr(x11, "XSetIOErrorExitHandler"):
+        x11.XSetIOErrorExitHandler.argtypes = [vp, _IOErrorExitHandler, vp]
+        x11.XSetIOErrorExitHandler.restype = None
     x11.XQueryPointer.argtypes = [
         vp,
         ctypes.c_ulong,
@@ -185,6 +193,8 @@ class XKeyReader:
     def __init__(self, x11: ctypes.CDLL, xi: ctypes.CDLL, display: int, opcode: int) -> None:
         self._x11 = x11
         self._events = x11  # open(): the same library, its calls holding the GIL
+        self._broken = threading.Event()  # the connection to the server is lost
+        self._on_loss: object = None
         self._xi = xi
         self._display: int | None = display
         self._opcode = opcode
@@ -215,9 +225,20 @@ class XKeyReader:
             _declare(events, xi)
         except AttributeError:
             return None
+        if not hasattr(x11, "XSetIOErrorExitHandler"):  # libX11 < 1.7
+            log.info("libX11 before 1.7: keys go through Qt's events only")
+            return None
         display = x11.XOpenDisplay(display_name.encode() if display_name else None)
         if not display:
             return None
+        # The server gone (it died, the session ended): Xlib's default ends the process with
+        # C's exit() from whichever thread noticed - from this one, exit() ran Qt's global
+        # destructors under the GUI thread's feet and the process hung (a hog run). This
+        # connection's handler only marks it broken; the GUI thread's own connection then
+        # ends the console as before (ocu.app hooks the zeros to the loss).
+        broken = threading.Event()
+        on_loss = _IOErrorExitHandler(lambda _display, _data: broken.set())
+        x11.XSetIOErrorExitHandler(display, on_loss, None)
         opcode, event, error = ctypes.c_int(), ctypes.c_int(), ctypes.c_int()
         major, minor = ctypes.c_int(2), ctypes.c_int(2)
         if (
@@ -241,6 +262,7 @@ class XKeyReader:
         x11.XFlush(display)
         reader = cls(x11, xi, display, opcode.value)
         reader._events = events
+        reader._broken, reader._on_loss = broken, on_loss  # kept alive with the display
         return reader
 
     # ---- what the GUI thread tells it ---------------------------------------------------------
@@ -276,7 +298,8 @@ class XKeyReader:
         if thread is not None and thread is not threading.current_thread():
             thread.join(2.0)
         display, self._display = self._display, None
-        if display is not None and (thread is None or not thread.is_alive()):
+        alive = thread is not None and thread.is_alive()
+        if display is not None and not alive and not self._broken.is_set():
             self._x11.XCloseDisplay(display)
             for fd in (self._wake_r, self._wake_w):
                 os.close(fd)
@@ -286,18 +309,29 @@ class XKeyReader:
         assert display is not None
         events = self._events
         fd = events.XConnectionNumber(display)
+        # A look at the connection before Xlib reads it: a server gone is noticed here, and
+        # Xlib's I/O error path (a global handler, then exit()) is never taken from this
+        # thread (once it hung the process while Qt's own connection ended it).
+        peek = socket.socket(fileno=os.dup(fd))
         event = _XEvent()
         log.info(STARTED)
         try:
             while not self._stop.is_set():
-                while events.XPending(display):
+                while events.XPending(display) and not self._broken.is_set():
                     events.XNextEvent(display, ctypes.byref(event))
                     self._dispatch(display, event)
-                if self._stop.is_set():
+                if self._stop.is_set() or self._broken.is_set():
                     break
                 select.select([fd, self._wake_r], [], [])
+                if not _connected(peek):
+                    self._broken.set()
+                    break
         except Exception:
             log.exception("the X key reader failed: keys go through Qt's events only")
+        finally:
+            peek.close()
+        if self._broken.is_set():
+            log.warning("the X key reader lost the X server: keys go through Qt's events only")
 
     def _dispatch(self, display: int, event: _XEvent) -> None:
         cookie = event.cookie
@@ -342,6 +376,16 @@ class XKeyReader:
             log.debug("X focus 0x%x, not the console's %s", focus.value, sorted(self._windows))
             return False
         return True
+
+
+def _connected(sock: socket.socket) -> bool:
+    """Whether the X server's end of the connection is still there (EOF or a reset: gone)."""
+    try:
+        return sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) != b""
+    except BlockingIOError:
+        return True  # nothing to read: woken by the stop pipe
+    except OSError:
+        return False
 
 
 class RawKeys:
