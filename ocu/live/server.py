@@ -1,0 +1,539 @@
+"""The live server: a session served over the Foxglove WebSocket protocol (docs/live.md).
+
+The server is one more subscriber of a Link (attach()). Its callback runs on the link's
+threads and only appends a small item to a bounded queue (dropped and counted when full; the
+link never waits, and with no client connected it returns at once). Everything else runs on
+the server's own thread, "ocu-live", in one asyncio loop: the items become the recorder's
+ROS 2 messages (ocu.record.convert, the same CDR bytes a recording holds) plus the robot's
+/tf, /tf_static, /robot_description and /scan (ocu.live.robot); a message is encoded only
+when some client subscribed to its channel.
+
+Each client has its own outbox bounded in bytes: a message that does not fit is dropped for
+that client alone and counted, so a slow client loses frames, never grows the server's
+memory and never delays another client or the operator. A client whose frames the server
+refuses (not JSON, unknown operations, bad ids) gets a status message per frame and is
+closed after MAX_REFUSED of them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+import logging
+import threading
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from http import HTTPStatus
+from typing import Any, Final
+from urllib.parse import parse_qs, urlsplit
+
+from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.exceptions import ConnectionClosed
+from websockets.http11 import Request, Response
+
+from ocu.link.base import Link
+from ocu.live import robot as rb
+from ocu.live import wire
+from ocu.profile import RobotProfile
+from ocu.record import schemas as s
+from ocu.record.convert import (
+    DECODED_TOPICS,
+    TELEMETRY,
+    Item,
+    MessageConverter,
+    item_of,
+    topic_type,
+)
+from ocu.record.session import clock_pair
+from ocu.records import LinkEvent, ScanFrame, TelemetryFrame
+
+log = logging.getLogger("ocu.live")
+
+DEFAULT_HOST: Final = "127.0.0.1"
+DEFAULT_PORT: Final = 8765
+# Per client: bytes of messages waiting for its socket (beside the socket's own write buffer).
+DEFAULT_CLIENT_BUFFER_BYTES: Final = 4 * 1024 * 1024
+# Items waiting between the link's threads and the server's loop.
+DEFAULT_MAX_QUEUE_BYTES: Final = 16 * 1024 * 1024
+# Control messages (serverInfo, advertise, status) a client has not read: more is a fault.
+MAX_CONTROL_BYTES: Final = 1024 * 1024
+# Refused frames before a client is closed.
+MAX_REFUSED: Final = 10
+# A client only subscribes: no frame of its needs more.
+MAX_CLIENT_FRAME_BYTES: Final = 64 * 1024
+# The socket's own write buffer (websockets' high-water mark).
+WRITE_LIMIT_BYTES: Final = 64 * 1024
+START_TIMEOUT_S: Final = 10.0
+STOP_TIMEOUT_S: Final = 5.0
+ITEM_OVERHEAD_BYTES: Final = 200
+TOKEN_PARAMETER: Final = "token"
+CLOSE_POLICY: Final = 1008
+_SCAN: Final = -1  # the queue kind of a range scan (the recorder keeps only its datagram)
+
+
+class LiveError(Exception):
+    """The live server cannot start (address in use, exposed without a token)."""
+
+
+@dataclass(frozen=True)
+class ClientStats:
+    """One connected client."""
+
+    address: str
+    subscriptions: int
+    sent: int
+    dropped: int
+    refused: int
+    queued_bytes: int
+    peak_queued_bytes: int
+
+
+@dataclass(frozen=True)
+class LiveStats:
+    """The server's counters now."""
+
+    clients: tuple[ClientStats, ...]
+    connections: int
+    unauthorized: int
+    closed_for_refused: int
+    queue_dropped: int
+
+
+@dataclass
+class _Channel:
+    info: wire.ChannelInfo
+    encoder: s.Encoder
+    latched: tuple[int, bytes] | None = None
+    keeps_last: bool = False
+
+
+class _Client:
+    """One connection's subscriptions and bounded outbox (the loop thread's only)."""
+
+    def __init__(self, connection: ServerConnection, buffer_bytes: int) -> None:
+        self.connection = connection
+        remote = connection.remote_address
+        self.address = f"{remote[0]}:{remote[1]}" if remote else "?"
+        self.buffer_bytes = buffer_bytes
+        self.subscriptions: dict[int, int] = {}
+        self.by_channel: dict[int, set[int]] = {}
+        self.outbox: deque[tuple[str | bytes, int, bool]] = deque()
+        self.data_bytes = 0
+        self.control_bytes = 0
+        self.wake = asyncio.Event()
+        self.sent = 0
+        self.dropped = 0
+        self.refused = 0
+        self.closing = False
+        self.peak_bytes = 0
+
+    def queue_data(self, frame: bytes) -> None:
+        if self.data_bytes + len(frame) > self.buffer_bytes:
+            self.dropped += 1
+            return
+        self.outbox.append((frame, len(frame), False))
+        self.data_bytes += len(frame)
+        self.peak_bytes = max(self.peak_bytes, self.data_bytes + self.control_bytes)
+        self.wake.set()
+
+    def queue_control(self, text: str) -> bool:
+        """Queue a control message; False when the client has left too many unread."""
+        if self.control_bytes + len(text) > MAX_CONTROL_BYTES:
+            return False
+        self.outbox.append((text, len(text), True))
+        self.control_bytes += len(text)
+        self.wake.set()
+        return True
+
+    def stats(self) -> ClientStats:
+        return ClientStats(
+            self.address,
+            len(self.subscriptions),
+            self.sent,
+            self.dropped,
+            self.refused,
+            self.data_bytes + self.control_bytes,
+            self.peak_bytes,
+        )
+
+
+class LiveServer:
+    """Serves what attached links send and receive to Foxglove WebSocket clients.
+
+    start() binds (LiveError if it cannot), stop() closes every client and the thread
+    (idempotent). `token`: clients must give it (`?token=` in the URL or an
+    `Authorization: Bearer` header); the caller checks exposure (ocu.live.options).
+    """
+
+    def __init__(
+        self,
+        profile: RobotProfile,
+        host: str = DEFAULT_HOST,
+        port: int = DEFAULT_PORT,
+        *,
+        token: str | None = None,
+        client_buffer_bytes: int = DEFAULT_CLIENT_BUFFER_BYTES,
+        max_queue_bytes: int = DEFAULT_MAX_QUEUE_BYTES,
+        clock: Callable[[], float] = time.monotonic,
+        frames: rb.RobotFrames | None = None,
+    ) -> None:
+        self.profile = profile
+        self.host = host
+        self.port = port
+        self.token = token
+        self.client_buffer_bytes = client_buffer_bytes
+        self.max_queue_bytes = max_queue_bytes
+        self.clock = clock
+        self.frames = frames if frames is not None else rb.RobotFrames.load(profile)
+        self.mono0, self.wall0_ns = clock_pair(clock)
+        self.session_id = uuid.uuid4().hex
+        self._lock = threading.Lock()
+        self._queue: deque[Item] = deque()
+        self._queued_bytes = 0
+        self._pump_scheduled = False
+        self._queue_dropped = 0
+        self._client_count = 0
+        self._clients: set[_Client] = set()
+        self._connections = 0
+        self._unauthorized = 0
+        self._closed_for_refused = 0
+        self._channels: dict[str, _Channel] = {}
+        self._by_id: dict[int, _Channel] = {}
+        self._closing: set[asyncio.Future[None]] = set()
+        self._converter = MessageConverter(profile, self.wall_ns, self._publish)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop_event: asyncio.Event | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._start_error: str | None = None
+        self._bound_port: int | None = None
+        self._declare_channels()
+
+    # ---- channels (the loop thread's once started) -----------------------------------------
+
+    def _declare_channels(self) -> None:
+        for topic in s.RAW_TOPICS:
+            self._channel(topic, s.RAW_PACKET)
+        for topic, message_type in DECODED_TOPICS:
+            self._channel(topic, message_type)
+        for name in self.profile.link.camera_names:
+            self._channel(s.camera_topic(name), s.COMPRESSED_IMAGE)
+        self._channel(rb.SCAN, rb.LASER_SCAN)
+        frames = self.frames
+        if frames is not None:
+            self._channel(rb.TF, rb.TF_MESSAGE)
+            static = self._channel(rb.TF_STATIC, rb.TF_MESSAGE, keeps_last=True)
+            description = self._channel(rb.ROBOT_DESCRIPTION, rb.STRING, keeps_last=True)
+            now = self.wall_ns(self.clock())
+            stamp = s.stamp(now)
+            static.latched = (now, static.encoder(frames.static_message(stamp)))
+            description.latched = (now, description.encoder(frames.description_message()))
+
+    def _channel(
+        self, topic: str, message_type: s.MessageType, *, keeps_last: bool = False
+    ) -> _Channel:
+        channel_id = len(self._by_id) + 1
+        info = wire.ChannelInfo(channel_id, topic, message_type.name, message_type.definition)
+        channel = _Channel(info, s.make_encoder(message_type), keeps_last=keeps_last)
+        self._channels[topic] = channel
+        self._by_id[channel_id] = channel
+        return channel
+
+    def topics(self) -> list[str]:
+        """The topics advertised now."""
+        return list(self._channels)
+
+    def wall_ns(self, mono: float) -> int:
+        """Wall-clock nanoseconds of a monotonic time (the recorder's mapping)."""
+        return self.wall0_ns + round((mono - self.mono0) * 1e9)
+
+    # ---- the link side (any thread) --------------------------------------------------------
+
+    def attach(self, link: Link) -> None:
+        """Serve what this link sends and receives."""
+        link.subscribe(self.on_event)
+
+    def detach(self, link: Link) -> None:
+        """Stop serving this link."""
+        link.unsubscribe(self.on_event)
+
+    def on_event(self, event: LinkEvent) -> None:
+        """One link event into the queue (the link's threads; never blocks)."""
+        if not self._client_count:
+            return  # nobody watching: one attribute read
+        if isinstance(event, ScanFrame):
+            kept: tuple[Item, int] | None = (
+                (_SCAN, event.received_at, event),
+                8 * len(event.ranges_m),
+            )
+        else:
+            kept = item_of(event, self.clock)
+        loop = self._loop
+        if kept is None or loop is None:
+            return
+        item, size = kept
+        cost = size + ITEM_OVERHEAD_BYTES
+        with self._lock:
+            if self._queued_bytes + cost > self.max_queue_bytes:
+                self._queue_dropped += 1
+                return
+            self._queue.append(item)
+            self._queued_bytes += cost
+            if self._pump_scheduled:
+                return
+            self._pump_scheduled = True
+        with contextlib.suppress(RuntimeError):  # the loop has closed: the server is stopping
+            loop.call_soon_threadsafe(self._pump)
+
+    # ---- the loop thread -------------------------------------------------------------------
+
+    def _pump(self) -> None:
+        with self._lock:
+            items = self._queue
+            self._queue = deque()
+            self._queued_bytes = 0
+            self._pump_scheduled = False
+            dropped = self._queue_dropped
+        for item in items:
+            try:
+                self._serve_item(item, dropped)
+            except Exception:
+                # One item the conversion cannot take must not end the server for the rest.
+                log.exception("live: cannot serve a %s item", item[0])
+
+    def _serve_item(self, item: Item, dropped: int) -> None:
+        kind, mono = item[0], item[1]
+        if kind == _SCAN:
+            self._publish(mono, rb.SCAN, rb.scan_message(item[2], s.stamp(self.wall_ns(mono))))
+            return
+        self._converter.convert(item, dropped)
+        if kind == TELEMETRY and self.frames is not None:
+            self._publish_tf(mono, item[2])
+
+    def _publish_tf(self, mono: float, frame: TelemetryFrame) -> None:
+        channel = self._channels[rb.TF]
+        if not self._subscribed(channel.info.id):
+            return
+        assert self.frames is not None
+        positions = {
+            name: reading.angle_rad
+            for name, reading in frame.readings.items()
+            if reading.angle_rad is not None
+        }
+        self._publish(
+            mono, rb.TF, self.frames.moving_message(positions, s.stamp(self.wall_ns(mono)))
+        )
+
+    def _subscribed(self, channel_id: int) -> bool:
+        return any(channel_id in client.by_channel for client in self._clients)
+
+    def _publish(
+        self, mono: float, topic: str, message: dict[str, Any], publish_ns: int | None = None
+    ) -> None:
+        channel = self._channels.get(topic)
+        if channel is None:
+            channel = self._channel(topic, topic_type(topic))
+            self._broadcast(wire.advertise([channel.info]))
+        channel_id = channel.info.id
+        if not channel.keeps_last and not self._subscribed(channel_id):
+            return
+        payload = channel.encoder(message)
+        log_ns = self.wall_ns(mono)
+        if channel.keeps_last:
+            channel.latched = (log_ns, payload)
+        for client in self._clients:
+            for subscription in client.by_channel.get(channel_id, ()):
+                client.queue_data(wire.message_data(subscription, log_ns, payload))
+
+    def _broadcast(self, text: str) -> None:
+        for client in list(self._clients):
+            self._control(client, text)
+
+    def _control(self, client: _Client, text: str) -> None:
+        if not client.queue_control(text) and not client.closing:
+            client.closing = True
+            task = asyncio.ensure_future(client.connection.close(CLOSE_POLICY, "not reading"))
+            self._closing.add(task)
+            task.add_done_callback(self._closing.discard)
+
+    def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
+        if self.token is None:
+            return None
+        query = parse_qs(urlsplit(request.path).query)
+        given = query.get(TOKEN_PARAMETER, [""])[0]
+        header = request.headers.get("Authorization", "")
+        if header.startswith("Bearer "):
+            given = given or header[len("Bearer ") :]
+        if given and hmac.compare_digest(given.encode(), self.token.encode()):
+            return None
+        self._unauthorized += 1
+        log.warning("live: refused %s: no valid token", connection.remote_address)
+        return connection.respond(HTTPStatus.UNAUTHORIZED, "a valid token is needed\n")
+
+    async def _handle(self, connection: ServerConnection) -> None:
+        client = _Client(connection, self.client_buffer_bytes)
+        self._clients.add(client)
+        self._client_count = len(self._clients)
+        self._connections += 1
+        log.info("live: %s connected (%s)", client.address, connection.subprotocol)
+        metadata = {"profile": self.profile.name}
+        self._control(
+            client, wire.server_info(f"ocu {self.profile.name}", self.session_id, metadata)
+        )
+        self._control(client, wire.advertise([c.info for c in self._channels.values()]))
+        sender = asyncio.create_task(self._send_loop(client), name="ocu-live-send")
+        try:
+            async for frame in connection:
+                self._on_frame(client, frame)
+                if client.refused >= MAX_REFUSED and not client.closing:
+                    client.closing = True
+                    self._closed_for_refused += 1
+                    await connection.close(CLOSE_POLICY, "too many refused messages")
+                    break
+        except ConnectionClosed:
+            pass
+        finally:
+            self._clients.discard(client)
+            self._client_count = len(self._clients)
+            sender.cancel()
+            log.info(
+                "live: %s left (%d sent, %d dropped, %d refused)",
+                client.address,
+                client.sent,
+                client.dropped,
+                client.refused,
+            )
+
+    def _on_frame(self, client: _Client, frame: str | bytes) -> None:
+        try:
+            message = wire.parse_client_message(frame)
+        except wire.ClientMessageError as err:
+            client.refused += 1
+            self._control(client, wire.status(wire.StatusLevel.ERROR, str(err)))
+            return
+        if isinstance(message, wire.Subscribe):
+            for subscription, channel_id in message.subscriptions:
+                self._subscribe(client, subscription, channel_id)
+        else:
+            for subscription in message.subscription_ids:
+                taken = client.subscriptions.pop(subscription, None)
+                if taken is None:
+                    continue
+                ids = client.by_channel.get(taken, set())
+                ids.discard(subscription)
+                if not ids:
+                    client.by_channel.pop(taken, None)
+
+    def _subscribe(self, client: _Client, subscription: int, channel_id: int) -> None:
+        channel = self._by_id.get(channel_id)
+        problem = None
+        if channel is None:
+            problem = f"no channel {channel_id}"
+        elif subscription in client.subscriptions:
+            problem = f"subscription {subscription} is taken"
+        elif len(client.subscriptions) >= wire.MAX_SUBSCRIPTIONS:
+            problem = f"more than {wire.MAX_SUBSCRIPTIONS} subscriptions"
+        if problem is not None or channel is None:
+            client.refused += 1
+            self._control(client, wire.status(wire.StatusLevel.ERROR, f"subscribe: {problem}"))
+            return
+        client.subscriptions[subscription] = channel_id
+        client.by_channel.setdefault(channel_id, set()).add(subscription)
+        if channel.latched is not None:
+            log_ns, payload = channel.latched
+            client.queue_data(wire.message_data(subscription, log_ns, payload))
+
+    async def _send_loop(self, client: _Client) -> None:
+        try:
+            while True:
+                await client.wake.wait()
+                client.wake.clear()
+                while client.outbox:
+                    frame, size, control = client.outbox.popleft()
+                    if control:
+                        client.control_bytes -= size
+                    else:
+                        client.data_bytes -= size
+                    await client.connection.send(frame)
+                    client.sent += 1
+        except ConnectionClosed:
+            pass
+
+    # ---- start and stop --------------------------------------------------------------------
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """Where it listens (the port bound when 0 was asked)."""
+        return self.host, self._bound_port if self._bound_port is not None else self.port
+
+    def start(self) -> None:
+        """Bind and serve on the thread "ocu-live"; LiveError with the reason if it cannot."""
+        if self._thread is not None:
+            return
+        self._thread = threading.Thread(target=self._run, name="ocu-live", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(START_TIMEOUT_S):
+            raise LiveError(f"live server did not start within {START_TIMEOUT_S:.0f} s")
+        if self._start_error is not None:
+            self._thread.join(STOP_TIMEOUT_S)
+            self._thread = None
+            raise LiveError(self._start_error)
+        log.info("live: serving on ws://%s:%d", *self.address)
+
+    def _run(self) -> None:
+        asyncio.run(self._main())
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop_event = asyncio.Event()
+        try:
+            server: Server = await serve(
+                self._handle,
+                self.host,
+                self.port,
+                subprotocols=[wire.SUBPROTOCOLS[0], wire.SUBPROTOCOLS[1]],  # type: ignore[list-item]
+                process_request=self._process_request,
+                compression=None,
+                max_size=MAX_CLIENT_FRAME_BYTES,
+                write_limit=WRITE_LIMIT_BYTES,
+            )
+        except OSError as err:
+            self._start_error = (
+                f"cannot serve live on {self.host}:{self.port}: {err.strerror or err}"
+            )
+            self._loop = None
+            self._ready.set()
+            return
+        self._bound_port = int(server.sockets[0].getsockname()[1])
+        self._ready.set()
+        await self._stop_event.wait()
+        self._loop = None
+        server.close(close_connections=True)
+        await server.wait_closed()
+
+    def stop(self) -> None:
+        """Close every client and the server; idempotent."""
+        thread = self._thread
+        loop, stop_event = self._loop, self._stop_event
+        if thread is None:
+            return
+        if loop is not None and stop_event is not None:
+            with contextlib.suppress(RuntimeError):  # the loop has ended already
+                loop.call_soon_threadsafe(stop_event.set)
+        thread.join(STOP_TIMEOUT_S)
+        if thread.is_alive():
+            log.error("live server did not stop within %.1f s", STOP_TIMEOUT_S)
+        self._thread = None
+
+    def stats(self) -> LiveStats:
+        """Counters now (any thread; the client list is a snapshot)."""
+        clients = tuple(client.stats() for client in list(self._clients))
+        with self._lock:
+            dropped = self._queue_dropped
+        return LiveStats(
+            clients, self._connections, self._unauthorized, self._closed_for_refused, dropped
+        )

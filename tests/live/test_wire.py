@@ -1,0 +1,67 @@
+"""The protocol's messages: golden bytes out, every malformed client frame refused."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from ocu.live import wire
+
+
+def test_message_data_is_opcode_subscription_time_payload_little_endian() -> None:
+    frame = wire.message_data(0x01020304, 0x1122334455667788, b"\xaa\xbb")
+    assert frame == (
+        b"\x01" + b"\x04\x03\x02\x01" + b"\x88\x77\x66\x55\x44\x33\x22\x11" + b"\xaa\xbb"
+    )
+
+
+def test_advertise_names_the_ros2_encodings() -> None:
+    text = wire.advertise([wire.ChannelInfo(3, "/joint_states", "sensor_msgs/msg/JointState", "x")])
+    assert json.loads(text) == {
+        "op": "advertise",
+        "channels": [
+            {
+                "id": 3,
+                "topic": "/joint_states",
+                "encoding": "cdr",
+                "schemaName": "sensor_msgs/msg/JointState",
+                "schema": "x",
+                "schemaEncoding": "ros2msg",
+            }
+        ],
+    }
+
+
+def test_subscribe_and_unsubscribe_are_read() -> None:
+    message = wire.parse_client_message(
+        '{"op":"subscribe","subscriptions":[{"id":0,"channelId":5},{"id":1,"channelId":6}]}'
+    )
+    assert message == wire.Subscribe(((0, 5), (1, 6)))
+    assert wire.parse_client_message('{"op":"unsubscribe","subscriptionIds":[1]}') == (
+        wire.Unsubscribe((1,))
+    )
+
+
+@pytest.mark.parametrize(
+    ("frame", "reason"),
+    [
+        (b"\x01\x02", "binary frames are not accepted"),
+        ("not json", "not JSON"),
+        ("[1, 2]", "not a JSON object"),
+        ("[" * 100000, "not JSON"),
+        ('{"op":"publish"}', "operation 'publish' is not supported"),
+        ('{"op":"subscribe"}', "'subscriptions' must be a list"),
+        ('{"op":"subscribe","subscriptions":[7]}', "each subscription must be an object"),
+        ('{"op":"subscribe","subscriptions":[{"id":-1,"channelId":1}]}', "subscription id"),
+        ('{"op":"subscribe","subscriptions":[{"id":true,"channelId":1}]}', "subscription id"),
+        ('{"op":"subscribe","subscriptions":[{"id":1,"channelId":4294967296}]}', "channel id"),
+        ('{"op":"unsubscribe","subscriptionIds":["1"]}', "subscription id"),
+        ('{"op":"unsubscribe","subscriptionIds":' + json.dumps(list(range(5000))) + "}", "more"),
+    ],
+)
+def test_malformed_client_frames_are_refused_with_the_reason(
+    frame: str | bytes, reason: str
+) -> None:
+    with pytest.raises(wire.ClientMessageError, match=reason):
+        wire.parse_client_message(frame)
