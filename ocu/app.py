@@ -22,6 +22,7 @@ from ocu.console.poses import CONFIG_DIR_ENV, default_config_dir
 from ocu.core.manager import DEFAULT_RATE_HZ as DEFAULT_CONTROL_HZ
 from ocu.core.manager import MAX_RATE_HZ as MAX_CONTROL_HZ
 from ocu.core.manager import MIN_RATE_HZ as MIN_CONTROL_HZ
+from ocu.live.options import LiveError, add_live_options, serve, serving, start_live
 from ocu.priority import (
     DEFAULT_NICE,
     NICE_ENV,
@@ -41,6 +42,7 @@ if TYPE_CHECKING:
 
     from ocu.gamepad.mapping import PadMapping
     from ocu.hotkeys import KeyMap
+    from ocu.live.server import LiveServer
     from ocu.windows.main_window import MainWindow
     from ocu.windows.settings_file import SettingsStatus
 
@@ -141,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
         "CAP_SYS_NICE or an RLIMIT_NICE allowance, else the console says what it got)",
     )
     parser.add_argument("--log-level", default="INFO")
+    add_live_options(parser)
     return parser
 
 
@@ -253,6 +256,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         pad_mapping = load_pad_mapping(profile, pad_override)
     except PadMappingError as err:
         return refuse_file(str(err))
+    try:
+        live = start_live(profile, args.live, args.live_token)  # docs/live.md
+    except LiveError as err:
+        return refuse_file(str(err))
     # From here on a stop signal quits in order, also one that comes while the window is
     # being built (the link may already be running then): see StopSignals.
     STOP.install()
@@ -268,6 +275,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             key_map=key_map,
             pad_mapping=None if args.no_gamepad else pad_mapping,
             control_hz=args.control_hz,
+            live=live,
         )
     if args.replay is not None:
         return run_replay(
@@ -277,6 +285,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             config_dir=config_dir,
             key_map=key_map,
             control_hz=args.control_hz,
+            live=live,
         )
     return run_console(
         profile,
@@ -289,6 +298,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         record_path=args.record,
         pad_mapping=None if args.no_gamepad else pad_mapping,
         control_hz=args.control_hz,
+        live=live,
     )
 
 
@@ -304,6 +314,7 @@ def run_console(
     record_path: Path | None = None,
     pad_mapping: PadMapping | None = None,
     control_hz: float = DEFAULT_CONTROL_HZ,
+    live: LiveServer | None = None,
 ) -> int:
     """Start simulator (if no robot), link and window; run the Qt event loop."""
     from PySide6.QtWidgets import QApplication
@@ -358,7 +369,7 @@ def run_console(
         guard.enter_context(last_zeros_guard())  # the window starts the link
         window = MainWindow(
             profile,
-            make_link,
+            serving(live, make_link),
             address_text,
             settings,
             key_map,
@@ -389,6 +400,7 @@ def run_ur_console(
     key_map: KeyMap,
     pad_mapping: PadMapping | None = None,
     control_hz: float = DEFAULT_CONTROL_HZ,
+    live: LiveServer | None = None,
 ) -> int:
     """The console on a UR arm: the controller at `robot` (HOST[:PORT_BASE]), else the UR
     simulator in this process on 127.0.0.1 (docs/ur.md)."""
@@ -432,7 +444,7 @@ def run_ur_console(
         guard.enter_context(last_zeros_guard())  # the window starts the link
         window = MainWindow(
             profile,
-            make_link,
+            serving(live, make_link),
             where,
             settings,
             key_map,
@@ -458,6 +470,7 @@ def run_replay(
     config_dir: Path,
     key_map: KeyMap,
     control_hz: float = DEFAULT_CONTROL_HZ,
+    live: LiveServer | None = None,
 ) -> int:
     """The console on a recording: no simulator, no link; plays from the start."""
     from PySide6.QtWidgets import QApplication
@@ -470,7 +483,7 @@ def run_replay(
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
     try:
-        source = ReplayLink(path, profile)
+        source = serve(live, ReplayLink(path, profile))
     except (RecordingError, LinkError) as err:
         log.error("%s", err)
         return 1

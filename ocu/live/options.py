@@ -13,16 +13,23 @@ import ipaddress
 import os
 import socket
 from collections.abc import Callable
-from typing import Final, TypeVar
+from typing import TYPE_CHECKING, Final, TypeVar
 
 from ocu.link.base import Link
-from ocu.live.server import DEFAULT_HOST, LiveError, LiveServer
 from ocu.profile import RobotProfile
 
+if TYPE_CHECKING:  # the server (websockets, the CDR encoders) loads only with --live
+    from ocu.live.server import LiveServer
+
+DEFAULT_HOST: Final = "127.0.0.1"
 TOKEN_ENV: Final = "OCU_LIVE_TOKEN"
 MIN_TOKEN_CHARS: Final = 8
 
 L = TypeVar("L", bound=Link)
+
+
+class LiveError(Exception):
+    """The live server cannot start (address in use, exposed without a token)."""
 
 
 def parse_live_address(text: str) -> tuple[str, int]:
@@ -91,6 +98,8 @@ def start_live(
     """The started server (stopped at exit), or None without --live; LiveError if refused."""
     if address is None:
         return None
+    from ocu.live.server import LiveServer
+
     host, port = address
     check_exposure(host, token)
     server = LiveServer(profile, host, port, token=token)
@@ -110,3 +119,10 @@ def serving(live: LiveServer | None, make_link: Callable[[], L]) -> Callable[[],
         return link
 
     return make_served_link
+
+
+def serve(live: LiveServer | None, link: L) -> L:
+    """The link, also served live when there is a server."""
+    if live is not None:
+        live.attach(link)
+    return link

@@ -38,6 +38,7 @@ from websockets.http11 import Request, Response
 from ocu.link.base import Link
 from ocu.live import robot as rb
 from ocu.live import wire
+from ocu.live.options import DEFAULT_HOST, LiveError
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.convert import (
@@ -53,7 +54,6 @@ from ocu.records import LinkEvent, ScanFrame, TelemetryFrame
 
 log = logging.getLogger("ocu.live")
 
-DEFAULT_HOST: Final = "127.0.0.1"
 DEFAULT_PORT: Final = 8765
 # Per client: bytes of messages waiting for its socket (beside the socket's own write buffer).
 DEFAULT_CLIENT_BUFFER_BYTES: Final = 4 * 1024 * 1024
@@ -73,10 +73,6 @@ ITEM_OVERHEAD_BYTES: Final = 200
 TOKEN_PARAMETER: Final = "token"
 CLOSE_POLICY: Final = 1008
 _SCAN: Final = -1  # the queue kind of a range scan (the recorder keeps only its datagram)
-
-
-class LiveError(Exception):
-    """The live server cannot start (address in use, exposed without a token)."""
 
 
 @dataclass(frozen=True)

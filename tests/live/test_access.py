@@ -10,8 +10,8 @@ import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from ocu.live.options import check_exposure, parse_live_address
-from ocu.live.server import LiveError, LiveServer
+from ocu.live.options import LiveError, check_exposure, parse_live_address
+from ocu.live.server import LiveServer
 from ocu.profile import RobotProfile
 from tests.live.node_client import NodeClient
 
