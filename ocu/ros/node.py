@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import re
 import shlex
 import signal
@@ -75,6 +76,9 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~extension        ask an extended robot for every camera's stream (default false)
   ~arm_poses        the operator's stored arm poses (TOML); default: the console's
                     arm_poses.toml in $OCU_CONFIG_DIR or ~/.config/ocu
+  ~live             [HOST:]PORT: serve the session to Foxglove/Lichtblick (docs/live.md)
+  ~live_token       the token its clients give; needed for a non-loopback ~live
+                    (default $OCU_LIVE_TOKEN)
 
 topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose, follow_path
 (nav_msgs/Path in odom), scan (placed by frame_id; /tf, /tf_static) in; joint_states,
@@ -115,6 +119,9 @@ class NodeConfig:
     #: (HOST[:PORT_BASE]), or its simulator runs in the node when that is empty.
     ur_arm: UrArmProfile | None = None
     ur_target: str = ""
+    #: ~live and ~live_token (docs/live.md): where to serve the session, who may watch.
+    live: tuple[str, int] | None = None
+    live_token: str | None = None
 
 
 ParamGetter = Callable[[str, Any], Any]
@@ -148,6 +155,22 @@ def _text(get: ParamGetter, name: str) -> str:
     if not isinstance(value, str):
         raise ConfigError(f"~{name} must be a string, got {value!r}")
     return value.strip()
+
+
+def read_live(get: ParamGetter) -> dict[str, Any]:
+    """~live and ~live_token, checked as `ocu --live` checks them."""
+    from ocu.live.options import TOKEN_ENV, LiveError, check_exposure, parse_live_address
+
+    text = _text(get, "live")
+    if not text:
+        return {}
+    try:
+        address = parse_live_address(text)
+        token = _text(get, "live_token") or os.environ.get(TOKEN_ENV) or None
+        check_exposure(address[0], token)
+    except (argparse.ArgumentTypeError, LiveError) as err:
+        raise ConfigError(f"~live: {err}") from err
+    return {"live": address, "live_token": token}
 
 
 def parse_address(text: str, default_port: int) -> tuple[str, int]:
@@ -229,6 +252,7 @@ def read_ur_config(
         arm_poses_path=Path(_text(get, "arm_poses") or default_config_dir() / ARM_POSES_NAME),
         ur_arm=arm,
         ur_target=target,
+        **read_live(get),
     )
 
 
@@ -278,6 +302,7 @@ def read_config(
         extension=_flag(get, "extension", False),
         camera=names.index(camera_text) if camera_text else None,
         arm_poses_path=Path(_text(get, "arm_poses") or default_config_dir() / ARM_POSES_NAME),
+        **read_live(get),
     )
 
 
@@ -541,6 +566,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.hardware.ur import SIM_HOST, SimulatedUr
     from ocu.headless import HeadlessConsole
     from ocu.link.base import LinkError
+    from ocu.live.options import LiveError, serve, start_live
     from ocu.ros.host import ModelSink, end_path, follow_path
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
@@ -586,6 +612,11 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
             except (LinkError, HardwareError) as err:
                 log.error("%s", err)
                 return 1
+        try:
+            serve(start_live(profile, config.live, config.live_token), hardware.link)
+        except LiveError as err:
+            log.error("%s", err)
+            return 1
         # The console's control core (ocu.core): the model's mux, limits, zones and path
         # mode, its control thread at ~rate (the console's 50 Hz by default), which also
         # beats the link's heartbeat.
