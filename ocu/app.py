@@ -22,7 +22,14 @@ from ocu.console.poses import CONFIG_DIR_ENV, default_config_dir
 from ocu.core.manager import DEFAULT_RATE_HZ as DEFAULT_CONTROL_HZ
 from ocu.core.manager import MAX_RATE_HZ as MAX_CONTROL_HZ
 from ocu.core.manager import MIN_RATE_HZ as MIN_CONTROL_HZ
-from ocu.live.options import LiveError, add_live_options, serve, serving, start_live
+from ocu.live.options import (
+    LiveError,
+    add_live_options,
+    serve,
+    serve_navigation,
+    serving,
+    start_live,
+)
 from ocu.priority import (
     DEFAULT_NICE,
     NICE_ENV,
@@ -382,6 +389,7 @@ def run_console(
             ),
             control_hz=control_hz,
         )
+        serve_navigation(live, window.core.model.nav)
         with guard:
             return run_window(app, window, quit_after_s)
     finally:
@@ -498,6 +506,7 @@ def run_replay(
         settings_status=settings_status,
         control_hz=control_hz,
     )
+    serve_navigation(live, window.core.model.nav)
     source.play()
     return run_window(app, window, quit_after_s)
 

@@ -19,6 +19,7 @@ from ocu.link.base import Link
 from ocu.profile import RobotProfile
 
 if TYPE_CHECKING:  # the server (websockets, the CDR encoders) loads only with --live
+    from ocu.live.navigation import NavigationSource
     from ocu.live.server import LiveServer
 
 DEFAULT_HOST: Final = "127.0.0.1"
@@ -119,6 +120,12 @@ def serving(live: LiveServer | None, make_link: Callable[[], L]) -> Callable[[],
         return link
 
     return make_served_link
+
+
+def serve_navigation(live: LiveServer | None, navigator: NavigationSource) -> None:
+    """Serve a chassis's odometry and map (docs/live.md); nothing without a server."""
+    if live is not None:
+        live.serve_navigation(navigator)
 
 
 def serve(live: LiveServer | None, link: L) -> L:

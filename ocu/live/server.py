@@ -36,6 +36,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from ocu.link.base import Link
+from ocu.live import navigation as nv
 from ocu.live import robot as rb
 from ocu.live import wire
 from ocu.live.options import DEFAULT_HOST, LiveError
@@ -200,6 +201,7 @@ class LiveServer:
         self._channels: dict[str, _Channel] = {}
         self._by_id: dict[int, _Channel] = {}
         self._closing: set[asyncio.Future[None]] = set()
+        self._navigator: nv.NavigationSource | None = None
         self._converter = MessageConverter(profile, self.wall_ns, self._publish)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_event: asyncio.Event | None = None
@@ -219,9 +221,12 @@ class LiveServer:
         for name in self.profile.link.camera_names:
             self._channel(s.camera_topic(name), s.COMPRESSED_IMAGE)
         self._channel(rb.SCAN, rb.LASER_SCAN)
+        if self.profile.drive_channels is not None:  # a chassis: odometry and a map
+            self._channel(nv.ODOM, nv.ODOMETRY)
+            self._channel(nv.MAP, nv.OCCUPANCY_GRID)
+        self._channel(rb.TF, rb.TF_MESSAGE)
         frames = self.frames
         if frames is not None:
-            self._channel(rb.TF, rb.TF_MESSAGE)
             static = self._channel(rb.TF_STATIC, rb.TF_MESSAGE, keeps_last=True)
             description = self._channel(rb.ROBOT_DESCRIPTION, rb.STRING, keeps_last=True)
             now = self.wall_ns(self.clock())
@@ -334,16 +339,53 @@ class LiveServer:
         if channel is None:
             channel = self._channel(topic, topic_type(topic))
             self._broadcast(wire.advertise([channel.info]))
-        channel_id = channel.info.id
-        if not channel.keeps_last and not self._subscribed(channel_id):
+        if not channel.keeps_last and not self._subscribed(channel.info.id):
             return
-        payload = channel.encoder(message)
-        log_ns = self.wall_ns(mono)
+        self._fan_out(channel, self.wall_ns(mono), channel.encoder(message))
+
+    def _fan_out(self, channel: _Channel, log_ns: int, payload: bytes) -> None:
         if channel.keeps_last:
             channel.latched = (log_ns, payload)
+        channel_id = channel.info.id
         for client in self._clients:
             for subscription in client.by_channel.get(channel_id, ()):
                 client.queue_data(wire.message_data(subscription, log_ns, payload))
+
+    def serve_navigation(self, navigator: nv.NavigationSource) -> None:
+        """Serve this navigator's odometry (/odom, odom -> base_link on /tf) and grid (/map)."""
+        self._navigator = navigator
+
+    async def _navigation_loop(self) -> None:
+        if nv.ODOM not in self._channels:
+            return
+        odom, tf, grid = (self._channels[t] for t in (nv.ODOM, rb.TF, nv.MAP))
+        next_map = 0.0
+        while True:
+            await asyncio.sleep(nv.ODOM_PERIOD_S)
+            navigator = self._navigator
+            if navigator is None:
+                continue
+            try:
+                now = self.clock()
+                stamp = s.stamp(self.wall_ns(now))
+                if self._subscribed(odom.info.id) or self._subscribed(tf.info.id):
+                    estimate = navigator.estimate(now)
+                    log_ns = self.wall_ns(now)
+                    message = nv.odometry_message(estimate, stamp)
+                    self._fan_out(odom, log_ns, odom.encoder(message))
+                    transform = nv.odometry_transform(estimate, stamp)
+                    self._fan_out(tf, log_ns, tf.encoder(transform))
+                if (
+                    navigator.grid is not None
+                    and now >= next_map
+                    and self._subscribed(grid.info.id)
+                ):
+                    next_map = now + nv.MAP_PERIOD_S
+                    payload = nv.encode_grid(grid.encoder, navigator.grid, stamp)
+                    self._fan_out(grid, self.wall_ns(now), payload)
+            except Exception:
+                log.exception("live: cannot serve the navigator's state")
+                await asyncio.sleep(nv.MAP_PERIOD_S)
 
     def _broadcast(self, text: str) -> None:
         for client in list(self._clients):
@@ -505,9 +547,11 @@ class LiveServer:
             self._ready.set()
             return
         self._bound_port = int(server.sockets[0].getsockname()[1])
+        navigation = asyncio.create_task(self._navigation_loop(), name="ocu-live-navigation")
         self._ready.set()
         await self._stop_event.wait()
         self._loop = None
+        navigation.cancel()
         server.close(close_connections=True)
         await server.wait_closed()
 

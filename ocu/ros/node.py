@@ -566,7 +566,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.hardware.ur import SIM_HOST, SimulatedUr
     from ocu.headless import HeadlessConsole
     from ocu.link.base import LinkError
-    from ocu.live.options import LiveError, serve, start_live
+    from ocu.live.options import LiveError, serve, serve_navigation, start_live
     from ocu.ros.host import ModelSink, end_path, follow_path
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
@@ -613,7 +613,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
                 log.error("%s", err)
                 return 1
         try:
-            serve(start_live(profile, config.live, config.live_token), hardware.link)
+            live = start_live(profile, config.live, config.live_token)
         except LiveError as err:
             log.error("%s", err)
             return 1
@@ -622,6 +622,8 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         # beats the link's heartbeat.
         model = ConsoleModel(profile, arm_poses_path=config.arm_poses_path)
         model.nav.grid = None  # no map view: no occupancy grid to build from each scan
+        serve(live, hardware.link)
+        serve_navigation(live, model.nav)
         model.events.message.connect(lambda text: log.info("%s", text), direct=True)
         model.events.position_message.connect(lambda text: log.info("%s", text), direct=True)
         # The node is the only commander: the maxima ROS is held to are the model's.

@@ -16,12 +16,15 @@ import numpy as np
 import pytest
 
 from ocu.link.live import UdpLink
+from ocu.live.navigation import MAP, ODOM
 from ocu.live.robot import ROBOT_DESCRIPTION, SCAN, SCAN_FRAME, TF, TF_STATIC, RobotFrames
 from ocu.live.server import LiveServer
 from ocu.model.tree import axis_rotation
+from ocu.nav.navigator import Navigator
+from ocu.nav.world import load_world
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
-from ocu.records import LinkEvent, ScanFrame, TelemetryFrame, VideoFrame
+from ocu.records import CommandSent, LinkEvent, ScanFrame, TelemetryFrame, VideoFrame
 from ocu.sim.simulator import RobotSimulator
 from tests.live.node_client import DEADLINE_S, NodeClient, count, require_node
 
@@ -277,3 +280,64 @@ def poll(predicate: object, timeout_s: float = DEADLINE_S) -> bool:
             return True
         threading.Event().wait(0.02)
     return bool(predicate())
+
+
+def test_odometry_and_the_map_reach_the_client(profile: RobotProfile) -> None:
+    require_node()
+    sim = RobotSimulator(
+        profile, telemetry_hz=50.0, video_fps=0.0, extended=True, world=load_world("default")
+    )
+    sim.start()
+    server = LiveServer(profile, "127.0.0.1", 0)
+    server.start()
+    navigator = Navigator(profile)
+    server.serve_navigation(navigator)
+    link = UdpLink(profile, sim.address, gui_alive_timeout_s=None, extension=True)
+
+    def feed(event: LinkEvent) -> None:  # as the console model feeds its navigator
+        if isinstance(event, TelemetryFrame):
+            navigator.on_telemetry(event)
+        elif isinstance(event, CommandSent):
+            navigator.on_command(event.command, event.sent_at)
+        elif isinstance(event, ScanFrame):
+            navigator.on_scan(event)
+
+    link.subscribe(feed)
+    server.attach(link)
+    link.start()
+    client = NodeClient(f"ws://127.0.0.1:{server.address[1]}", topics=[ODOM, MAP, TF])
+    try:
+        link.set_velocities(drive_turn=0.4)
+        assert client.wait(count(MAP, 3)), client.events[-3:]
+        assert client.wait(count(ODOM, 20))
+    finally:
+        client.close()
+        link.shutdown()
+        server.stop()
+        sim.stop()
+    assert not client.of("error")
+    assert all(m["trailing"] is False for m in client.messages(MAP) + client.messages(ODOM))
+    odometry = [m["decoded"] for m in client.messages(ODOM)]
+    assert {o["header"]["frame_id"] for o in odometry} == {"odom"}
+    assert {o["child_frame_id"] for o in odometry} == {"base_link"}
+    headings = {round(o["pose"]["pose"]["orientation"]["z"], 4) for o in odometry}
+    assert len(headings) > 3  # the robot turned while the client watched
+    on_tf = [
+        t
+        for m in client.messages(TF)
+        for t in m["decoded"]["transforms"]
+        if t["child_frame_id"] == "base_link"
+    ]
+    assert on_tf
+    assert on_tf[0]["header"]["frame_id"] == "odom"
+    grid = navigator.grid
+    assert grid is not None
+    last = client.messages(MAP)[-1]
+    info = last["decoded"]["info"]
+    assert (info["width"], info["height"]) == (grid.cells, grid.cells)
+    assert math.isclose(info["resolution"], grid.resolution_m, rel_tol=1e-6)
+    cells = last["decoded"]["data"]
+    assert len(cells) == grid.cells * grid.cells
+    assert set(cells) <= {-1, *range(101)}
+    assert max(cells) > 50  # the walls the scans saw
+    assert cells.count(-1) > len(cells) // 2  # most of the map unseen
