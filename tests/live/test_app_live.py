@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from ocu.link.live import UdpLink
+from ocu.live.navigation import ODOM
 from ocu.live.robot import TF
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
@@ -70,7 +71,7 @@ def test_ocu_live_serves_the_engineer_console(tmp_path: Path) -> None:
     lines: list[str] = []
     with console(tmp_path, "--live", "127.0.0.1:0") as process:
         port = served_port(process, lines)
-        watch(process, port, [s.JOINT_STATES, TF, s.LINK_STATS])
+        watch(process, port, [s.JOINT_STATES, TF, s.LINK_STATS, ODOM])
         _, rest = process.communicate(timeout=60)
     assert process.returncode == 0, "".join(lines) + rest
     assert "link stopped (zeros sent last)" in rest
@@ -93,7 +94,7 @@ def test_ocu_replay_live_serves_the_recording(tmp_path: Path, profile: RobotProf
     lines: list[str] = []
     with console(tmp_path, "--replay", str(recording), "--live", "0") as process:
         port = served_port(process, lines)
-        watch(process, port, [s.JOINT_STATES, TF])
+        watch(process, port, [s.JOINT_STATES, TF, ODOM])
         _, rest = process.communicate(timeout=60)
     assert process.returncode == 0, "".join(lines) + rest
 
