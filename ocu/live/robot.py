@@ -5,12 +5,18 @@ its range scans, as ROS 2 messages (the recorder's channels come from ocu.record
 per telemetry packet, `/robot_description` the URDF text (std_msgs/msg/String), `/scan` a
 range scan in the frame `range_sensor`, placed on the URDF's root by the profile's
 `scan_mount_xy_m` (a static transform).
+
+A client cannot resolve the URDF's mesh paths (relative to the file, or package:// on this
+machine): the served URDF names each mesh `package://ocu_robot/...` and the server hands out
+exactly those files through the protocol's fetchAsset (`assets`); nothing else on disk.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import re
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +24,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from ocu.model.mesh_files import MeshSkippedError, find_mesh_file
 from ocu.model.tree import KinematicTree
 from ocu.model.urdf import UrdfError, load_urdf, profile_urdf_path
 from ocu.profile import RobotProfile
@@ -31,6 +38,8 @@ TF_STATIC: Final = "/tf_static"
 ROBOT_DESCRIPTION: Final = "/robot_description"
 SCAN: Final = "/scan"
 SCAN_FRAME: Final = "range_sensor"
+ASSET_PACKAGE: Final = "package://ocu_robot/"
+_MESH_FILENAME = re.compile(r"""(<mesh\b[^>]*?\bfilename\s*=\s*)(["'])(.*?)\2""", re.DOTALL)
 
 _TIME = "int32 sec\nuint32 nanosec\n"
 _HEADER = "builtin_interfaces/Time stamp\nstring frame_id\n"
@@ -107,6 +116,8 @@ class RobotFrames:
     tree: KinematicTree
     urdf_text: str
     scan_mount_xy_m: tuple[float, float] | None
+    # The served URI of each mesh file the URDF names (urdf_text names them so).
+    assets: Mapping[str, Path]
 
     @classmethod
     def load(cls, profile: RobotProfile) -> RobotFrames | None:
@@ -120,7 +131,8 @@ class RobotFrames:
             return None
         navigation = profile.navigation
         mount = navigation.scan_mount_xy_m if navigation.footprint is not None else None
-        return cls(model.tree, text, mount)
+        served, assets = serve_meshes(text, path.parent)
+        return cls(model.tree, served, mount, assets)
 
     def _moving(self) -> list[str]:
         return [name for name, joint in self.tree.joints.items() if joint.type != "fixed"]
@@ -161,6 +173,34 @@ class RobotFrames:
     def description_message(self) -> dict[str, Any]:
         """/robot_description: the URDF as it is on disk."""
         return {"data": self.urdf_text}
+
+
+def serve_meshes(text: str, base_dir: Path) -> tuple[str, dict[str, Path]]:
+    """The URDF with its mesh references renamed for clients, and the files they name."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return text, {}
+    found: dict[str, Path] = {}
+    for mesh in root.iter("mesh"):
+        filename = mesh.get("filename", "")
+        if not filename or filename in found:
+            continue
+        try:
+            found[filename] = find_mesh_file(filename, "live", base_dir, (), log.debug)
+        except MeshSkippedError as err:
+            log.warning("live: %s", err)
+    renamed: dict[str, str] = {}
+    for index, (filename, file) in enumerate(found.items()):
+        relative = filename.removeprefix("package://")
+        if filename.startswith(("/", "file://", "model://")) or ".." in Path(relative).parts:
+            relative = f"{index}/{file.name}"
+        renamed[filename] = ASSET_PACKAGE + relative
+    served = _MESH_FILENAME.sub(
+        lambda m: m.group(1) + m.group(2) + renamed.get(m.group(3), m.group(3)) + m.group(2),
+        text,
+    )
+    return served, {renamed[name]: file for name, file in found.items()}
 
 
 def scan_message(scan: ScanFrame, stamp: dict[str, int]) -> dict[str, Any]:

@@ -28,6 +28,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from http import HTTPStatus
+from pathlib import Path
 from typing import Any, Final
 from urllib.parse import parse_qs, urlsplit
 
@@ -62,6 +63,8 @@ DEFAULT_CLIENT_BUFFER_BYTES: Final = 4 * 1024 * 1024
 DEFAULT_MAX_QUEUE_BYTES: Final = 16 * 1024 * 1024
 # Control messages (serverInfo, advertise, status) a client has not read: more is a fault.
 MAX_CONTROL_BYTES: Final = 1024 * 1024
+# Mesh files on their way to one client (fetchAsset): more is answered "busy".
+MAX_ASSET_BYTES: Final = 32 * 1024 * 1024
 # Refused frames before a client is closed.
 MAX_REFUSED: Final = 10
 # A client only subscribes: no frame of its needs more.
@@ -74,6 +77,7 @@ ITEM_OVERHEAD_BYTES: Final = 200
 TOKEN_PARAMETER: Final = "token"
 CLOSE_POLICY: Final = 1008
 _SCAN: Final = -1  # the queue kind of a range scan (the recorder keeps only its datagram)
+_DATA, _CONTROL, _ASSET = 0, 1, 2  # what waits in a client's outbox
 
 
 @dataclass(frozen=True)
@@ -118,9 +122,11 @@ class _Client:
         self.buffer_bytes = buffer_bytes
         self.subscriptions: dict[int, int] = {}
         self.by_channel: dict[int, set[int]] = {}
-        self.outbox: deque[tuple[str | bytes, int, bool]] = deque()
+        # (frame, size, kind): _DATA may be dropped, _CONTROL and _ASSET are bounded apart.
+        self.outbox: deque[tuple[str | bytes, int, int]] = deque()
         self.data_bytes = 0
         self.control_bytes = 0
+        self.asset_bytes = 0
         self.wake = asyncio.Event()
         self.sent = 0
         self.dropped = 0
@@ -132,7 +138,7 @@ class _Client:
         if self.data_bytes + len(frame) > self.buffer_bytes:
             self.dropped += 1
             return
-        self.outbox.append((frame, len(frame), False))
+        self.outbox.append((frame, len(frame), _DATA))
         self.data_bytes += len(frame)
         self.peak_bytes = max(self.peak_bytes, self.data_bytes + self.control_bytes)
         self.wake.set()
@@ -141,8 +147,17 @@ class _Client:
         """Queue a control message; False when the client has left too many unread."""
         if self.control_bytes + len(text) > MAX_CONTROL_BYTES:
             return False
-        self.outbox.append((text, len(text), True))
+        self.outbox.append((text, len(text), _CONTROL))
         self.control_bytes += len(text)
+        self.wake.set()
+        return True
+
+    def queue_asset(self, frame: bytes) -> bool:
+        """Queue a fetchAsset answer; False when too many bytes of them are on their way."""
+        if self.asset_bytes + len(frame) > MAX_ASSET_BYTES:
+            return False
+        self.outbox.append((frame, len(frame), _ASSET))
+        self.asset_bytes += len(frame)
         self.wake.set()
         return True
 
@@ -419,9 +434,9 @@ class LiveServer:
         self._connections += 1
         log.info("live: %s connected (%s)", client.address, connection.subprotocol)
         metadata = {"profile": self.profile.name}
-        self._control(
-            client, wire.server_info(f"ocu {self.profile.name}", self.session_id, metadata)
-        )
+        assets = ["assets"] if self.frames is not None and self.frames.assets else []
+        name = f"ocu {self.profile.name}"
+        self._control(client, wire.server_info(name, self.session_id, metadata, assets))
         self._control(client, wire.advertise([c.info for c in self._channels.values()]))
         sender = asyncio.create_task(self._send_loop(client), name="ocu-live-send")
         try:
@@ -456,6 +471,8 @@ class LiveServer:
         if isinstance(message, wire.Subscribe):
             for subscription, channel_id in message.subscriptions:
                 self._subscribe(client, subscription, channel_id)
+        elif isinstance(message, wire.FetchAsset):
+            self._fetch_asset(client, message)
         else:
             for subscription in message.subscription_ids:
                 taken = client.subscriptions.pop(subscription, None)
@@ -465,6 +482,31 @@ class LiveServer:
                 ids.discard(subscription)
                 if not ids:
                     client.by_channel.pop(taken, None)
+
+    def _fetch_asset(self, client: _Client, request: wire.FetchAsset) -> None:
+        assets = self.frames.assets if self.frames is not None else {}
+        file = assets.get(request.uri)
+        if file is None:
+            client.refused += 1  # only the URDF's own meshes are served: a probe is a fault
+            answer = wire.fetch_asset_response(
+                request.request_id, None, f"{request.uri[:200]}: not a mesh of this robot"
+            )
+            if not client.queue_asset(answer):
+                self._control(client, wire.status(wire.StatusLevel.ERROR, "fetchAsset: busy"))
+            return
+        task = asyncio.ensure_future(self._send_asset(client, request.request_id, file))
+        self._closing.add(task)
+        task.add_done_callback(self._closing.discard)
+
+    async def _send_asset(self, client: _Client, request_id: int, file: Path) -> None:
+        try:
+            data: bytes | None = await asyncio.to_thread(file.read_bytes)
+            error = ""
+        except OSError as err:
+            data, error = None, f"cannot read the mesh: {err.strerror or err}"
+        if not client.queue_asset(wire.fetch_asset_response(request_id, data, error)):
+            busy = "busy: too many meshes on their way, ask again"
+            client.queue_asset(wire.fetch_asset_response(request_id, None, busy))
 
     def _subscribe(self, client: _Client, subscription: int, channel_id: int) -> None:
         channel = self._by_id.get(channel_id)
@@ -491,9 +533,11 @@ class LiveServer:
                 await client.wake.wait()
                 client.wake.clear()
                 while client.outbox:
-                    frame, size, control = client.outbox.popleft()
-                    if control:
+                    frame, size, kind = client.outbox.popleft()
+                    if kind == _CONTROL:
                         client.control_bytes -= size
+                    elif kind == _ASSET:
+                        client.asset_bytes -= size
                     else:
                         client.data_bytes -= size
                     await client.connection.send(frame)

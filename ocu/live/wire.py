@@ -32,6 +32,7 @@ class BinaryOpcode(IntEnum):
 
     MESSAGE_DATA = 1
     TIME = 2
+    FETCH_ASSET_RESPONSE = 4
 
 
 class StatusLevel(IntEnum):
@@ -43,6 +44,9 @@ class StatusLevel(IntEnum):
 
 
 _MESSAGE_HEADER: Final = struct.Struct("<BIQ")
+_ASSET_HEADER: Final = struct.Struct("<BIBI")
+# A mesh's URI is a path: longer than this is not one.
+MAX_URI_CHARS: Final = 4096
 
 
 class ClientMessageError(ValueError):
@@ -73,20 +77,30 @@ class Unsubscribe:
     subscription_ids: tuple[int, ...]
 
 
-ClientMessage = Subscribe | Unsubscribe
+@dataclass(frozen=True)
+class FetchAsset:
+    """fetchAsset: a file by URI, answered under the request id."""
+
+    uri: str
+    request_id: int
+
+
+ClientMessage = Subscribe | Unsubscribe | FetchAsset
 
 
 def _text(message: dict[str, Any]) -> str:
     return json.dumps(message, separators=(",", ":"), allow_nan=False)
 
 
-def server_info(name: str, session_id: str, metadata: dict[str, str]) -> str:
-    """serverInfo: no capabilities (the clients only watch), CDR messages."""
+def server_info(
+    name: str, session_id: str, metadata: dict[str, str], capabilities: list[str]
+) -> str:
+    """serverInfo: the capabilities (`assets`: the robot's meshes), CDR messages."""
     return _text(
         {
             "op": "serverInfo",
             "name": name,
-            "capabilities": [],
+            "capabilities": capabilities,
             "supportedEncodings": [],
             "metadata": metadata,
             "sessionId": session_id,
@@ -127,6 +141,14 @@ def status(level: StatusLevel, message: str) -> str:
 def message_data(subscription_id: int, receive_ns: int, payload: bytes) -> bytes:
     """messageData: one message on one of the client's subscriptions."""
     return _MESSAGE_HEADER.pack(BinaryOpcode.MESSAGE_DATA, subscription_id, receive_ns) + payload
+
+
+def fetch_asset_response(request_id: int, data: bytes | None, error: str = "") -> bytes:
+    """fetchAssetResponse: the file's bytes, or (data None) the reason it is refused."""
+    message = error.encode()
+    status = 0 if data is not None else 1
+    header = _ASSET_HEADER.pack(BinaryOpcode.FETCH_ASSET_RESPONSE, request_id, status, len(message))
+    return header + message + (data or b"")
 
 
 def _uint32(value: object, what: str) -> int:
@@ -172,4 +194,9 @@ def parse_client_message(frame: str | bytes) -> ClientMessage:
             _uint32(value, "subscription id") for value in _list(message, "subscriptionIds")
         )
         return Unsubscribe(ids)
+    if op == "fetchAsset":
+        uri = message.get("uri")
+        if not isinstance(uri, str) or len(uri) > MAX_URI_CHARS:
+            raise ClientMessageError(f"fetchAsset: 'uri' must be a string of <= {MAX_URI_CHARS}")
+        return FetchAsset(uri, _uint32(message.get("requestId"), "request id"))
     raise ClientMessageError(f"operation {op!r:.40} is not supported by this server")

@@ -7,7 +7,9 @@ what the link decoded from the simulator's datagrams.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import re
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -20,6 +22,7 @@ from ocu.live.navigation import MAP, ODOM
 from ocu.live.robot import ROBOT_DESCRIPTION, SCAN, SCAN_FRAME, TF, TF_STATIC, RobotFrames
 from ocu.live.server import LiveServer
 from ocu.model.tree import axis_rotation
+from ocu.model.urdf import profile_urdf_path
 from ocu.nav.navigator import Navigator
 from ocu.nav.world import load_world
 from ocu.profile import RobotProfile
@@ -154,7 +157,7 @@ def test_a_foxglove_client_decodes_the_robot_as_the_simulator_sent_it(
     fixed = {j.child for j in frames.tree.joints.values() if j.type == "fixed"}
     assert {t["child_frame_id"] for t in static} == fixed | {SCAN_FRAME}
     description = client.messages(ROBOT_DESCRIPTION)[0]["decoded"]["data"]
-    assert description == frames.urdf_text
+    assert description == frames.urdf_text  # the file, meshes named for the client (below)
 
     image = client.messages(front)[-1]
     decoded_image = image["decoded"]
@@ -341,3 +344,48 @@ def test_odometry_and_the_map_reach_the_client(profile: RobotProfile) -> None:
     assert set(cells) <= {-1, *range(101)}
     assert max(cells) > 50  # the walls the scans saw
     assert cells.count(-1) > len(cells) // 2  # most of the map unseen
+
+
+def test_the_robots_meshes_are_fetched_and_nothing_else(profile: RobotProfile) -> None:
+    require_node()
+    urdf = profile_urdf_path(profile)
+    server = LiveServer(profile, "127.0.0.1", 0)
+    server.start()
+    probes = [
+        "package://ocu_robot/../engineer.urdf",
+        "package://ocu_robot/meshes/../../pyproject.toml",
+        f"file://{urdf}",
+        str(urdf),
+        "package://ocu_robot/meshes/not_there.stl",
+    ]
+    client = NodeClient(
+        f"ws://127.0.0.1:{server.address[1]}",
+        topics=[ROBOT_DESCRIPTION],
+        fetchMeshes=True,
+        fetch=probes,
+    )
+    try:
+        assert client.wait(count(ROBOT_DESCRIPTION, 1))
+        description = client.messages(ROBOT_DESCRIPTION)[0]["decoded"]["data"]
+        names = re.findall(r'<mesh[^>]*filename="([^"]*)"', description)
+        assert names
+        assert client.wait(lambda events: len(client.of("asset")) >= len(set(names)) + 5)
+        assert not client.of("close")  # five probes: told no, still connected
+    finally:
+        client.close()
+        server.stop()
+    assert client.of("serverInfo")[0]["capabilities"] == ["assets"]
+    on_disk = re.findall(r'<mesh[^>]*filename="([^"]*)"', urdf.read_text())
+    # The served URDF is the file with its mesh paths renamed for the client, nothing else.
+    assert [n.removeprefix("package://ocu_robot/") for n in names] == on_disk
+    assert re.sub(r'filename="[^"]*"', "", description) == re.sub(
+        r'filename="[^"]*"', "", urdf.read_text()
+    )
+    answers = {a["uri"]: a for a in client.of("asset")}
+    for name, relative in zip(names, on_disk, strict=True):
+        data = (urdf.parent / relative).read_bytes()
+        assert answers[name]["status"] == 0
+        assert answers[name]["sha256"] == hashlib.sha256(data).hexdigest()
+    for probe in probes:
+        assert answers[probe]["status"] == 1
+        assert "not a mesh of this robot" in answers[probe]["error"]

@@ -16,6 +16,18 @@ def test_message_data_is_opcode_subscription_time_payload_little_endian() -> Non
     )
 
 
+def test_fetch_asset_answers_are_opcode_id_status_error_data() -> None:
+    assert wire.fetch_asset_response(7, b"STL") == (
+        b"\x04" + b"\x07\x00\x00\x00" + b"\x00" + b"\x00\x00\x00\x00" + b"STL"
+    )
+    assert wire.fetch_asset_response(1, None, "no") == (
+        b"\x04" + b"\x01\x00\x00\x00" + b"\x01" + b"\x02\x00\x00\x00" + b"no"
+    )
+    assert wire.parse_client_message('{"op":"fetchAsset","uri":"package://a/b","requestId":3}') == (
+        wire.FetchAsset("package://a/b", 3)
+    )
+
+
 def test_advertise_names_the_ros2_encodings() -> None:
     text = wire.advertise([wire.ChannelInfo(3, "/joint_states", "sensor_msgs/msg/JointState", "x")])
     assert json.loads(text) == {
@@ -57,6 +69,9 @@ def test_subscribe_and_unsubscribe_are_read() -> None:
         ('{"op":"subscribe","subscriptions":[{"id":true,"channelId":1}]}', "subscription id"),
         ('{"op":"subscribe","subscriptions":[{"id":1,"channelId":4294967296}]}', "channel id"),
         ('{"op":"unsubscribe","subscriptionIds":["1"]}', "subscription id"),
+        ('{"op":"fetchAsset","uri":7,"requestId":1}', "'uri' must be a string"),
+        ('{"op":"fetchAsset","uri":"' + "x" * 5000 + '","requestId":1}', "'uri' must be"),
+        ('{"op":"fetchAsset","uri":"a","requestId":-2}', "request id"),
         ('{"op":"unsubscribe","subscriptionIds":' + json.dumps(list(range(5000))) + "}", "more"),
     ],
 )

@@ -6,7 +6,9 @@
 //
 // Options (one JSON argument): url; topics to subscribe to (all advertised when "*");
 // garbage: frames of junk sent right after serverInfo; paused: stop reading the socket once
-// subscribed (a slow client); brief: print only topic, sizes and times of each message.
+// subscribed (a slow client); brief: print only topic, sizes and times of each message;
+// fetch: URIs to fetch (fetchAsset) once connected; fetchMeshes: fetch every mesh the
+// /robot_description it receives names (as Foxglove's 3D panel does).
 // It prints one JSON object per line: serverInfo, advertise, message (decoded), status,
 // close, error; it runs until stdin closes or the server closes the connection.
 "use strict";
@@ -15,6 +17,7 @@ const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const { parse } = require("@foxglove/rosmsg");
 const { MessageReader } = require("@foxglove/rosmsg2-serialization");
 const WebSocket = require("ws");
+const { createHash } = require("crypto");
 
 const options = JSON.parse(process.argv[2]);
 
@@ -42,9 +45,19 @@ const ws = new WebSocket(options.url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
 const client = new FoxgloveClient({ ws });
 const channels = new Map();
 const subscriptions = new Map();
+const fetches = new Map();
+let nextRequest = 1;
+let meshesAsked = false;
+
+function fetchAsset(uri) {
+  const id = nextRequest++;
+  fetches.set(id, uri);
+  client.fetchAsset(uri, id);
+}
 
 client.on("serverInfo", (info) => {
   print({ event: "serverInfo", name: info.name, capabilities: info.capabilities, protocol: ws.protocol });
+  for (const uri of options.fetch || []) fetchAsset(uri);
   for (let i = 0; i < (options.garbage || 0); i++) {
     ws.send(i % 2 === 0 ? `not json ${i}` : Buffer.from([0xff, 0x00, i & 0xff]));
   }
@@ -91,6 +104,22 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
     const decoded = entry.reader.readMessage(data);
     out.trailing = entry.reader.lastReadHadTrailingBytes();
     out.decoded = plain(decoded);
+    if (options.fetchMeshes && entry.channel.topic === "/robot_description" && !meshesAsked) {
+      meshesAsked = true;
+      for (const match of decoded.data.matchAll(/<mesh[^>]*filename="([^"]*)"/g)) fetchAsset(match[1]);
+    }
+  }
+  print(out);
+});
+
+client.on("fetchAssetResponse", (response) => {
+  const out = { event: "asset", requestId: response.requestId, uri: fetches.get(response.requestId), status: response.status };
+  if (response.status === 0) {
+    const bytes = new Uint8Array(response.data.buffer, response.data.byteOffset, response.data.byteLength);
+    out.bytes = bytes.length;
+    out.sha256 = createHash("sha256").update(bytes).digest("hex");
+  } else {
+    out.error = response.error;
   }
   print(out);
 });
