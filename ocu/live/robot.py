@@ -24,6 +24,7 @@ from typing import Any, Final
 
 import numpy as np
 
+from ocu.link.diagnostics import DiagnosticReport
 from ocu.model.mesh_files import MeshSkippedError, find_mesh_file
 from ocu.model.tree import KinematicTree
 from ocu.model.urdf import UrdfError, load_urdf, profile_urdf_path
@@ -61,6 +62,21 @@ TF_MESSAGE = s.MessageType(
 )
 
 STRING = s.MessageType("std_msgs/msg/String", "string data\n")
+
+DIAGNOSTICS: Final = "/diagnostics"
+DIAGNOSTIC_ARRAY = s.MessageType(
+    "diagnostic_msgs/msg/DiagnosticArray",
+    s.concatenate(
+        "std_msgs/Header header\nDiagnosticStatus[] status\n",
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+        (
+            "diagnostic_msgs/DiagnosticStatus",
+            "byte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values\n",
+        ),
+        ("diagnostic_msgs/KeyValue", "string key\nstring value\n"),
+    ),
+)
 
 LASER_SCAN = s.MessageType(
     "sensor_msgs/msg/LaserScan",
@@ -201,6 +217,22 @@ def serve_meshes(text: str, base_dir: Path) -> tuple[str, dict[str, Path]]:
         text,
     )
     return served, {renamed[name]: file for name, file in found.items()}
+
+
+def diagnostics_message(report: DiagnosticReport, stamp: dict[str, int]) -> dict[str, Any]:
+    """/diagnostics: the link's report, as ocu-ros publishes it."""
+    return {
+        "header": {"stamp": stamp, "frame_id": ""},
+        "status": [
+            {
+                "level": int(report.level),
+                "name": report.name,
+                "message": report.message,
+                "hardware_id": report.hardware_id,
+                "values": [{"key": key, "value": value} for key, value in report.values],
+            }
+        ],
+    }
 
 
 def scan_message(scan: ScanFrame, stamp: dict[str, int]) -> dict[str, Any]:

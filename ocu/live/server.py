@@ -2,11 +2,12 @@
 
 The server is one more subscriber of a Link (attach()). Its callback runs on the link's
 threads and only appends a small item to a bounded queue (dropped and counted when full; the
-link never waits, and with no client connected it returns at once). Everything else runs on
-the server's own thread, "ocu-live", in one asyncio loop: the items become the recorder's
-ROS 2 messages (ocu.record.convert, the same CDR bytes a recording holds) plus the robot's
-/tf, /tf_static, /robot_description and /scan (ocu.live.robot); a message is encoded only
-when some client subscribed to its channel.
+link never waits, and with no client connected it keeps only the link's state changes).
+Everything else runs on the server's own thread, "ocu-live", in one asyncio loop: the items
+become the recorder's ROS 2 messages (ocu.record.convert, the same CDR bytes a recording
+holds) plus the robot's /tf, /tf_static, /robot_description, /scan and /diagnostics
+(ocu.live.robot) and the navigator's /odom and /map (ocu.live.navigation); a message is
+encoded only when some client subscribed to its channel.
 
 Each client has its own outbox bounded in bytes: a message that does not fit is dropped for
 that client alone and counted, so a slow client loses frames, never grows the server's
@@ -37,6 +38,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from ocu.link.base import Link
+from ocu.link.diagnostics import link_report
 from ocu.live import navigation as nv
 from ocu.live import robot as rb
 from ocu.live import wire
@@ -45,6 +47,8 @@ from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.convert import (
     DECODED_TOPICS,
+    EVENT,
+    STATS,
     TELEMETRY,
     Item,
     MessageConverter,
@@ -52,7 +56,14 @@ from ocu.record.convert import (
     topic_type,
 )
 from ocu.record.session import clock_pair
-from ocu.records import LinkEvent, ScanFrame, TelemetryFrame
+from ocu.records import (
+    ExtensionChanged,
+    LinkEvent,
+    LinkState,
+    LinkStateChanged,
+    ScanFrame,
+    TelemetryFrame,
+)
 
 log = logging.getLogger("ocu.live")
 
@@ -217,6 +228,7 @@ class LiveServer:
         self._by_id: dict[int, _Channel] = {}
         self._closing: set[asyncio.Future[None]] = set()
         self._navigator: nv.NavigationSource | None = None
+        self._link_state = LinkState.CONNECTING
         self._converter = MessageConverter(profile, self.wall_ns, self._publish)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_event: asyncio.Event | None = None
@@ -236,6 +248,7 @@ class LiveServer:
         for name in self.profile.link.camera_names:
             self._channel(s.camera_topic(name), s.COMPRESSED_IMAGE)
         self._channel(rb.SCAN, rb.LASER_SCAN)
+        self._channel(rb.DIAGNOSTICS, rb.DIAGNOSTIC_ARRAY)
         if self.profile.drive_channels is not None:  # a chassis: odometry and a map
             self._channel(nv.ODOM, nv.ODOMETRY)
             self._channel(nv.MAP, nv.OCCUPANCY_GRID)
@@ -279,8 +292,8 @@ class LiveServer:
 
     def on_event(self, event: LinkEvent) -> None:
         """One link event into the queue (the link's threads; never blocks)."""
-        if not self._client_count:
-            return  # nobody watching: one attribute read
+        if not self._client_count and not isinstance(event, LinkStateChanged | ExtensionChanged):
+            return  # nobody watching: the states the statistics carry are kept, nothing else
         if isinstance(event, ScanFrame):
             kept: tuple[Item, int] | None = (
                 (_SCAN, event.received_at, event),
@@ -329,6 +342,12 @@ class LiveServer:
         self._converter.convert(item, dropped)
         if kind == TELEMETRY and self.frames is not None:
             self._publish_tf(mono, item[2])
+        elif kind == EVENT and item[2] == s.EVENT_LINK_STATE:
+            self._link_state = LinkState(item[3])
+        elif kind == STATS:
+            report = link_report(self._link_state, item[2], self.profile.name)
+            message = rb.diagnostics_message(report, s.stamp(self.wall_ns(mono)))
+            self._publish(mono, rb.DIAGNOSTICS, message)
 
     def _publish_tf(self, mono: float, frame: TelemetryFrame) -> None:
         channel = self._channels[rb.TF]

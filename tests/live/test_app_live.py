@@ -54,11 +54,13 @@ def served_port(process: subprocess.Popen[str], lines: list[str]) -> int:
 
 
 def watch(process: subprocess.Popen[str], port: int, topics: list[str]) -> NodeClient:
-    """A client of the console; every topic gets messages, then the console quits by SIGTERM."""
+    """A client of the console; every topic gets messages (the Engineer sends telemetry once
+    a second), then the console quits by SIGTERM."""
     client = NodeClient(f"ws://127.0.0.1:{port}", topics=topics, brief=True)
     try:
         for topic in topics:
-            assert client.wait(count(topic, 10)), client.events[-3:]
+            counts = {t: len(client.messages(t)) for t in topics}
+            assert client.wait(count(topic, 3)), (topic, counts, client.of("status"))
     finally:
         process.send_signal(signal.SIGTERM)
         client.wait(lambda events: any(e["event"] in ("close", "exit") for e in events))

@@ -19,7 +19,15 @@ import pytest
 
 from ocu.link.live import UdpLink
 from ocu.live.navigation import MAP, ODOM
-from ocu.live.robot import ROBOT_DESCRIPTION, SCAN, SCAN_FRAME, TF, TF_STATIC, RobotFrames
+from ocu.live.robot import (
+    DIAGNOSTICS,
+    ROBOT_DESCRIPTION,
+    SCAN,
+    SCAN_FRAME,
+    TF,
+    TF_STATIC,
+    RobotFrames,
+)
 from ocu.live.server import LiveServer
 from ocu.model.tree import axis_rotation
 from ocu.model.urdf import profile_urdf_path
@@ -27,7 +35,7 @@ from ocu.nav.navigator import Navigator
 from ocu.nav.world import load_world
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
-from ocu.records import CommandSent, LinkEvent, ScanFrame, TelemetryFrame, VideoFrame
+from ocu.records import CommandSent, LinkEvent, LinkState, ScanFrame, TelemetryFrame, VideoFrame
 from ocu.sim.simulator import RobotSimulator
 from tests.live.node_client import DEADLINE_S, NodeClient, count, require_node
 
@@ -96,6 +104,7 @@ def test_a_foxglove_client_decodes_the_robot_as_the_simulator_sent_it(
 ) -> None:
     front = s.camera_topic(profile.link.camera_names[0])
     topics = [s.JOINT_STATES, TF, TF_STATIC, ROBOT_DESCRIPTION, front, SCAN, s.LINK_STATS]
+    topics.append(DIAGNOSTICS)
     client = NodeClient(session.url, topics=topics)
     try:
         assert client.wait(count(s.JOINT_STATES, 20)), client.events[-5:]
@@ -104,6 +113,7 @@ def test_a_foxglove_client_decodes_the_robot_as_the_simulator_sent_it(
         assert client.wait(count(s.LINK_STATS, 1))
         assert client.wait(count(SCAN, 1))
         assert client.wait(count(ROBOT_DESCRIPTION, 1))
+        assert client.wait(count(DIAGNOSTICS, 2))
     finally:
         client.close()
     assert not client.of("error")
@@ -164,6 +174,16 @@ def test_a_foxglove_client_decodes_the_robot_as_the_simulator_sent_it(
     jpeg = video[stamp_ns(decoded_image["header"]["stamp"])].jpeg
     assert decoded_image["format"] == "jpeg"
     assert decoded_image["data"] == {"bytes": len(jpeg), "head": list(jpeg[:4])}
+
+    # /diagnostics: the link's report, as ocu-ros publishes it.
+    [status] = client.messages(DIAGNOSTICS)[-1]["decoded"]["status"]
+    assert status["name"] == "ocu: robot link"
+    # Connected before the client came; a warning while the loss estimate settles.
+    assert status["message"].startswith("connected")
+    assert status["level"] in (0, 1)
+    values = {v["key"]: v["value"] for v in status["values"]}
+    assert values["state"] == LinkState.CONNECTED.label
+    assert int(values["telemetry packets"]) > 0
 
     scan = client.messages(SCAN)[-1]["decoded"]
     sent = scans[stamp_ns(scan["header"]["stamp"])]
