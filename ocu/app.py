@@ -26,7 +26,7 @@ from ocu.live.options import (
     LiveError,
     add_live_options,
     serve,
-    serve_navigation,
+    serve_console,
     serving,
     start_live,
 )
@@ -215,6 +215,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(args_list)
     if args.replay is not None and (args.robot or args.sim_arg):
         parser.error("--replay plays a file: --robot and --sim-arg do not apply")
+    if args.replay is not None and args.live_control:
+        parser.error("--replay plays a file: nothing to drive with --live-control")
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:
         nice = nice_from_env() if args.nice is None else args.nice
@@ -264,7 +266,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except PadMappingError as err:
         return refuse_file(str(err))
     try:
-        live = start_live(profile, args.live, args.live_token)  # docs/live.md
+        live = start_live(profile, args.live, args.live_token, args.live_control)  # docs/live.md
     except LiveError as err:
         return refuse_file(str(err))
     # From here on a stop signal quits in order, also one that comes while the window is
@@ -389,7 +391,7 @@ def run_console(
             ),
             control_hz=control_hz,
         )
-        serve_navigation(live, window.core.model.nav)
+        serve_console(live, window.core)
         with guard:
             return run_window(app, window, quit_after_s)
     finally:
@@ -506,7 +508,7 @@ def run_replay(
         settings_status=settings_status,
         control_hz=control_hz,
     )
-    serve_navigation(live, window.core.model.nav)
+    serve_console(live, window.core)
     source.play()
     return run_window(app, window, quit_after_s)
 

@@ -19,7 +19,7 @@ from ocu.link.base import Link
 from ocu.profile import RobotProfile
 
 if TYPE_CHECKING:  # the server (websockets, the CDR encoders) loads only with --live
-    from ocu.live.navigation import NavigationSource
+    from ocu.live.control import Core
     from ocu.live.server import LiveServer
 
 DEFAULT_HOST: Final = "127.0.0.1"
@@ -85,6 +85,13 @@ def add_live_options(parser: argparse.ArgumentParser) -> None:
         f"HOST:PORT, {DEFAULT_HOST} when no HOST (docs/live.md)",
     )
     parser.add_argument(
+        "--live-control",
+        action="store_true",
+        help="let one live client drive with /cmd_vel (Foxglove's Teleop panel), as the "
+        "input mux's `live` source: any operator input, Space, LINK LOST or focus loss stops "
+        "it (docs/live.md)",
+    )
+    parser.add_argument(
         "--live-token",
         metavar="TOKEN",
         default=os.environ.get(TOKEN_ENV) or None,
@@ -94,16 +101,23 @@ def add_live_options(parser: argparse.ArgumentParser) -> None:
 
 
 def start_live(
-    profile: RobotProfile, address: tuple[str, int] | None, token: str | None
+    profile: RobotProfile,
+    address: tuple[str, int] | None,
+    token: str | None,
+    control: bool = False,
 ) -> LiveServer | None:
     """The started server (stopped at exit), or None without --live; LiveError if refused."""
     if address is None:
+        if control:
+            raise LiveError("--live-control needs --live")
         return None
+    if control and profile.drive_channels is None:
+        raise LiveError("--live-control: this robot has no drive channels for /cmd_vel")
     from ocu.live.server import LiveServer
 
     host, port = address
     check_exposure(host, token)
-    server = LiveServer(profile, host, port, token=token)
+    server = LiveServer(profile, host, port, token=token, control=control)
     server.start()
     atexit.register(server.stop)
     return server
@@ -122,10 +136,14 @@ def serving(live: LiveServer | None, make_link: Callable[[], L]) -> Callable[[],
     return make_served_link
 
 
-def serve_navigation(live: LiveServer | None, navigator: NavigationSource) -> None:
-    """Serve a chassis's odometry and map (docs/live.md); nothing without a server."""
-    if live is not None:
-        live.serve_navigation(navigator)
+def serve_console(live: LiveServer | None, core: Core) -> None:
+    """Serve the control core's model: a chassis's odometry and map, and with
+    --live-control a client's /cmd_vel into its mux (docs/live.md); nothing without a server."""
+    if live is None:
+        return
+    if core.model.profile.drive_channels is not None:
+        live.serve_navigation(core.model.nav)
+    live.serve_control(core)
 
 
 def serve(live: LiveServer | None, link: L) -> L:

@@ -42,6 +42,22 @@ from ocu.link.diagnostics import link_report
 from ocu.live import navigation as nv
 from ocu.live import robot as rb
 from ocu.live import wire
+from ocu.live.clients import (
+    ASSET,
+    CONTROL,
+    DEFAULT_CLIENT_BUFFER_BYTES,
+    Client,
+    LiveStats,
+)
+from ocu.live.control import (
+    CMD_VEL,
+    ENCODINGS,
+    TWIST_SCHEMAS,
+    Core,
+    LiveControl,
+    TwistError,
+    decode_twist,
+)
 from ocu.live.options import DEFAULT_HOST, LiveError
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
@@ -68,14 +84,8 @@ from ocu.records import (
 log = logging.getLogger("ocu.live")
 
 DEFAULT_PORT: Final = 8765
-# Per client: bytes of messages waiting for its socket (beside the socket's own write buffer).
-DEFAULT_CLIENT_BUFFER_BYTES: Final = 4 * 1024 * 1024
 # Items waiting between the link's threads and the server's loop.
 DEFAULT_MAX_QUEUE_BYTES: Final = 16 * 1024 * 1024
-# Control messages (serverInfo, advertise, status) a client has not read: more is a fault.
-MAX_CONTROL_BYTES: Final = 1024 * 1024
-# Mesh files on their way to one client (fetchAsset): more is answered "busy".
-MAX_ASSET_BYTES: Final = 32 * 1024 * 1024
 # Refused frames before a client is closed.
 MAX_REFUSED: Final = 10
 # A client only subscribes: no frame of its needs more.
@@ -83,36 +93,13 @@ MAX_CLIENT_FRAME_BYTES: Final = 64 * 1024
 # The socket's own write buffer (websockets' high-water mark).
 WRITE_LIMIT_BYTES: Final = 64 * 1024
 START_TIMEOUT_S: Final = 10.0
+# How often the remote drive's timeout is checked (its shortest is 0.15 s).
+CONTROL_PERIOD_S: Final = 0.02
 STOP_TIMEOUT_S: Final = 5.0
 ITEM_OVERHEAD_BYTES: Final = 200
 TOKEN_PARAMETER: Final = "token"
 CLOSE_POLICY: Final = 1008
 _SCAN: Final = -1  # the queue kind of a range scan (the recorder keeps only its datagram)
-_DATA, _CONTROL, _ASSET = 0, 1, 2  # what waits in a client's outbox
-
-
-@dataclass(frozen=True)
-class ClientStats:
-    """One connected client."""
-
-    address: str
-    subscriptions: int
-    sent: int
-    dropped: int
-    refused: int
-    queued_bytes: int
-    peak_queued_bytes: int
-
-
-@dataclass(frozen=True)
-class LiveStats:
-    """The server's counters now."""
-
-    clients: tuple[ClientStats, ...]
-    connections: int
-    unauthorized: int
-    closed_for_refused: int
-    queue_dropped: int
 
 
 @dataclass
@@ -121,67 +108,6 @@ class _Channel:
     encoder: s.Encoder
     latched: tuple[int, bytes] | None = None
     keeps_last: bool = False
-
-
-class _Client:
-    """One connection's subscriptions and bounded outbox (the loop thread's only)."""
-
-    def __init__(self, connection: ServerConnection, buffer_bytes: int) -> None:
-        self.connection = connection
-        remote = connection.remote_address
-        self.address = f"{remote[0]}:{remote[1]}" if remote else "?"
-        self.buffer_bytes = buffer_bytes
-        self.subscriptions: dict[int, int] = {}
-        self.by_channel: dict[int, set[int]] = {}
-        # (frame, size, kind): _DATA may be dropped, _CONTROL and _ASSET are bounded apart.
-        self.outbox: deque[tuple[str | bytes, int, int]] = deque()
-        self.data_bytes = 0
-        self.control_bytes = 0
-        self.asset_bytes = 0
-        self.wake = asyncio.Event()
-        self.sent = 0
-        self.dropped = 0
-        self.refused = 0
-        self.closing = False
-        self.peak_bytes = 0
-
-    def queue_data(self, frame: bytes) -> None:
-        if self.data_bytes + len(frame) > self.buffer_bytes:
-            self.dropped += 1
-            return
-        self.outbox.append((frame, len(frame), _DATA))
-        self.data_bytes += len(frame)
-        self.peak_bytes = max(self.peak_bytes, self.data_bytes + self.control_bytes)
-        self.wake.set()
-
-    def queue_control(self, text: str) -> bool:
-        """Queue a control message; False when the client has left too many unread."""
-        if self.control_bytes + len(text) > MAX_CONTROL_BYTES:
-            return False
-        self.outbox.append((text, len(text), _CONTROL))
-        self.control_bytes += len(text)
-        self.wake.set()
-        return True
-
-    def queue_asset(self, frame: bytes) -> bool:
-        """Queue a fetchAsset answer; False when too many bytes of them are on their way."""
-        if self.asset_bytes + len(frame) > MAX_ASSET_BYTES:
-            return False
-        self.outbox.append((frame, len(frame), _ASSET))
-        self.asset_bytes += len(frame)
-        self.wake.set()
-        return True
-
-    def stats(self) -> ClientStats:
-        return ClientStats(
-            self.address,
-            len(self.subscriptions),
-            self.sent,
-            self.dropped,
-            self.refused,
-            self.data_bytes + self.control_bytes,
-            self.peak_bytes,
-        )
 
 
 class LiveServer:
@@ -203,6 +129,7 @@ class LiveServer:
         max_queue_bytes: int = DEFAULT_MAX_QUEUE_BYTES,
         clock: Callable[[], float] = time.monotonic,
         frames: rb.RobotFrames | None = None,
+        control: bool = False,
     ) -> None:
         self.profile = profile
         self.host = host
@@ -220,7 +147,7 @@ class LiveServer:
         self._pump_scheduled = False
         self._queue_dropped = 0
         self._client_count = 0
-        self._clients: set[_Client] = set()
+        self._clients: set[Client] = set()
         self._connections = 0
         self._unauthorized = 0
         self._closed_for_refused = 0
@@ -229,6 +156,9 @@ class LiveServer:
         self._closing: set[asyncio.Future[None]] = set()
         self._navigator: nv.NavigationSource | None = None
         self._link_state = LinkState.CONNECTING
+        # --live-control: clients may publish /cmd_vel (ocu.live.control) once a core is served.
+        self.allow_control = control
+        self._teleop: LiveControl | None = None
         self._converter = MessageConverter(profile, self.wall_ns, self._publish)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_event: asyncio.Event | None = None
@@ -425,7 +355,7 @@ class LiveServer:
         for client in list(self._clients):
             self._control(client, text)
 
-    def _control(self, client: _Client, text: str) -> None:
+    def _control(self, client: Client, text: str) -> None:
         if not client.queue_control(text) and not client.closing:
             client.closing = True
             task = asyncio.ensure_future(client.connection.close(CLOSE_POLICY, "not reading"))
@@ -447,15 +377,20 @@ class LiveServer:
         return connection.respond(HTTPStatus.UNAUTHORIZED, "a valid token is needed\n")
 
     async def _handle(self, connection: ServerConnection) -> None:
-        client = _Client(connection, self.client_buffer_bytes)
+        client = Client(connection, self.client_buffer_bytes)
         self._clients.add(client)
         self._client_count = len(self._clients)
         self._connections += 1
         log.info("live: %s connected (%s)", client.address, connection.subprotocol)
         metadata = {"profile": self.profile.name}
-        assets = ["assets"] if self.frames is not None and self.frames.assets else []
+        capabilities = ["assets"] if self.frames is not None and self.frames.assets else []
+        encodings = []
+        if self.allow_control:
+            capabilities.append("clientPublish")
+            encodings = list(ENCODINGS)
         name = f"ocu {self.profile.name}"
-        self._control(client, wire.server_info(name, self.session_id, metadata, assets))
+        info = wire.server_info(name, self.session_id, metadata, capabilities, encodings)
+        self._control(client, info)
         self._control(client, wire.advertise([c.info for c in self._channels.values()]))
         sender = asyncio.create_task(self._send_loop(client), name="ocu-live-send")
         try:
@@ -472,6 +407,8 @@ class LiveServer:
             self._clients.discard(client)
             self._client_count = len(self._clients)
             sender.cancel()
+            if self._teleop is not None:
+                self._teleop.release(client.address, "left")
             log.info(
                 "live: %s left (%d sent, %d dropped, %d refused)",
                 client.address,
@@ -480,7 +417,7 @@ class LiveServer:
                 client.refused,
             )
 
-    def _on_frame(self, client: _Client, frame: str | bytes) -> None:
+    def _on_frame(self, client: Client, frame: str | bytes) -> None:
         try:
             message = wire.parse_client_message(frame)
         except wire.ClientMessageError as err:
@@ -492,6 +429,10 @@ class LiveServer:
                 self._subscribe(client, subscription, channel_id)
         elif isinstance(message, wire.FetchAsset):
             self._fetch_asset(client, message)
+        elif isinstance(
+            message, wire.ClientAdvertise | wire.ClientUnadvertise | wire.ClientPublish
+        ):
+            self._client_publish(client, message)
         else:
             for subscription in message.subscription_ids:
                 taken = client.subscriptions.pop(subscription, None)
@@ -502,7 +443,78 @@ class LiveServer:
                 if not ids:
                     client.by_channel.pop(taken, None)
 
-    def _fetch_asset(self, client: _Client, request: wire.FetchAsset) -> None:
+    def _client_publish(
+        self,
+        client: Client,
+        message: wire.ClientAdvertise | wire.ClientUnadvertise | wire.ClientPublish,
+    ) -> None:
+        if not self.allow_control:
+            client.refused += 1
+            off = "client publish is off (ocu --live-control)"
+            self._control(client, wire.status(wire.StatusLevel.ERROR, off))
+            return
+        if isinstance(message, wire.ClientAdvertise):
+            for channel in message.channels:
+                if (
+                    channel.topic != CMD_VEL
+                    or channel.schema_name not in TWIST_SCHEMAS
+                    or channel.encoding not in ENCODINGS
+                ):
+                    self._warn(
+                        client,
+                        f"{channel.topic} ({channel.schema_name}, {channel.encoding}) is not "
+                        f"taken: only {CMD_VEL} as a Twist in json or cdr",
+                    )
+                    continue
+                client.published[channel.id] = channel
+            return
+        if isinstance(message, wire.ClientUnadvertise):
+            for channel_id in message.channel_ids:
+                if client.published.pop(channel_id, None) is not None and self._teleop:
+                    self._teleop.release(client.address, f"{CMD_VEL} unadvertised")
+            return
+        published = client.published.get(message.channel_id)
+        if published is None:
+            client.refused += 1
+            self._warn(client, f"a message on channel {message.channel_id}, not advertised")
+            return
+        try:
+            linear, angular = decode_twist(published.encoding, message.payload)
+        except TwistError as err:
+            client.refused += 1
+            self._warn(client, f"{CMD_VEL}: {err}")
+            return
+        teleop = self._teleop
+        if teleop is None:  # a client that came while the console starts: not its fault
+            self._warn(client, f"{CMD_VEL} not taken: the console is starting")
+            return
+        refusal = teleop.twist(client.address, linear, angular)
+        if refusal is not None:
+            self._warn(client, f"{CMD_VEL} not taken: {refusal}")
+        else:
+            client.last_warning = ""
+
+    def _warn(self, client: Client, text: str) -> None:
+        if text != client.last_warning:  # once per reason, not per message at 20 Hz
+            client.last_warning = text
+            self._control(client, wire.status(wire.StatusLevel.WARNING, text))
+
+    def serve_control(self, core: Core) -> None:
+        """With `control`: clients' /cmd_vel drive this core's model (ocu.live.control)."""
+        if self.allow_control:
+            self._teleop = LiveControl(core, self.clock)
+
+    async def _control_loop(self) -> None:
+        while True:
+            await asyncio.sleep(CONTROL_PERIOD_S)
+            teleop = self._teleop
+            if teleop is not None:
+                try:
+                    teleop.expire()
+                except Exception:
+                    log.exception("live: cannot expire the remote drive")
+
+    def _fetch_asset(self, client: Client, request: wire.FetchAsset) -> None:
         assets = self.frames.assets if self.frames is not None else {}
         file = assets.get(request.uri)
         if file is None:
@@ -517,7 +529,7 @@ class LiveServer:
         self._closing.add(task)
         task.add_done_callback(self._closing.discard)
 
-    async def _send_asset(self, client: _Client, request_id: int, file: Path) -> None:
+    async def _send_asset(self, client: Client, request_id: int, file: Path) -> None:
         try:
             data: bytes | None = await asyncio.to_thread(file.read_bytes)
             error = ""
@@ -527,7 +539,7 @@ class LiveServer:
             busy = "busy: too many meshes on their way, ask again"
             client.queue_asset(wire.fetch_asset_response(request_id, None, busy))
 
-    def _subscribe(self, client: _Client, subscription: int, channel_id: int) -> None:
+    def _subscribe(self, client: Client, subscription: int, channel_id: int) -> None:
         channel = self._by_id.get(channel_id)
         problem = None
         if channel is None:
@@ -546,16 +558,16 @@ class LiveServer:
             log_ns, payload = channel.latched
             client.queue_data(wire.message_data(subscription, log_ns, payload))
 
-    async def _send_loop(self, client: _Client) -> None:
+    async def _send_loop(self, client: Client) -> None:
         try:
             while True:
                 await client.wake.wait()
                 client.wake.clear()
                 while client.outbox:
                     frame, size, kind = client.outbox.popleft()
-                    if kind == _CONTROL:
+                    if kind == CONTROL:
                         client.control_bytes -= size
-                    elif kind == _ASSET:
+                    elif kind == ASSET:
                         client.asset_bytes -= size
                     else:
                         client.data_bytes -= size
@@ -611,10 +623,16 @@ class LiveServer:
             return
         self._bound_port = int(server.sockets[0].getsockname()[1])
         navigation = asyncio.create_task(self._navigation_loop(), name="ocu-live-navigation")
+        teleop = asyncio.create_task(self._control_loop(), name="ocu-live-control")
         self._ready.set()
         await self._stop_event.wait()
         self._loop = None
         navigation.cancel()
+        teleop.cancel()
+        if self._teleop is not None:
+            owner = self._teleop.owner
+            if owner is not None:
+                self._teleop.release(owner, "the live server stopped")
         server.close(close_connections=True)
         await server.wait_closed()
 

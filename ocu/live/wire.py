@@ -45,6 +45,8 @@ class StatusLevel(IntEnum):
 
 _MESSAGE_HEADER: Final = struct.Struct("<BIQ")
 _ASSET_HEADER: Final = struct.Struct("<BIBI")
+_CLIENT_MESSAGE_HEADER: Final = struct.Struct("<BI")
+CLIENT_MESSAGE_DATA: Final = 1  # a client's binary opcode for a message it publishes
 # A mesh's URI is a path: longer than this is not one.
 MAX_URI_CHARS: Final = 4096
 
@@ -85,7 +87,41 @@ class FetchAsset:
     request_id: int
 
 
-ClientMessage = Subscribe | Unsubscribe | FetchAsset
+@dataclass(frozen=True)
+class ClientChannel:
+    """A channel a client advertises to publish on (client publish)."""
+
+    id: int
+    topic: str
+    encoding: str
+    schema_name: str
+
+
+@dataclass(frozen=True)
+class ClientAdvertise:
+    """advertise (from a client): the channels it will publish on."""
+
+    channels: tuple[ClientChannel, ...]
+
+
+@dataclass(frozen=True)
+class ClientUnadvertise:
+    """unadvertise (from a client): channels it no longer publishes on."""
+
+    channel_ids: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class ClientPublish:
+    """A binary message from a client on one of its channels."""
+
+    channel_id: int
+    payload: bytes
+
+
+ClientMessage = (
+    Subscribe | Unsubscribe | FetchAsset | ClientAdvertise | ClientUnadvertise | ClientPublish
+)
 
 
 def _text(message: dict[str, Any]) -> str:
@@ -93,15 +129,20 @@ def _text(message: dict[str, Any]) -> str:
 
 
 def server_info(
-    name: str, session_id: str, metadata: dict[str, str], capabilities: list[str]
+    name: str,
+    session_id: str,
+    metadata: dict[str, str],
+    capabilities: list[str],
+    encodings: list[str],
 ) -> str:
-    """serverInfo: the capabilities (`assets`: the robot's meshes), CDR messages."""
+    """serverInfo: the capabilities (`assets`: the robot's meshes, `clientPublish`: teleop)
+    and the encodings a client may publish in."""
     return _text(
         {
             "op": "serverInfo",
             "name": name,
             "capabilities": capabilities,
-            "supportedEncodings": [],
+            "supportedEncodings": encodings,
             "metadata": metadata,
             "sessionId": session_id,
         }
@@ -169,7 +210,10 @@ def _list(message: dict[str, Any], key: str) -> list[Any]:
 def parse_client_message(frame: str | bytes) -> ClientMessage:
     """One frame from a client; ClientMessageError says why it is refused."""
     if isinstance(frame, bytes):
-        raise ClientMessageError("binary frames are not accepted (no client publish)")
+        if len(frame) < _CLIENT_MESSAGE_HEADER.size or frame[0] != CLIENT_MESSAGE_DATA:
+            raise ClientMessageError("binary frame: not a message (opcode 1, channel id)")
+        _, channel_id = _CLIENT_MESSAGE_HEADER.unpack_from(frame)
+        return ClientPublish(channel_id, frame[_CLIENT_MESSAGE_HEADER.size :])
     try:
         message = json.loads(frame)
     except (json.JSONDecodeError, RecursionError) as err:
@@ -199,4 +243,20 @@ def parse_client_message(frame: str | bytes) -> ClientMessage:
         if not isinstance(uri, str) or len(uri) > MAX_URI_CHARS:
             raise ClientMessageError(f"fetchAsset: 'uri' must be a string of <= {MAX_URI_CHARS}")
         return FetchAsset(uri, _uint32(message.get("requestId"), "request id"))
+    if op == "advertise":
+        channels = []
+        for entry in _list(message, "channels"):
+            if not isinstance(entry, dict):
+                raise ClientMessageError("advertise: each channel must be an object")
+            texts = [entry.get(key) for key in ("topic", "encoding", "schemaName")]
+            if not all(isinstance(text, str) and len(text) <= MAX_URI_CHARS for text in texts):
+                raise ClientMessageError("advertise: topic, encoding and schemaName are strings")
+            topic, encoding, schema_name = (str(text) for text in texts)
+            channels.append(
+                ClientChannel(_uint32(entry.get("id"), "channel id"), topic, encoding, schema_name)
+            )
+        return ClientAdvertise(tuple(channels))
+    if op == "unadvertise":
+        ids = tuple(_uint32(value, "channel id") for value in _list(message, "channelIds"))
+        return ClientUnadvertise(ids)
     raise ClientMessageError(f"operation {op!r:.40} is not supported by this server")

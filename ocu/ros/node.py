@@ -79,6 +79,7 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~live             [HOST:]PORT: serve the session to Foxglove/Lichtblick (docs/live.md)
   ~live_token       the token its clients give; needed for a non-loopback ~live
                     (default $OCU_LIVE_TOKEN)
+  ~live_control     let one live client drive with /cmd_vel (default false)
 
 topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose, follow_path
 (nav_msgs/Path in odom), scan (placed by frame_id; /tf, /tf_static) in; joint_states,
@@ -122,6 +123,7 @@ class NodeConfig:
     #: ~live and ~live_token (docs/live.md): where to serve the session, who may watch.
     live: tuple[str, int] | None = None
     live_token: str | None = None
+    live_control: bool = False
 
 
 ParamGetter = Callable[[str, Any], Any]
@@ -162,7 +164,10 @@ def read_live(get: ParamGetter) -> dict[str, Any]:
     from ocu.live.options import TOKEN_ENV, LiveError, check_exposure, parse_live_address
 
     text = _text(get, "live")
+    control = _flag(get, "live_control", False)
     if not text:
+        if control:
+            raise ConfigError("~live_control: needs ~live")
         return {}
     try:
         address = parse_live_address(text)
@@ -170,7 +175,7 @@ def read_live(get: ParamGetter) -> dict[str, Any]:
         check_exposure(address[0], token)
     except (argparse.ArgumentTypeError, LiveError) as err:
         raise ConfigError(f"~live: {err}") from err
-    return {"live": address, "live_token": token}
+    return {"live": address, "live_token": token, "live_control": control}
 
 
 def parse_address(text: str, default_port: int) -> tuple[str, int]:
@@ -566,7 +571,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.hardware.ur import SIM_HOST, SimulatedUr
     from ocu.headless import HeadlessConsole
     from ocu.link.base import LinkError
-    from ocu.live.options import LiveError, serve, serve_navigation, start_live
+    from ocu.live.options import LiveError, serve, serve_console, start_live
     from ocu.ros.host import ModelSink, end_path, follow_path
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
@@ -613,7 +618,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
                 log.error("%s", err)
                 return 1
         try:
-            live = start_live(profile, config.live, config.live_token)
+            live = start_live(profile, config.live, config.live_token, config.live_control)
         except LiveError as err:
             log.error("%s", err)
             return 1
@@ -623,7 +628,6 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         model = ConsoleModel(profile, arm_poses_path=config.arm_poses_path)
         model.nav.grid = None  # no map view: no occupancy grid to build from each scan
         serve(live, hardware.link)
-        serve_navigation(live, model.nav)
         model.events.message.connect(lambda text: log.info("%s", text), direct=True)
         model.events.position_message.connect(lambda text: log.info("%s", text), direct=True)
         # The node is the only commander: the maxima ROS is held to are the model's.
@@ -643,6 +647,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         headless = console = HeadlessConsole(
             model, hardware, control_period_s=1.0 / config.bridge.rate_hz
         )
+        serve_console(live, console.manager)
         # The model feeds its own navigator (odometry, the zones, the path mode); the bridge
         # publishes from it, hands it other nodes' scans and /follow_path.
         sink = ModelSink(console, silent_after_s=profile.link.gui_alive_timeout_s)

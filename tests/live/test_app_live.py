@@ -101,6 +101,29 @@ def test_ocu_replay_live_serves_the_recording(tmp_path: Path, profile: RobotProf
     assert process.returncode == 0, "".join(lines) + rest
 
 
+def test_ocu_live_control_drives_the_console_from_a_client(tmp_path: Path) -> None:
+    require_node()
+    lines: list[str] = []
+    with console(tmp_path, "--live", "0", "--live-control") as process:
+        port = served_port(process, lines)
+        spec = {"topic": "/cmd_vel", "encoding": "json", "schemaName": "geometry_msgs/msg/Twist"}
+        spec |= {"rateHz": 10.0, "count": 1000, "linear": 0.3, "angular": 0.0}
+        client = NodeClient(f"ws://127.0.0.1:{port}", topics=[s.CMD_VEL], publish=spec)
+        try:
+            # What the console sent the robot, read back from its own live channel.
+            assert client.wait(
+                lambda events: any(
+                    m["decoded"]["linear"]["x"] > 0.0 for m in client.messages(s.CMD_VEL)
+                )
+            ), (client.of("status"), "".join(lines))
+        finally:
+            process.send_signal(signal.SIGTERM)
+            client.close()
+        _, rest = process.communicate(timeout=60)
+    assert process.returncode == 0, "".join(lines) + rest
+    assert "live client 127.0.0.1:" in "".join(lines) + rest  # the Events dock's line, logged
+
+
 def record(profile: RobotProfile, path: Path, frames: int) -> None:
     """A recording of the simulator with this many telemetry packets (the waist turning)."""
     sim = RobotSimulator(profile, telemetry_hz=100.0, video_fps=5.0, video_size=(160, 120))
@@ -133,6 +156,8 @@ def record(profile: RobotProfile, path: Path, frames: int) -> None:
         (("--live", "0.0.0.0:8765"), "refusing to serve a non-loopback address without a token"),
         (("--live", "8765", "--live-token", "short"), "at least 8 characters"),
         (("--live", "x:y"), "bad port in 'x:y'"),
+        (("--live-control",), "--live-control needs --live"),
+        (("--replay", "x.mcap", "--live", "0", "--live-control"), "nothing to drive with"),
     ],
 )
 def test_ocu_live_refuses_before_anything_starts(

@@ -28,6 +28,20 @@ def test_fetch_asset_answers_are_opcode_id_status_error_data() -> None:
     )
 
 
+def test_client_publish_messages_are_read() -> None:
+    advertise = (
+        '{"op":"advertise","channels":[{"id":2,"topic":"/cmd_vel","encoding":"json",'
+        '"schemaName":"geometry_msgs/msg/Twist"}]}'
+    )
+    assert wire.parse_client_message(advertise) == wire.ClientAdvertise(
+        (wire.ClientChannel(2, "/cmd_vel", "json", "geometry_msgs/msg/Twist"),)
+    )
+    assert wire.parse_client_message('{"op":"unadvertise","channelIds":[2]}') == (
+        wire.ClientUnadvertise((2,))
+    )
+    assert wire.parse_client_message(b"\x01\x02\x00\x00\x00{}") == wire.ClientPublish(2, b"{}")
+
+
 def test_advertise_names_the_ros2_encodings() -> None:
     text = wire.advertise([wire.ChannelInfo(3, "/joint_states", "sensor_msgs/msg/JointState", "x")])
     assert json.loads(text) == {
@@ -58,7 +72,11 @@ def test_subscribe_and_unsubscribe_are_read() -> None:
 @pytest.mark.parametrize(
     ("frame", "reason"),
     [
-        (b"\x01\x02", "binary frames are not accepted"),
+        (b"\x01\x02", "binary frame: not a message"),
+        (b"\x02\x00\x00\x00\x00", "binary frame: not a message"),
+        ('{"op":"advertise","channels":[{"id":1,"topic":5}]}', "topic, encoding and schemaName"),
+        ('{"op":"advertise","channels":[3]}', "each channel must be an object"),
+        ('{"op":"unadvertise","channelIds":[-1]}', "channel id"),
         ("not json", "not JSON"),
         ("[1, 2]", "not a JSON object"),
         ("[" * 100000, "not JSON"),

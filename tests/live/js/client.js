@@ -8,14 +8,17 @@
 // garbage: frames of junk sent right after serverInfo; paused: stop reading the socket once
 // subscribed (a slow client); brief: print only topic, sizes and times of each message;
 // fetch: URIs to fetch (fetchAsset) once connected; fetchMeshes: fetch every mesh the
-// /robot_description it receives names (as Foxglove's 3D panel does).
+// /robot_description it receives names (as Foxglove's 3D panel does); publish: {topic,
+// encoding ("json" or "cdr"), schemaName, rateHz, count, linear, angular}: advertise and
+// publish a Twist `count` times at `rateHz` (as Foxglove's Teleop panel does), once the
+// server declares clientPublish.
 // It prints one JSON object per line: serverInfo, advertise, message (decoded), status,
 // close, error; it runs until stdin closes or the server closes the connection.
 "use strict";
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const { parse } = require("@foxglove/rosmsg");
-const { MessageReader } = require("@foxglove/rosmsg2-serialization");
+const { MessageReader, MessageWriter } = require("@foxglove/rosmsg2-serialization");
 const WebSocket = require("ws");
 const { createHash } = require("crypto");
 
@@ -58,10 +61,39 @@ function fetchAsset(uri) {
 client.on("serverInfo", (info) => {
   print({ event: "serverInfo", name: info.name, capabilities: info.capabilities, protocol: ws.protocol });
   for (const uri of options.fetch || []) fetchAsset(uri);
+  if (options.publish && info.capabilities.includes("clientPublish")) publish(options.publish);
   for (let i = 0; i < (options.garbage || 0); i++) {
     ws.send(i % 2 === 0 ? `not json ${i}` : Buffer.from([0xff, 0x00, i & 0xff]));
   }
 });
+
+const TWIST = "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n" +
+  "================================================================================\n" +
+  "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n";
+
+function publish(spec) {
+  const channel = client.advertise({ topic: spec.topic, encoding: spec.encoding, schemaName: spec.schemaName });
+  const writer = new MessageWriter(parse(TWIST, { ros2: true }));
+  const message = {
+    linear: { x: spec.linear, y: 0, z: 0 },
+    angular: { x: 0, y: 0, z: spec.angular },
+  };
+  const data = spec.encoding === "cdr"
+    ? writer.writeMessage(message)
+    : new TextEncoder().encode(JSON.stringify(message));
+  let sent = 0;
+  const send = () => {
+    client.sendMessage(channel, data);
+    sent += 1;
+    print({ event: "published", n: sent, local_ms: performance.timeOrigin + performance.now() });
+    if (sent >= spec.count) {
+      clearInterval(timer);
+      if (spec.unadvertise) client.unadvertise(channel);
+    }
+  };
+  const timer = setInterval(send, 1000 / spec.rateHz);
+  send();
+}
 
 client.on("advertise", (advertised) => {
   for (const channel of advertised) {
