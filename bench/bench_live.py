@@ -11,6 +11,13 @@ with its wall clock. Latency: that arrival less the message's receive time (the 
 when the link got the telemetry datagram), p50/p99 over the phase. CPU: this process (link,
 server, no GUI) per phase, in % of one core, with a phase of no clients first as the
 baseline.
+
+    .venv/bin/python bench/bench_live.py --teleop 20      # client Twist -> datagram
+
+--teleop N: the control core (HeadlessConsole) on an in-process simulator over UDP, the
+server with --live-control; one npm client publishes a Twist once a second (a Teleop panel's
+default: the robot stops between messages), N; latency from its send to the simulator's
+first datagram carrying the drive, p50/p99.
 """
 
 from __future__ import annotations
@@ -20,19 +27,26 @@ import os
 import resource
 import sys
 import time
+from collections.abc import Callable
+from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from common import percentile
 
+from ocu.console.model import ConsoleModel
+from ocu.hardware.registry import HARDWARE
+from ocu.headless import HeadlessConsole
 from ocu.link.live import UdpLink
+from ocu.live.options import serve_console
 from ocu.live.server import LiveServer
 from ocu.priority import DEFAULT_NICE, raise_priority
-from ocu.profile import load_profile
+from ocu.profile import RobotProfile, load_profile
 from ocu.record import schemas as s
 from ocu.records import DatagramSent, LinkEvent
 from ocu.sim.launcher import SimulatorProcess
+from ocu.sim.simulator import RobotSimulator
 from tests.live.node_client import NodeClient, count
 
 
@@ -59,13 +73,56 @@ class SendGaps:
         return f"send gaps p99 {percentile(gaps, 99):5.1f} ms max {max(gaps):5.1f} ms"
 
 
+def count_published(n: int) -> Callable[[list[dict[str, Any]]], bool]:
+    """A predicate: the client has published its n-th message."""
+    return lambda events: any(event.get("n") == n for event in events)
+
+
+def teleop(profile: RobotProfile, count_n: int) -> None:
+    """Client-published Twist -> the simulator's datagram (module docstring)."""
+    sim = RobotSimulator(profile, telemetry_hz=50.0, video_fps=0.0)
+    sim.start()
+    hardware = HARDWARE.create("engineer", profile, f"{sim.address[0]}:{sim.address[1]}")
+    console = HeadlessConsole(ConsoleModel(profile), hardware)
+    server = LiveServer(profile, "127.0.0.1", 0, control=True)
+    server.start()
+    serve_console(server, console.manager)
+    console.start()
+    spec: dict[str, object] = {"topic": "/cmd_vel", "encoding": "cdr"}
+    spec["schemaName"] = "geometry_msgs/msg/Twist"
+    spec |= {"rateHz": 1.0, "count": count_n, "linear": 0.3, "angular": 0.0}
+    client = NodeClient(f"ws://127.0.0.1:{server.address[1]}", topics=[], publish=spec)
+    latencies_ms = []
+    try:
+        for n in range(1, count_n + 1):
+            moving = sim.wait_until(lambda s: s.commanded_velocities.get("drive_linear", 0) > 0, 10)
+            seen_ms = time.time() * 1000.0
+            assert moving
+            assert client.wait(count_published(n), 10.0)
+            latencies_ms.append(seen_ms - client.of("published")[n - 1]["local_ms"])
+            assert sim.wait_until(lambda s: s.commanded_velocities.get("drive_linear", 0) == 0, 5)
+    finally:
+        client.close()
+        server.stop()
+        console.stop()
+        sim.stop()
+    print(
+        f"client Twist -> datagram: p50 {percentile(latencies_ms, 50):.1f} ms "
+        f"p99 {percentile(latencies_ms, 99):.1f} ms ({len(latencies_ms)} from rest, 1 Hz)"
+    )
+
+
 def main() -> int:
     parser = argparse.ArgumentParser()
     parser.add_argument("--clients", type=int, nargs="+", default=[1, 5, 20])
     parser.add_argument("--phase-s", type=float, default=10.0)
+    parser.add_argument("--teleop", type=int, metavar="N", help="measure client Twist -> datagram")
     args = parser.parse_args()
     profile = load_profile()
     print(f"priority: {raise_priority(DEFAULT_NICE).text} (as the console asks)")
+    if args.teleop:
+        teleop(profile, args.teleop)
+        return 0
     cameras = [s.camera_topic(name) for name in profile.link.camera_names]
     topics = [s.JOINT_STATES, "/tf", *cameras]
     with SimulatorProcess(None, ["--extended", "--telemetry-hz", "50"]) as sim:
