@@ -106,7 +106,8 @@ def test_ocu_live_control_drives_the_console_from_a_client(tmp_path: Path) -> No
     lines: list[str] = []
     with console(tmp_path, "--live", "0", "--live-control") as process:
         port = served_port(process, lines)
-        spec = {"topic": "/cmd_vel", "encoding": "json", "schemaName": "geometry_msgs/msg/Twist"}
+        spec: dict[str, object] = {"topic": "/cmd_vel", "encoding": "json"}
+        spec["schemaName"] = "geometry_msgs/msg/Twist"
         spec |= {"rateHz": 10.0, "count": 1000, "linear": 0.3, "angular": 0.0}
         client = NodeClient(f"ws://127.0.0.1:{port}", topics=[s.CMD_VEL], publish=spec)
         try:
