@@ -43,6 +43,8 @@ class LiveStats:
     unauthorized: int
     closed_for_refused: int
     queue_dropped: int
+    # Connections refused because max_clients were connected.
+    crowded: int
 
 
 class Client:

@@ -92,6 +92,8 @@ MAX_REFUSED: Final = 10
 MAX_CLIENT_FRAME_BYTES: Final = 64 * 1024
 # The socket's own write buffer (websockets' high-water mark).
 WRITE_LIMIT_BYTES: Final = 64 * 1024
+# Clients at once: with their outboxes, the memory the server may take (64 x 4 MB).
+DEFAULT_MAX_CLIENTS: Final = 64
 START_TIMEOUT_S: Final = 10.0
 # How often the remote drive's timeout is checked (its shortest is 0.15 s).
 CONTROL_PERIOD_S: Final = 0.02
@@ -130,6 +132,7 @@ class LiveServer:
         clock: Callable[[], float] = time.monotonic,
         frames: rb.RobotFrames | None = None,
         control: bool = False,
+        max_clients: int = DEFAULT_MAX_CLIENTS,
     ) -> None:
         self.profile = profile
         self.host = host
@@ -158,6 +161,8 @@ class LiveServer:
         self._link_state = LinkState.CONNECTING
         # --live-control: clients may publish /cmd_vel (ocu.live.control) once a core is served.
         self.allow_control = control
+        self.max_clients = max_clients
+        self._crowded = 0
         self._teleop: LiveControl | None = None
         self._converter = MessageConverter(profile, self.wall_ns, self._publish)
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -363,6 +368,10 @@ class LiveServer:
             task.add_done_callback(self._closing.discard)
 
     def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
+        if len(self._clients) >= self.max_clients:  # each costs up to its outbox
+            self._crowded += 1
+            text = f"{self.max_clients} clients are watching already\n"
+            return connection.respond(HTTPStatus.SERVICE_UNAVAILABLE, text)
         if self.token is None:
             return None
         query = parse_qs(urlsplit(request.path).query)
@@ -656,5 +665,10 @@ class LiveServer:
         with self._lock:
             dropped = self._queue_dropped
         return LiveStats(
-            clients, self._connections, self._unauthorized, self._closed_for_refused, dropped
+            clients,
+            self._connections,
+            self._unauthorized,
+            self._closed_for_refused,
+            dropped,
+            self._crowded,
         )

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import threading
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -93,3 +95,28 @@ def test_an_address_in_use_is_reported(guarded: LiveServer, profile: RobotProfil
     second = LiveServer(profile, "127.0.0.1", guarded.address[1])
     with pytest.raises(LiveError, match=f"cannot serve live on 127.0.0.1:{guarded.address[1]}"):
         second.start()
+
+
+def test_clients_beyond_the_limit_are_refused(profile: RobotProfile) -> None:
+    server = LiveServer(profile, "127.0.0.1", 0, max_clients=2)
+    server.start()
+    url = f"ws://127.0.0.1:{server.address[1]}"
+    offered = ["foxglove.websocket.v1"]
+    try:
+        with (
+            connect(url, subprotocols=offered) as first,  # type: ignore[arg-type]
+            connect(url, subprotocols=offered) as second,  # type: ignore[arg-type]
+        ):
+            assert json.loads(first.recv())["op"] == "serverInfo"
+            assert json.loads(second.recv())["op"] == "serverInfo"
+            with pytest.raises(InvalidStatus, match="503"):
+                connect(url, subprotocols=offered)  # type: ignore[arg-type]
+        # They left: room again (once the server has seen them go).
+        deadline = time.monotonic() + 10.0
+        while server.stats().clients and time.monotonic() < deadline:
+            threading.Event().wait(0.01)
+        with connect(url, subprotocols=offered) as third:  # type: ignore[arg-type]
+            assert json.loads(third.recv())["op"] == "serverInfo"
+    finally:
+        server.stop()
+    assert server.stats().crowded == 1
