@@ -1,5 +1,6 @@
-"""Driving with a map, served live: the navigator's odometry and occupancy grid as ROS 2
-messages (`/odom`, the tf odom -> base_link on `/tf`, `/map`).
+"""Driving with a map, served live: the navigator's odometry, occupancy grid and planned path
+and the chassis's footprint as ROS 2 messages (`/odom`, the tf odom -> base_link on `/tf`,
+`/map`, `/plan`, `/footprint`).
 
 The navigator is the console model's (ocu.nav.navigator); `estimate()` takes the
 navigator's own lock for a few microseconds, as the ROS node's bridge does. The grid is read
@@ -21,6 +22,8 @@ from ocu.record import schemas as s
 
 ODOM: Final = "/odom"
 MAP: Final = "/map"
+PLAN: Final = "/plan"
+FOOTPRINT: Final = "/footprint"
 ODOM_PERIOD_S: Final = 0.05
 _COUNT: Final = struct.Struct("<I")  # a sequence's count in little-endian CDR
 MAP_PERIOD_S: Final = 1.0
@@ -66,12 +69,39 @@ OCCUPANCY_GRID = s.MessageType(
 )
 
 
+PATH = s.MessageType(
+    "nav_msgs/msg/Path",
+    s.concatenate(
+        "std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n",
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+        ("geometry_msgs/PoseStamped", "std_msgs/Header header\nPose pose\n"),
+        _POSE,
+        ("geometry_msgs/Point", _POINT),
+        ("geometry_msgs/Quaternion", _QUATERNION),
+    ),
+)
+
+POLYGON_STAMPED = s.MessageType(
+    "geometry_msgs/msg/PolygonStamped",
+    s.concatenate(
+        "std_msgs/Header header\nPolygon polygon\n",
+        ("std_msgs/Header", _HEADER),
+        ("builtin_interfaces/Time", _TIME),
+        ("geometry_msgs/Polygon", "Point32[] points\n"),
+        ("geometry_msgs/Point32", "float32 x\nfloat32 y\nfloat32 z\n"),
+    ),
+)
+
+
 class NavigationSource(Protocol):
     """What the live server reads of a navigator."""
 
     grid: OccupancyGrid | None
 
     def estimate(self, now: float | None = None) -> OdometryEstimate: ...
+
+    def planned_path(self) -> np.ndarray[Any, Any]: ...
 
 
 def _xyz(values: tuple[float, float, float]) -> dict[str, float]:
@@ -147,3 +177,26 @@ def grid_message(grid: OccupancyGrid, stamp: dict[str, int]) -> dict[str, Any]:
         },
         "data": [],
     }
+
+
+def path_message(points: np.ndarray[Any, Any], stamp: dict[str, int]) -> dict[str, Any]:
+    """/plan: the path (or the shuttle's two points) an assisted mode drives, in `odom`;
+    no poses when none runs."""
+    header = {"stamp": stamp, "frame_id": ODOM_FRAME}
+    identity = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+    poses = [
+        {
+            "header": header,
+            "pose": {"position": {"x": float(x), "y": float(y), "z": 0.0}, "orientation": identity},
+        }
+        for x, y in points
+    ]
+    return {"header": header, "poses": poses}
+
+
+def footprint_message(
+    corners_m: tuple[tuple[float, float], ...], stamp: dict[str, int]
+) -> dict[str, Any]:
+    """/footprint: the chassis outline about the turn centre, in `base_link`."""
+    points = [{"x": x, "y": y, "z": 0.0} for x, y in corners_m]
+    return {"header": {"stamp": stamp, "frame_id": BASE_FRAME}, "polygon": {"points": points}}

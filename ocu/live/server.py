@@ -187,6 +187,13 @@ class LiveServer:
         if self.profile.drive_channels is not None:  # a chassis: odometry and a map
             self._channel(nv.ODOM, nv.ODOMETRY)
             self._channel(nv.MAP, nv.OCCUPANCY_GRID)
+            self._channel(nv.PLAN, nv.PATH)
+            footprint = self.profile.navigation.footprint
+            if footprint is not None:
+                outline = self._channel(nv.FOOTPRINT, nv.POLYGON_STAMPED, keeps_last=True)
+                now = self.wall_ns(self.clock())
+                message = nv.footprint_message(footprint.corners_m, s.stamp(now))
+                outline.latched = (now, outline.encoder(message))
         self._channel(rb.TF, rb.TF_MESSAGE)
         frames = self.frames
         if frames is not None:
@@ -327,7 +334,7 @@ class LiveServer:
     async def _navigation_loop(self) -> None:
         if nv.ODOM not in self._channels:
             return
-        odom, tf, grid = (self._channels[t] for t in (nv.ODOM, rb.TF, nv.MAP))
+        odom, tf, grid, plan = (self._channels[t] for t in (nv.ODOM, rb.TF, nv.MAP, nv.PLAN))
         next_map = 0.0
         while True:
             await asyncio.sleep(nv.ODOM_PERIOD_S)
@@ -336,22 +343,23 @@ class LiveServer:
                 continue
             try:
                 now = self.clock()
-                stamp = s.stamp(self.wall_ns(now))
+                log_ns = self.wall_ns(now)
+                stamp = s.stamp(log_ns)
                 if self._subscribed(odom.info.id) or self._subscribed(tf.info.id):
                     estimate = navigator.estimate(now)
-                    log_ns = self.wall_ns(now)
                     message = nv.odometry_message(estimate, stamp)
                     self._fan_out(odom, log_ns, odom.encoder(message))
                     transform = nv.odometry_transform(estimate, stamp)
                     self._fan_out(tf, log_ns, tf.encoder(transform))
-                if (
-                    navigator.grid is not None
-                    and now >= next_map
-                    and self._subscribed(grid.info.id)
-                ):
-                    next_map = now + nv.MAP_PERIOD_S
-                    payload = nv.encode_grid(grid.encoder, navigator.grid, stamp)
-                    self._fan_out(grid, self.wall_ns(now), payload)
+                if now < next_map:
+                    continue
+                next_map = now + nv.MAP_PERIOD_S
+                if self._subscribed(plan.info.id):
+                    path = nv.path_message(navigator.planned_path(), stamp)
+                    self._fan_out(plan, log_ns, plan.encoder(path))
+                occupancy = navigator.grid
+                if occupancy is not None and self._subscribed(grid.info.id):
+                    self._fan_out(grid, log_ns, nv.encode_grid(grid.encoder, occupancy, stamp))
             except Exception:
                 log.exception("live: cannot serve the navigator's state")
                 await asyncio.sleep(nv.MAP_PERIOD_S)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from ocu.link.live import UdpLink
-from ocu.live.navigation import MAP, ODOM
+from ocu.live.navigation import FOOTPRINT, MAP, ODOM, PLAN
 from ocu.live.robot import (
     DIAGNOSTICS,
     ROBOT_DESCRIPTION,
@@ -328,18 +328,34 @@ def test_odometry_and_the_map_reach_the_client(profile: RobotProfile) -> None:
     link.subscribe(feed)
     server.attach(link)
     link.start()
-    client = NodeClient(f"ws://127.0.0.1:{server.address[1]}", topics=[ODOM, MAP, TF])
+    topics = [ODOM, MAP, TF, PLAN, FOOTPRINT]
+    client = NodeClient(f"ws://127.0.0.1:{server.address[1]}", topics=topics)
     try:
+        assert client.wait(count(PLAN, 1))
+        assert client.messages(PLAN)[0]["decoded"]["poses"] == []  # no assisted mode yet
+        navigator.start_path([(1.0, 0.0), (1.0, 1.0)])  # the path the path mode would drive
         link.set_velocities(drive_turn=0.4)
         assert client.wait(count(MAP, 3)), client.events[-3:]
         assert client.wait(count(ODOM, 20))
+        assert client.wait(lambda events: any(m["decoded"]["poses"] for m in client.messages(PLAN)))
     finally:
         client.close()
         link.shutdown()
         server.stop()
         sim.stop()
     assert not client.of("error")
-    assert all(m["trailing"] is False for m in client.messages(MAP) + client.messages(ODOM))
+    every = [e for e in client.events if e["event"] == "message"]
+    assert all(m["trailing"] is False for m in every)
+    plan = next(m["decoded"] for m in client.messages(PLAN) if m["decoded"]["poses"])
+    assert plan["header"]["frame_id"] == "odom"
+    ends = [(p["pose"]["position"]["x"], p["pose"]["position"]["y"]) for p in plan["poses"]]
+    assert ends[-1] == pytest.approx((1.0, 1.0), abs=1e-6)
+    footprint = client.messages(FOOTPRINT)[0]["decoded"]
+    assert footprint["header"]["frame_id"] == "base_link"
+    corners = [c for p in footprint["polygon"]["points"] for c in (p["x"], p["y"])]
+    outline = profile.navigation.footprint
+    assert outline is not None
+    assert corners == pytest.approx([c for xy in outline.corners_m for c in xy], abs=1e-6)
     odometry = [m["decoded"] for m in client.messages(ODOM)]
     assert {o["header"]["frame_id"] for o in odometry} == {"odom"}
     assert {o["child_frame_id"] for o in odometry} == {"base_link"}
