@@ -20,6 +20,14 @@ from ocu.core.manager import DEFAULT_RATE_HZ as DEFAULT_CONTROL_HZ
 from ocu.core.manager import MAX_RATE_HZ as MAX_CONTROL_HZ
 from ocu.core.manager import MIN_RATE_HZ as MIN_CONTROL_HZ
 from ocu.lifecycle import STOP, last_zeros_guard, run_window
+from ocu.live.options import (
+    LiveError,
+    add_live_options,
+    serve,
+    serve_console,
+    serving,
+    start_live,
+)
 from ocu.priority import (
     DEFAULT_NICE,
     NICE_ENV,
@@ -42,6 +50,7 @@ if TYPE_CHECKING:
     from ocu.gamepad.mapping import PadMapping
     from ocu.hotkeys import KeyMap
     from ocu.link.base import Link
+    from ocu.live.server import LiveServer
     from ocu.record.recorder import Recorder
     from ocu.windows.settings_file import SettingsStatus
 
@@ -137,6 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
         "CAP_SYS_NICE or an RLIMIT_NICE allowance, else the console says what it got)",
     )
     parser.add_argument("--log-level", default="INFO")
+    add_live_options(parser)
     return parser
 
 
@@ -201,6 +211,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(args_list)
     if args.replay is not None and (args.robot or args.sim_arg):
         parser.error("--replay plays a file: --robot and --sim-arg do not apply")
+    if args.replay is not None and args.live_control:
+        parser.error("--replay plays a file: nothing to drive with --live-control")
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:
         nice = nice_from_env() if args.nice is None else args.nice
@@ -218,7 +230,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--sim-arg is not available for a UR arm yet (docs/ur.md)")
     if xarm is not None:
         for given, option in ((args.replay, "--replay"), (args.record, "--record"),
-                              (args.sim_arg, "--sim-arg")):  # fmt: skip
+                              (args.sim_arg, "--sim-arg"), (args.live, "--live")):  # fmt: skip
             if given:
                 parser.error(f"{option} is not available for the xArm yet (docs/xarm.md)")
     if args.replay is not None:
@@ -254,6 +266,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         pad_mapping = load_pad_mapping(profile, pad_override)
     except PadMappingError as err:
+        return refuse_file(str(err))
+    try:
+        live = start_live(profile, args.live, args.live_token, args.live_control)  # docs/live.md
+    except LiveError as err:
         return refuse_file(str(err))
     # From here on a stop signal quits in order, also one that comes while the window is
     # being built (the link may already be running then): see StopSignals.
@@ -292,6 +308,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             record_path=args.record,
             pad_mapping=None if args.no_gamepad else pad_mapping,
             control_hz=args.control_hz,
+            live=live,
         )
     if args.replay is not None:
         return run_replay(
@@ -301,6 +318,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             config_dir=config_dir,
             key_map=key_map,
             control_hz=args.control_hz,
+            live=live,
         )
     return run_console(
         profile,
@@ -313,6 +331,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         record_path=args.record,
         pad_mapping=None if args.no_gamepad else pad_mapping,
         control_hz=args.control_hz,
+        live=live,
     )
 
 
@@ -328,6 +347,7 @@ def run_console(
     record_path: Path | None = None,
     pad_mapping: PadMapping | None = None,
     control_hz: float = DEFAULT_CONTROL_HZ,
+    live: LiveServer | None = None,
 ) -> int:
     """Start simulator (if no robot), link and window; run the Qt event loop."""
     from PySide6.QtWidgets import QApplication
@@ -382,7 +402,7 @@ def run_console(
         guard.enter_context(last_zeros_guard())  # the window starts the link
         window = MainWindow(
             profile,
-            make_link,
+            serving(live, make_link),
             address_text,
             settings,
             key_map,
@@ -395,6 +415,7 @@ def run_console(
             ),
             control_hz=control_hz,
         )
+        serve_console(live, window.core)
         with guard:
             return run_window(app, window, quit_after_s)
     finally:
@@ -414,6 +435,7 @@ def run_ur_console(
     record_path: Path | None = None,
     pad_mapping: PadMapping | None = None,
     control_hz: float = DEFAULT_CONTROL_HZ,
+    live: LiveServer | None = None,
 ) -> int:
     """The console on a UR arm: the controller at `robot` (HOST[:PORT_BASE]), else the UR
     simulator in this process on 127.0.0.1 (docs/ur.md)."""
@@ -460,7 +482,7 @@ def run_ur_console(
 
         return run_arm_window(
             profile,
-            (make_link, hardware_for, UR_CAPABILITIES),
+            (serving(live, make_link), hardware_for, UR_CAPABILITIES),
             where,
             quit_after_s,
             config_dir=config_dir,
@@ -468,6 +490,7 @@ def run_ur_console(
             recorder=recorder,
             pad_mapping=pad_mapping,
             control_hz=control_hz,
+            live=live,
         )
     finally:
         recorder.stop()  # after the window's shutdown: the link's closing stopj is in it
@@ -486,6 +509,7 @@ def run_arm_window(
     pad_mapping: PadMapping | None,
     control_hz: float,
     recorder: Recorder | None = None,
+    live: LiveServer | None = None,
 ) -> int:
     """The console's window on an arm (a UR, an xArm): `hardware` is its link factory, its
     component factory and its capabilities; the window starts the link, zeros are last."""
@@ -514,6 +538,7 @@ def run_arm_window(
         hardware_for=hardware_for,
         capabilities=capabilities,
     )
+    serve_console(live, window.core)
     with guard:
         return run_window(app, window, quit_after_s)
 
@@ -526,6 +551,7 @@ def run_replay(
     config_dir: Path,
     key_map: KeyMap,
     control_hz: float = DEFAULT_CONTROL_HZ,
+    live: LiveServer | None = None,
 ) -> int:
     """The console on a recording: no simulator, no link; plays from the start."""
     from PySide6.QtWidgets import QApplication
@@ -539,7 +565,7 @@ def run_replay(
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
     try:
-        source = open_replay(path, profile)
+        source = serve(live, open_replay(path, profile))
     except (RecordingError, LinkError) as err:
         log.error("%s", err)
         return 1
@@ -557,6 +583,7 @@ def run_replay(
         hardware_for=hardware_for,
         capabilities=capabilities,
     )
+    serve_console(live, window.core)
     source.play()
     return run_window(app, window, quit_after_s)
 

@@ -44,6 +44,9 @@ class Source:
     # Click-to-track (ocu.console.tracking): the pan and tilt joints keep an object centred;
     # any operator input ends it.
     TRACK: ClassVar[Source]
+    # A remote client of the live server (ocu.live, `--live-control`): a planner that stops
+    # for every lock and any operator input.
+    LIVE: ClassVar[Source]
 
     value: str
 
@@ -79,7 +82,7 @@ class Source:
 
 
 _BUILT_IN = ("none", "slider", "text", "hotkey", "switch", "position", "ros", "arm", "gamepad")
-for _name in (*_BUILT_IN, "assist", "track"):
+for _name in (*_BUILT_IN, "assist", "track", "live"):
     setattr(Source, _name.upper(), Source.define(_name))
 
 

@@ -31,33 +31,10 @@ from mcap.writer import CompressionType
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
+from ocu.record.convert import EVENT, VIDEO, Item, item_of
 from ocu.record.errors import RecordingError
-from ocu.record.session import (
-    COMMAND,
-    EVENT,
-    RECEIVED,
-    SENT,
-    STATS,
-    STATUS,
-    TELEMETRY,
-    VIDEO,
-    Item,
-    RecordingFile,
-)
-from ocu.records import (
-    CommandSent,
-    DatagramReceived,
-    DatagramSent,
-    ExtensionChanged,
-    LinkEvent,
-    LinkStateChanged,
-    LinkStats,
-    RobotModeReport,
-    SafetyEvent,
-    StatusFrame,
-    TelemetryFrame,
-    VideoFrame,
-)
+from ocu.record.session import RecordingFile
+from ocu.records import LinkEvent
 
 log = logging.getLogger("ocu.record")
 
@@ -73,7 +50,6 @@ REORDER_HOLD_S = 0.1
 STOP_TIMEOUT_S = 10.0
 # Rough bytes of a queued item beside its payload, for the queue's memory bound.
 ITEM_OVERHEAD_BYTES = 200
-TELEMETRY_ITEM_BYTES = 2000
 RECORDINGS_DIR_ENV = "OCU_RECORDINGS_DIR"
 
 
@@ -180,33 +156,10 @@ class Recorder:
 
     def on_event(self, event: LinkEvent) -> None:
         """One link event into the queue (the link's threads; never blocks)."""
-        if isinstance(event, DatagramSent):
-            self.put((SENT, event.sent_at, event), len(event.data))
-        elif isinstance(event, DatagramReceived):
-            self.put((RECEIVED, event.received_at, event), len(event.data))
-        elif isinstance(event, CommandSent):
-            self.put((COMMAND, event.sent_at, event.command), 0)
-        elif isinstance(event, TelemetryFrame):
-            self.put((TELEMETRY, event.received_at, event), TELEMETRY_ITEM_BYTES)
-        elif isinstance(event, VideoFrame):
-            if self.decoded_video:
-                self.put((VIDEO, event.received_at, event), len(event.jpeg))
-        elif isinstance(event, StatusFrame):
-            self.put((STATUS, event.received_at, event), 0)
-        elif isinstance(event, LinkStats):
-            self.put((STATS, self.clock(), event), 0)
-        elif isinstance(event, LinkStateChanged):
-            state = event.state.value
-            self.put((EVENT, self.clock(), s.EVENT_LINK_STATE, state, event.reason), 0)
-        elif isinstance(event, SafetyEvent):
-            self.put((EVENT, self.clock(), s.EVENT_SAFETY, "", event.message), 0)
-        elif isinstance(event, ExtensionChanged):
-            state = "active" if event.active else "inactive"
-            self.put((EVENT, self.clock(), s.EVENT_EXTENSION, state, event.reason), 0)
-        elif isinstance(event, RobotModeReport):
-            detail = f"robot {event.mode}, safety {event.safety}"
-            detail += "".join(f", {stop}" for stop in event.stops)
-            self.put((EVENT, self.clock(), s.EVENT_ROBOT_MODE, event.text, detail), 0)
+        kept = item_of(event, self.clock)
+        if kept is None or (kept[0][0] == VIDEO and not self.decoded_video):
+            return
+        self.put(*kept)
 
     # ---- control ---------------------------------------------------------------------------
 

@@ -80,7 +80,8 @@ _HEADER = "builtin_interfaces/Time stamp\nstring frame_id\n"
 _VECTOR3 = "float64 x\nfloat64 y\nfloat64 z\n"
 
 
-def _concatenate(main: str, *dependencies: tuple[str, str]) -> str:
+def concatenate(main: str, *dependencies: tuple[str, str]) -> str:
+    """A message definition with its dependencies, as MCAP and Foxglove take it."""
     parts = [main]
     for name, text in dependencies:
         parts.append(f"{_SEPARATOR}\nMSG: {name}\n{text}")
@@ -97,7 +98,7 @@ class MessageType:
 
 TWIST = MessageType(
     "geometry_msgs/msg/Twist",
-    _concatenate(
+    concatenate(
         "# This expresses velocity in free space broken into its linear and angular parts.\n"
         "Vector3 linear\nVector3 angular\n",
         ("geometry_msgs/Vector3", _VECTOR3),
@@ -106,7 +107,7 @@ TWIST = MessageType(
 
 JOINT_STATE = MessageType(
     "sensor_msgs/msg/JointState",
-    _concatenate(
+    concatenate(
         "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
         "float64[] effort\n",
         ("std_msgs/Header", _HEADER),
@@ -116,7 +117,7 @@ JOINT_STATE = MessageType(
 
 COMPRESSED_IMAGE = MessageType(
     "sensor_msgs/msg/CompressedImage",
-    _concatenate(
+    concatenate(
         "std_msgs/Header header\nstring format\nuint8[] data\n",
         ("std_msgs/Header", _HEADER),
         ("builtin_interfaces/Time", _TIME),
@@ -125,7 +126,7 @@ COMPRESSED_IMAGE = MessageType(
 
 RAW_PACKET = MessageType(
     "ocu_msgs/msg/RawPacket",
-    _concatenate(
+    concatenate(
         "# One UDP datagram exactly as it went on or came off the wire.\n"
         "# send_stamp: when it was sent; the OCU's wall clock for datagrams the OCU sent, the\n"
         "# robot's own clock (from the packet: telemetry tick, video capture time) for robot\n"
@@ -142,7 +143,7 @@ RAW_PACKET = MessageType(
 
 LINK_STATS_TYPE = MessageType(
     "ocu_msgs/msg/LinkStats",
-    _concatenate(
+    concatenate(
         "# The link's counters and rates (ocu.link.stats.LinkStats); NaN = not known yet.\n"
         "builtin_interfaces/Time stamp\n"
         "string link_state\n"
@@ -173,7 +174,7 @@ LINK_STATS_TYPE = MessageType(
 
 EVENT = MessageType(
     "ocu_msgs/msg/Event",
-    _concatenate(
+    concatenate(
         "# kind: safety (e-stop, watchdogs), link_state, extension, recording or robot_mode.\n"
         "# state: the new link state, 'active'/'inactive' for the extension, the robot\n"
         "# controller's mode ('RUNNING · NORMAL', 'PROTECTIVE STOP'), else empty.\n"
@@ -185,7 +186,7 @@ EVENT = MessageType(
 
 ROBOT_STATUS_TYPE = MessageType(
     "ocu_msgs/msg/RobotStatus",
-    _concatenate(
+    concatenate(
         "# The protocol extension's status packet in SI units; NaN = not measured.\n"
         "std_msgs/Header header\n"
         "float64 voltage_v\nfloat64 charge_percent\n"

@@ -20,43 +20,9 @@ from typing import Any
 
 from mcap.writer import CompressionType, Writer
 
-from ocu import records as r
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
-from ocu.records import (
-    Command,
-    DatagramReceived,
-    DatagramSent,
-    LinkStats,
-    StatusFrame,
-    TelemetryFrame,
-    VideoFrame,
-)
-
-# What the recorder queues: (kind, monotonic time, payload...). The kinds:
-SENT = 0
-RECEIVED = 1
-TELEMETRY = 2
-VIDEO = 3
-STATUS = 4
-STATS = 5
-EVENT = 6
-COMMAND = 7
-
-# The raw channel of each kind of datagram (ocu.records).
-SENT_TOPICS = {r.RCP: s.RAW_RCP, r.HELLO: s.RAW_HELLO, r.UR_SCRIPT: s.RAW_UR_SCRIPT}
-RECEIVED_TOPICS = {
-    r.TELEMETRY: s.RAW_TELEMETRY,
-    r.VIDEO: s.RAW_VIDEO,
-    r.VIDEO_FRAGMENT: s.RAW_VIDEO_FRAGMENT,
-    r.STATUS: s.RAW_STATUS,
-    r.SCAN: s.RAW_SCAN,
-    r.UR_PRIMARY: s.RAW_UR_PRIMARY,
-    r.UR_SECONDARY: s.RAW_UR_SECONDARY,
-    r.UR_REALTIME: s.RAW_UR_REALTIME,
-}
-
-Item = tuple[Any, ...]
+from ocu.record.convert import DECODED_TOPICS, Item, MessageConverter, topic_type
 
 
 def clock_pair(clock: Callable[[], float]) -> tuple[float, int]:
@@ -103,9 +69,8 @@ class RecordingFile:
         self._sequence = 0
         self._last_flush = mono0
         self._closed = False
-        self._link_state = ""
-        self._extension_active = False
         self._camera_names = profile.link.camera_names
+        self._converter = MessageConverter(profile, self.wall_ns, self._add)
         self._encoders = {t.name: s.make_encoder(t) for t in s.MESSAGE_TYPES}
         self._file: io.BufferedWriter = open(path, "wb")  # noqa: SIM115 - closed in close()
         try:
@@ -122,15 +87,8 @@ class RecordingFile:
             self._channels: dict[str, tuple[int, str]] = {}
             for topic in s.RAW_TOPICS:
                 self._channel(topic, s.RAW_PACKET.name)
-            for topic, type_name in (
-                (s.CMD_VEL, s.TWIST.name),
-                (s.CMD_JOINTS, s.JOINT_STATE.name),
-                (s.JOINT_STATES, s.JOINT_STATE.name),
-                (s.LINK_STATS, s.LINK_STATS_TYPE.name),
-                (s.EVENTS, s.EVENT.name),
-                (s.ROBOT_STATUS, s.ROBOT_STATUS_TYPE.name),
-            ):
-                self._channel(topic, type_name)
+            for topic, message_type in DECODED_TOPICS:
+                self._channel(topic, message_type.name)
             for index, name in enumerate(self._camera_names):
                 self._channel(s.camera_topic(name), s.COMPRESSED_IMAGE.name, camera=index)
             # Fail now, with the operator still at the button, if the disk takes nothing.
@@ -197,197 +155,26 @@ class RecordingFile:
         """Wall-clock nanoseconds of a monotonic time."""
         return self.wall0_ns + round((mono - self.mono0) * 1e9)
 
-    def _add(self, mono: float, topic: str, message: Any, publish_ns: int | None = None) -> None:
-        channel_id, type_name = self._channels.get(topic) or self._late_channel(topic)
+    def convert(self, item: Item, dropped: int) -> None:
+        """Turn one queued item into its message(s), held for writing in time order."""
+        self._converter.convert(item, dropped)
+
+    def camera_name(self, camera: int | None) -> str:
+        """The name of a camera index (see MessageConverter.camera_name)."""
+        return self._converter.camera_name(camera)
+
+    def _add(
+        self, mono: float, topic: str, message: dict[str, Any], publish_ns: int | None = None
+    ) -> None:
+        channel_id, type_name = self._channels.get(topic) or self._channel(
+            topic, topic_type(topic).name
+        )
         data = self._encoders[type_name](message)
         self._sequence += 1
         log_ns = self.wall_ns(mono)
         heapq.heappush(
             self._heap,
             (mono, self._sequence, channel_id, data, log_ns if publish_ns is None else publish_ns),
-        )
-
-    def _late_channel(self, topic: str) -> tuple[int, str]:
-        # A UR's raw channels, and a camera the profile does not name: registered when used.
-        if topic in s.RAW_UR_TOPICS:
-            return self._channel(topic, s.RAW_PACKET.name)
-        return self._channel(topic, s.COMPRESSED_IMAGE.name)
-
-    def convert(self, item: Item, dropped: int) -> None:
-        """Turn one queued item into its message(s)."""
-        kind, mono = item[0], item[1]
-        if kind == SENT:
-            self._sent(mono, item[2])
-        elif kind == COMMAND:
-            self._command(mono, item[2])
-        elif kind == RECEIVED:
-            self._received(mono, item[2])
-        elif kind == TELEMETRY:
-            self._telemetry(mono, item[2])
-        elif kind == VIDEO:
-            self._video(mono, item[2])
-        elif kind == STATUS:
-            self._status(mono, item[2])
-        elif kind == STATS:
-            self._stats(mono, item[2], dropped)
-        elif kind == EVENT:
-            self._event(mono, item[2], item[3], item[4])
-
-    def _raw(self, send_ns: int, receive_ns: int, source: str, data: bytes) -> dict[str, Any]:
-        return {
-            "send_stamp": s.stamp(send_ns),
-            "receive_stamp": s.stamp(receive_ns),
-            "source": source,
-            "data": data,
-        }
-
-    def _sent(self, mono: float, event: DatagramSent) -> None:
-        topic = SENT_TOPICS.get(event.kind, s.RAW_OTHER)
-        self._add(mono, topic, self._raw(self.wall_ns(mono), 0, s.SOURCE_OCU, event.data))
-
-    def _command(self, mono: float, command: Command) -> None:
-        drive = self.profile.drive_channels
-        if drive is not None:
-            linear, turn = drive
-            self._add(
-                mono,
-                s.CMD_VEL,
-                {
-                    "linear": {"x": command.velocity(linear), "y": 0.0, "z": 0.0},
-                    "angular": {"x": 0.0, "y": 0.0, "z": command.velocity(turn)},
-                },
-            )
-        joints = [name for name in self.profile.channels if name not in (drive or ())]
-        self._add(
-            mono,
-            s.CMD_JOINTS,
-            {
-                "header": {"stamp": s.stamp(self.wall_ns(mono)), "frame_id": ""},
-                "name": joints,
-                "position": [],
-                "velocity": [command.velocity(name) for name in joints],
-                "effort": [],
-            },
-        )
-
-    def _received(self, mono: float, event: DatagramReceived) -> None:
-        # What the packet was and its own stamp come from the receiver, which decoded it.
-        robot_ns = None if event.robot_time_s is None else round(event.robot_time_s * 1e9)
-        self._add(
-            mono,
-            RECEIVED_TOPICS.get(event.kind, s.RAW_OTHER),
-            self._raw(robot_ns or 0, self.wall_ns(mono), s.SOURCE_ROBOT, event.data),
-            publish_ns=robot_ns,
-        )
-
-    def _telemetry(self, mono: float, frame: TelemetryFrame) -> None:
-        names: list[str] = []
-        positions: list[float] = []
-        velocities: list[float] = []
-        efforts: list[float] = []
-        for name, reading in frame.readings.items():
-            if reading.angle_rad is None:
-                continue
-            names.append(name)
-            positions.append(reading.angle_rad)
-            velocities.append(reading.speed_rad_s)
-            efforts.append(reading.current_a)
-        self._add(
-            mono,
-            s.JOINT_STATES,
-            {
-                "header": {"stamp": s.stamp(self.wall_ns(mono)), "frame_id": ""},
-                "name": names,
-                "position": positions,
-                "velocity": velocities,
-                "effort": efforts,
-            },
-            publish_ns=round(frame.packet.tick * 1e9 / self.profile.link.telemetry_tick_hz),
-        )
-
-    def camera_name(self, camera: int | None) -> str:
-        """The name of a camera index; a vendor frame of unknown camera shows as camera 0."""
-        index = 0 if camera is None else camera
-        if 0 <= index < len(self._camera_names):
-            return self._camera_names[index]
-        return f"camera{index}"
-
-    def _video(self, mono: float, frame: VideoFrame) -> None:
-        name = self.camera_name(frame.camera)
-        self._add(
-            mono,
-            s.camera_topic(name),
-            {
-                "header": {"stamp": s.stamp(self.wall_ns(mono)), "frame_id": name},
-                "format": "jpeg",
-                "data": frame.jpeg,
-            },
-            publish_ns=None if frame.capture_time_us is None else frame.capture_time_us * 1000,
-        )
-
-    def _status(self, mono: float, frame: StatusFrame) -> None:
-        headlight = frame.headlight_on
-        self._add(
-            mono,
-            s.ROBOT_STATUS,
-            {
-                "header": {"stamp": s.stamp(self.wall_ns(mono)), "frame_id": ""},
-                "voltage_v": s.nan_if_none(frame.voltage_v),
-                "charge_percent": s.nan_if_none(frame.charge_percent),
-                "headlight": -1 if headlight is None else int(headlight),
-                "roll_rad": s.nan_if_none(frame.roll_rad),
-                "pitch_rad": s.nan_if_none(frame.pitch_rad),
-            },
-        )
-
-    def _stats(self, mono: float, stats: LinkStats, dropped: int) -> None:
-        self._add(
-            mono,
-            s.LINK_STATS,
-            {
-                "stamp": s.stamp(self.wall_ns(mono)),
-                "link_state": self._link_state,
-                "sent": stats.sent,
-                "received": stats.received,
-                "telemetry": stats.telemetry,
-                "video": stats.video,
-                "malformed": stats.malformed,
-                "foreign": stats.foreign,
-                "send_errors": stats.send_errors,
-                "rcp_rate_hz": stats.rcp_rate_hz,
-                "telemetry_rate_hz": stats.telemetry_rate_hz,
-                "video_rate_hz": stats.video_rate_hz,
-                "loss_estimate": s.nan_if_none(stats.loss_estimate),
-                "duplicates": stats.duplicates,
-                "reordered": stats.reordered,
-                "last_valid_age_s": s.nan_if_none(stats.last_valid_age_s),
-                "send_rate_hz": stats.send_rate_hz,
-                "estop_latched": stats.estop_latched,
-                "extension_active": self._extension_active,
-                "recorder_dropped": dropped,
-                "delay_s": s.nan_if_none(stats.delay_s),
-                "stale_telemetry": stats.stale_telemetry,
-                "jitter_s": s.nan_if_none(stats.jitter_s),
-                "scan_rate_hz": stats.scan_rate_hz,
-                "frame_age_s": [s.nan_if_none(age) for age in stats.frame_age_s],
-                "uplink_loss": s.nan_if_none(stats.uplink_loss),
-            },
-        )
-
-    def _event(self, mono: float, kind: str, state: str, message: str) -> None:
-        if kind == s.EVENT_LINK_STATE:
-            self._link_state = state
-        elif kind == s.EVENT_EXTENSION:
-            self._extension_active = state == "active"
-        self._add(
-            mono,
-            s.EVENTS,
-            {
-                "stamp": s.stamp(self.wall_ns(mono)),
-                "kind": kind,
-                "state": state,
-                "message": message,
-            },
         )
 
     # ---- writing ---------------------------------------------------------------------------

@@ -2,20 +2,26 @@
 
 Who may move the robot through the bridge (`BridgeState`), whether the link lets ROS drive
 (`LinkGate`), a snapshot of the bridge (`BridgeStatus`), and the diagnostic_msgs reports of
-the bridge and of the link that `/diagnostics` publishes (`bridge_report`, `link_report`), and
-of a UR controller's robot and safety modes (`controller_report`).
+the bridge and of the link that `/diagnostics` publishes (`bridge_report`; `link_report`,
+from ocu.link.diagnostics, which the live server publishes too), and of a UR controller's
+robot and safety modes (`controller_report`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import Enum, IntEnum
+from enum import Enum
 
-from ocu.link.history import UPLINK_LOSS_UNMEASURABLE
+from ocu.link.diagnostics import (
+    LOSS_WARNING,
+    DiagnosticLevel,
+    DiagnosticReport,
+    link_report,
+    optional_text,
+)
 from ocu.link.ur_wire import UrRobotStatus
 from ocu.protocol.ur import SafetyMode
-from ocu.records import LinkState, LinkStats
 from ocu.ros.convert import DEFAULT_CMD_VEL_TIMEOUT_S
 
 __all__ = [
@@ -31,9 +37,6 @@ __all__ = [
     "gate_text",
     "link_report",
 ]
-
-# Telemetry loss above this fraction makes the link diagnostics a warning.
-LOSS_WARNING = 0.2
 
 
 class BridgeState(Enum):
@@ -89,84 +92,6 @@ class BridgeStatus:
     cmd_vel_timeout_s: float = DEFAULT_CMD_VEL_TIMEOUT_S
 
 
-class DiagnosticLevel(IntEnum):
-    """diagnostic_msgs/DiagnosticStatus levels."""
-
-    OK = 0
-    WARN = 1
-    ERROR = 2
-    STALE = 3
-
-
-@dataclass(frozen=True)
-class DiagnosticReport:
-    """One diagnostic_msgs/DiagnosticStatus, ROS-free."""
-
-    name: str
-    level: DiagnosticLevel
-    message: str
-    hardware_id: str
-    values: tuple[tuple[str, str], ...]
-
-
-def _optional(value: float | None, fmt: str) -> str:
-    return "n/a" if value is None else format(value, fmt)
-
-
-def _ms(value_s: float | None) -> float | None:
-    return None if value_s is None else value_s * 1e3
-
-
-def link_report(state: LinkState, stats: LinkStats, hardware_id: str) -> DiagnosticReport:
-    """Link health: state, rates, loss, malformed/foreign counts, e-stop latch."""
-    if state is LinkState.CONNECTED:
-        level, message = DiagnosticLevel.OK, "connected"
-        if stats.estop_latched:
-            level, message = DiagnosticLevel.WARN, "connected, emergency stop latched"
-        elif stats.loss_estimate is not None and stats.loss_estimate > LOSS_WARNING:
-            level = DiagnosticLevel.WARN
-            message = f"connected, telemetry loss {stats.loss_estimate:.0%}"
-    elif state is LinkState.CONNECTING:
-        level, message = DiagnosticLevel.WARN, "connecting: no packet from the robot yet"
-    elif state is LinkState.LOST:
-        level, message = DiagnosticLevel.ERROR, "LINK LOST: no valid packet from the robot"
-    else:
-        level, message = DiagnosticLevel.ERROR, "link closed"
-    values = (
-        ("state", state.label),
-        ("datagrams sent", str(stats.sent)),
-        ("valid packets received", str(stats.received)),
-        ("telemetry packets", str(stats.telemetry)),
-        ("video frames", str(stats.video)),
-        ("malformed datagrams", str(stats.malformed)),
-        ("foreign datagrams", str(stats.foreign)),
-        ("send errors", str(stats.send_errors)),
-        ("command rate (Hz)", f"{stats.rcp_rate_hz:.1f}"),
-        ("telemetry rate (Hz)", f"{stats.telemetry_rate_hz:.1f}"),
-        ("video rate (Hz)", f"{stats.video_rate_hz:.1f}"),
-        ("telemetry loss", _optional(stats.loss_estimate, ".3f")),
-        ("duplicates", str(stats.duplicates)),
-        ("reordered", str(stats.reordered)),
-        ("last valid packet age (s)", _optional(stats.last_valid_age_s, ".2f")),
-        ("send rate setting (Hz)", f"{stats.send_rate_hz:g}"),
-        ("emergency stop latched", str(stats.estop_latched).lower()),
-        ("round trip (ms)", _optional(_ms(stats.delay_s), ".0f")),
-        ("delay jitter (ms)", _optional(_ms(stats.jitter_s), ".0f")),
-        ("scan rate (Hz)", f"{stats.scan_rate_hz:.1f}"),
-        (
-            "command loss",
-            UPLINK_LOSS_UNMEASURABLE
-            if stats.uplink_loss is None
-            else format(stats.uplink_loss, ".3f"),
-        ),
-        *(
-            (f"frame age camera {index} (s)", _optional(age, ".2f"))
-            for index, age in enumerate(stats.frame_age_s)
-        ),
-    )
-    return DiagnosticReport("ocu: robot link", level, message, hardware_id, values)
-
-
 def bridge_report(status: BridgeStatus, hardware_id: str) -> DiagnosticReport:
     """Bridge health: who commands, the link gate, cmd_vel age, goals, rejections, timeouts."""
     level = DiagnosticLevel.OK
@@ -185,7 +110,7 @@ def bridge_report(status: BridgeStatus, hardware_id: str) -> DiagnosticReport:
             for name, unit in zip(status.drive, ("m/s", "rad/s"), strict=False)
         ),
         *((("cmd_vel", "refused: no chassis (no drive channels)"),) if not status.drive else ()),
-        ("last cmd_vel age (s)", _optional(status.cmd_vel_age_s, ".2f")),
+        ("last cmd_vel age (s)", optional_text(status.cmd_vel_age_s, ".2f")),
         ("cmd_vel timeout (s)", f"{status.cmd_vel_timeout_s:g}"),
         ("cmd_vel received", str(status.cmd_vel_count)),
         ("cmd_vel timeouts", str(status.timeouts)),

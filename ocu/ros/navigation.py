@@ -1,7 +1,8 @@
 """The ROS side of driving with a map, without ROS or Qt: messages as plain data and the
 frames of other nodes' scans (the zones and the path mode are the console model's).
 
-- `odometry_data`: nav_msgs/Odometry (frame `odom`, child `base_link`) and the matching tf.
+- `odometry_data` (ocu.nav.messages, shared with the live server): nav_msgs/Odometry (frame
+  `odom`, child `base_link`) and the matching tf.
 - `laser_scan_data` / `scan_from_ros`: sensor_msgs/LaserScan both ways.
 - `FrameTree`: the transforms other nodes publish on /tf and /tf_static, enough to place a
   planar scan taken in a frame below `base_link` (a laser's frame); unknown frames are refused.
@@ -18,15 +19,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ocu.nav.odometry import OdometryEstimate
+from ocu.nav.messages import (
+    BASE_FRAME,
+    ODOM_FRAME,
+    UNKNOWN_VARIANCE,
+    OdometryData,
+    odometry_data,
+    quaternion_yaw,
+    yaw_quaternion,
+)
 from ocu.records import SCAN_FROM_ROS, ScanFrame
 from ocu.ros.convert import BridgeError, quoted, rotation_of
 
-ODOM_FRAME = "odom"
-BASE_FRAME = "base_link"
-# The covariance ROS wants is 6x6 over (x, y, z, roll, pitch, yaw); a crawler on the floor
-# knows z, roll and pitch only loosely: this large variance says "not estimated".
-UNKNOWN_VARIANCE = 1e6
 # A path the path mode drives at 0.25 m/s: a pose farther than this (10 km) is a broken
 # message, and its arithmetic would overflow (1e308 squared).
 MAX_PATH_COORDINATE_M = 1e4
@@ -39,58 +43,26 @@ MAX_FRAME_DEPTH = 32
 MAX_SCAN_BEAMS = 4096
 
 
+__all__ = [
+    "BASE_FRAME",
+    "ODOM_FRAME",
+    "UNKNOWN_VARIANCE",
+    "FrameTree",
+    "LaserScanData",
+    "NavigationError",
+    "OdometryData",
+    "PlanarMount",
+    "laser_scan_data",
+    "odometry_data",
+    "path_points",
+    "quaternion_yaw",
+    "scan_from_ros",
+    "yaw_quaternion",
+]
+
+
 class NavigationError(ValueError):
     """A message the node cannot use (a path in another frame, a malformed scan)."""
-
-
-@dataclass(frozen=True)
-class OdometryData:
-    """nav_msgs/Odometry's contents (and the tf odom -> base_link)."""
-
-    frame_id: str
-    child_frame_id: str
-    position: tuple[float, float, float]
-    orientation_xyzw: tuple[float, float, float, float]
-    pose_covariance: tuple[float, ...]
-    linear: tuple[float, float, float]
-    angular: tuple[float, float, float]
-    twist_covariance: tuple[float, ...]
-
-
-def yaw_quaternion(yaw_rad: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a rotation about z."""
-    return (0.0, 0.0, math.sin(yaw_rad / 2.0), math.cos(yaw_rad / 2.0))
-
-
-def quaternion_yaw(x: float, y: float, z: float, w: float) -> float:
-    """The rotation about z of a quaternion."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def odometry_data(estimate: OdometryEstimate) -> OdometryData:
-    """The estimate as nav_msgs/Odometry: pose with its covariance, the speeds in base_link."""
-    pose = estimate.pose
-    cov = estimate.covariance
-    pose_cov = [0.0] * 36
-    index = {0: 0, 1: 1, 2: 5}  # x, y, yaw in the 6x6 matrix
-    for row, r in index.items():
-        for column, c in index.items():
-            pose_cov[r * 6 + c] = float(cov[row, column])
-    for axis in (2, 3, 4):
-        pose_cov[axis * 6 + axis] = UNKNOWN_VARIANCE
-    twist_cov = [0.0] * 36
-    for axis in (1, 2, 3, 4):
-        twist_cov[axis * 6 + axis] = UNKNOWN_VARIANCE
-    return OdometryData(
-        frame_id=ODOM_FRAME,
-        child_frame_id=BASE_FRAME,
-        position=(pose.x_m, pose.y_m, 0.0),
-        orientation_xyzw=yaw_quaternion(pose.heading_rad),
-        pose_covariance=tuple(pose_cov),
-        linear=(estimate.linear_m_s, 0.0, 0.0),
-        angular=(0.0, 0.0, estimate.angular_rad_s),
-        twist_covariance=tuple(twist_cov),
-    )
 
 
 @dataclass(frozen=True)

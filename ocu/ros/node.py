@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import re
 import shlex
 import signal
@@ -77,6 +78,10 @@ private parameters (set with _name:=value, a launch file or rosparam):
   ~extension        ask an extended robot for every camera's stream (default false)
   ~arm_poses        the operator's stored arm poses (TOML); default: the console's
                     arm_poses.toml in $OCU_CONFIG_DIR or ~/.config/ocu
+  ~live             [HOST:]PORT: serve the session to Foxglove/Lichtblick (docs/live.md)
+  ~live_token       the token its clients give; needed for a non-loopback ~live
+                    (default $OCU_LIVE_TOKEN)
+  ~live_control     let one live client drive with /cmd_vel (default false)
 
 topics: cmd_vel, joint_goals, arm/pose_goal, arm/twist_cmd, arm/named_pose, follow_path
 (nav_msgs/Path in odom), scan (placed by frame_id; /tf, /tf_static) in; joint_states,
@@ -118,6 +123,10 @@ class NodeConfig:
     #: when that is empty.
     ur_arm: UrArmProfile | XarmProfile | None = None
     ur_target: str = ""
+    #: ~live and ~live_token (docs/live.md): where to serve the session, who may watch.
+    live: tuple[str, int] | None = None
+    live_token: str | None = None
+    live_control: bool = False
 
 
 ParamGetter = Callable[[str, Any], Any]
@@ -151,6 +160,25 @@ def _text(get: ParamGetter, name: str) -> str:
     if not isinstance(value, str):
         raise ConfigError(f"~{name} must be a string, got {value!r}")
     return value.strip()
+
+
+def read_live(get: ParamGetter) -> dict[str, Any]:
+    """~live and ~live_token, checked as `ocu --live` checks them."""
+    from ocu.live.options import TOKEN_ENV, LiveError, check_exposure, parse_live_address
+
+    text = _text(get, "live")
+    control = _flag(get, "live_control", False)
+    if not text:
+        if control:
+            raise ConfigError("~live_control: needs ~live")
+        return {}
+    try:
+        address = parse_live_address(text)
+        token = _text(get, "live_token") or os.environ.get(TOKEN_ENV) or None
+        check_exposure(address[0], token)
+    except (argparse.ArgumentTypeError, LiveError) as err:
+        raise ConfigError(f"~live: {err}") from err
+    return {"live": address, "live_token": token, "live_control": control}
 
 
 def parse_address(text: str, default_port: int) -> tuple[str, int]:
@@ -241,6 +269,7 @@ def read_ur_config(
         arm_poses_path=Path(_text(get, "arm_poses") or default_config_dir() / ARM_POSES_NAME),
         ur_arm=arm,
         ur_target=target,
+        **read_live(get),
     )
 
 
@@ -290,6 +319,7 @@ def read_config(
         extension=_flag(get, "extension", False),
         camera=names.index(camera_text) if camera_text else None,
         arm_poses_path=Path(_text(get, "arm_poses") or default_config_dir() / ARM_POSES_NAME),
+        **read_live(get),
     )
 
 
@@ -553,6 +583,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.hardware.ur import SIM_HOST, SimulatedUr
     from ocu.headless import HeadlessConsole
     from ocu.link.base import LinkError
+    from ocu.live.options import LiveError, serve, serve_console, start_live
     from ocu.ros.host import ModelSink, end_path, follow_path
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
@@ -602,11 +633,17 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
             except (LinkError, HardwareError) as err:
                 log.error("%s", err)
                 return 1
+        try:
+            live = start_live(profile, config.live, config.live_token, config.live_control)
+        except LiveError as err:
+            log.error("%s", err)
+            return 1
         # The console's control core (ocu.core): the model's mux, limits, zones and path
         # mode, its control thread at ~rate (the console's 50 Hz by default), which also
         # beats the link's heartbeat.
         model = ConsoleModel(profile, arm_poses_path=config.arm_poses_path)
         model.nav.grid = None  # no map view: no occupancy grid to build from each scan
+        serve(live, hardware.link)
         model.events.message.connect(lambda text: log.info("%s", text), direct=True)
         model.events.position_message.connect(lambda text: log.info("%s", text), direct=True)
         # The node is the only commander: the maxima ROS is held to are the model's.
@@ -626,6 +663,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         headless = console = HeadlessConsole(
             model, hardware, control_period_s=1.0 / config.bridge.rate_hz
         )
+        serve_console(live, console.manager)
         # The model feeds its own navigator (odometry, the zones, the path mode); the bridge
         # publishes from it, hands it other nodes' scans and /follow_path.
         sink = ModelSink(console, silent_after_s=profile.link.gui_alive_timeout_s)

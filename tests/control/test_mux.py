@@ -54,7 +54,7 @@ def test_the_shipped_rules() -> None:
     mux = InputMux.shipped()
     built_in = [Source.SLIDER, Source.TEXT, Source.HOTKEY, Source.SWITCH, Source.GAMEPAD]
     built_in += [Source.POSITION, Source.ARM, Source.ASSIST, Source.TRACK, Source.ROS]
-    assert mux.sources == tuple(s.value for s in built_in)
+    assert mux.sources == (*(s.value for s in built_in), "live")
     # The latest manual input wins; automatic sources and planners never take a channel
     # from the operator; a planner yields to everything, an automatic source to no planner.
     assert mux.may_take("slider", "hotkey")
@@ -76,10 +76,16 @@ def test_the_shipped_rules() -> None:
     assert "ros" not in mux.stopped_by("focus lost", never)
     assert "gamepad" in mux.stopped_by("focus lost", never)
     assert "gamepad" not in mux.stopped_by("focus lost", always)
-    assert mux.stopped_by(OPERATOR, always) == ["assist", "track", "ros"]
-    assert mux.stopped_by(OPERATOR, never) == ["arm", "assist", "track", "ros"]
+    assert mux.stopped_by(OPERATOR, always) == ["assist", "track", "ros", "live"]
+    assert mux.stopped_by(OPERATOR, never) == ["arm", "assist", "track", "ros", "live"]
+    # A remote client (ocu.live, --live-control) stops for every lock and any operator input.
+    assert "live" in mux.stopped_by("focus lost", always)
+    assert "live" in mux.stopped_by("GUI silent", always)
+    assert mux.timed() == [("live", 0.6)]
+    assert not mux.may_take("live", "ros")
+    assert not mux.may_take("live", "hotkey")
     assert mux.stopped_by("GUI silent", never) == [
-        "slider", "text", "hotkey", "switch", "arm", "assist", "track"
+        "slider", "text", "hotkey", "switch", "arm", "assist", "track", "live"
     ]  # fmt: skip
     assert mux.fed_by("gui") == ["slider", "text", "hotkey", "switch"]
 
@@ -103,7 +109,7 @@ def test_the_shipped_rules() -> None:
             "second",
         ),
         (with_cell("ros", "robot stop", "keeps"), r"'ros', column robot stop: every source"),
-        (SHIPPED + "| x | planner | 1 | ros | stops |\n", r"table row 11: 5 cells"),
+        (SHIPPED + "| x | planner | 1 | ros | stops |\n", r"table row 12: 5 cells"),
     ],
 )
 def test_a_bad_table_is_refused_naming_the_file_row_and_column(text: str, message: str) -> None:

@@ -1,0 +1,1 @@
+"""The session served live over the Foxglove WebSocket protocol (docs/live.md)."""
