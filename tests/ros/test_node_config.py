@@ -10,14 +10,13 @@ import pytest
 import ocu
 from ocu.profile import RobotProfile
 from ocu.ros.node import (
-    CommandLineParams,
     ConfigError,
-    is_private_arg,
     main,
     read_config,
     read_profile,
     read_robot,
 )
+from ocu.ros.params import CommandLineParams, is_private_arg
 
 
 def getter(params: dict[str, Any]) -> Any:
