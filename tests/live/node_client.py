@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import shutil
 import subprocess
 import threading
@@ -23,9 +24,12 @@ NODE_MISSING = (
 
 
 def require_node() -> str:
-    """The node executable; skip the test when Node.js or the npm packages are missing."""
+    """The node executable; skip the test when Node.js or the npm packages are missing - fail
+    instead under `./dev test` once it installed them (OCU_REQUIRE_NODE=1), as for ROS."""
     node = shutil.which("node")
     if node is None or not (JS_DIR / "node_modules" / "@foxglove" / "ws-protocol").is_dir():
+        if os.environ.get("OCU_REQUIRE_NODE") == "1":
+            pytest.fail(NODE_MISSING + " (OCU_REQUIRE_NODE=1)")
         pytest.skip(NODE_MISSING)
     return node
 
