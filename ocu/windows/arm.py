@@ -29,7 +29,7 @@ from ocu.console.poses import PoseError
 from ocu.control.arm import OK, SLOW, STOP, ArmStatus
 from ocu.kinematics.analytic import BRANCHES
 from ocu.kinematics.arm import ArmError, ToolPose
-from ocu.kinematics.rpy import pose_from_rpy, rpy_of
+from ocu.kinematics.rpy import describe_pose, pose_from_rpy, rpy_of
 from ocu.model.tree import Matrix
 from ocu.widgets.number_box import NumberBox, NumberError, format_number
 from ocu.windows.velocity import ERROR_TEXT_STYLE
@@ -118,7 +118,8 @@ class ArmPanel(QWidget):
         top.addWidget(self.elbow_box, 0, 5)
         top.addWidget(QLabel("jog"), 1, 0)
         top.addWidget(self.linear_box, 1, 1)
-        top.addWidget(QLabel("mm/s  pitch"), 1, 2)
+        # Six joints or more: the same speed turns the tool about any axis (roll, pitch, yaw).
+        top.addWidget(QLabel("mm/s  turn" if arm.whole_pose else "mm/s  pitch"), 1, 2)
         top.addWidget(self.pitch_box, 1, 3)
         speeds_hint = QLabel("°/s  (N slower, M faster, Shift fine)")
         speeds_hint.setStyleSheet("color:#666;")
@@ -390,14 +391,19 @@ class ArmPanel(QWidget):
 
     def refresh(self) -> None:
         """The tool's pose now (the window calls this on its view timer)."""
-        pose = self.arm.tool_pose()
+        if self.whole:  # the whole pose, as the goal boxes take it
+            matrix = self.arm.tool_matrix()
+            text = describe_pose(matrix) if matrix is not None else None
+        else:
+            pose = self.arm.tool_pose()
+            text = pose.describe() if pose is not None else None
         status = self.arm.status
         extra = ""
         if status.condition is not None:
             extra += f"   cond {status.condition:.0f}"
         if status.clearance_m is not None:
             extra += f"   clearance {status.clearance_m * 1000:.0f} mm"
-        self.pose_label.setText(f"tool0: {pose.describe()}{extra}" if pose else "tool0: —")
+        self.pose_label.setText(f"tool0: {text}{extra}" if text else "tool0: —")
 
     def show_status(self, status: ArmStatus) -> None:
         """The arm's state and why it is slowed or stopped."""
