@@ -157,7 +157,10 @@ def test_stick_drives_only_behind_the_deadman(
     assert state.velocities["drive_linear"] == pytest.approx(
         console.model.max_velocity("drive_linear"), rel=0.01
     )
-    assert console.velocity_panel.source_labels["drive_linear"].text() == "pad"
+    # The pad's thread commands the link itself; the label hears of it through the GUI
+    # thread's inbox, after the robot moved.
+    label = console.velocity_panel.source_labels["drive_linear"]
+    qtbot.waitUntil(lambda: label.text() == "pad", timeout=DEADLINE_MS)
     since = time.monotonic()
     virtual_pad.set_button("leftshoulder", False)
     assert_stops_promptly(qtbot, sim, since, "deadman released")
