@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     from ocu.link.base import Link
     from ocu.live.server import LiveServer
     from ocu.record.recorder import Recorder
+    from ocu.windows.main_window import MainWindow
     from ocu.windows.settings_file import SettingsStatus
 
 log = logging.getLogger("ocu")
@@ -415,7 +416,7 @@ def run_console(
             ),
             control_hz=control_hz,
         )
-        serve_console(live, window.core)
+        show_live(live, window)
         with guard:
             return run_window(app, window, quit_after_s)
     finally:
@@ -538,7 +539,7 @@ def run_arm_window(
         hardware_for=hardware_for,
         capabilities=capabilities,
     )
-    serve_console(live, window.core)
+    show_live(live, window)
     with guard:
         return run_window(app, window, quit_after_s)
 
@@ -583,9 +584,19 @@ def run_replay(
         hardware_for=hardware_for,
         capabilities=capabilities,
     )
-    serve_console(live, window.core)
+    show_live(live, window)
     source.play()
     return run_window(app, window, quit_after_s)
+
+
+def show_live(live: LiveServer | None, window: MainWindow) -> None:
+    """The live server (if any) serves the window's control core; the status bar shows who
+    watches and who drives, and a click there revokes the remote drive (docs/live.md)."""
+    serve_console(live, window.core)
+    if live is not None:
+        from ocu.widgets.live_status import LiveIndicator
+
+        window.link_status.add_indicator(LiveIndicator(live))
 
 
 def open_settings(config_dir: Path) -> tuple[QSettings, SettingsStatus]:

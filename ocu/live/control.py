@@ -39,6 +39,9 @@ MAX_PERIOD_S: Final = 5.0
 NOT_FREE: Final = "the drive is not free: the operator holds it, or the e-stop is latched"
 
 
+REVOKED = "the operator has not allowed a remote drive"
+
+
 class TwistError(ValueError):
     """A /cmd_vel message that is not a Twist of finite numbers."""
 
@@ -89,6 +92,9 @@ class LiveControl:
         self.drive = drive
         self.timeout_max_s = dict(core.model.mux.timed())[Source.LIVE.value]
         self._lock = threading.Lock()
+        # The operator's permission: the console's LIVE indicator revokes and allows again
+        # (ocu.widgets.live_status); --live-control itself allows.
+        self._allowed = True
         self._owner: str | None = None
         self._deadline = 0.0
         self._last: dict[str, float] = {}
@@ -101,10 +107,34 @@ class LiveControl:
         with self._lock:
             return self._owner
 
+    @property
+    def allowed(self) -> bool:
+        """Whether the operator lets a client drive."""
+        with self._lock:
+            return self._allowed
+
+    def set_allowed(self, allowed: bool) -> None:
+        """The operator allows a client to drive, or revokes it: the client driving stops at
+        once, and nothing a client sends moves the robot until it is allowed again."""
+        with self._lock:
+            if allowed == self._allowed:
+                return
+            self._allowed = allowed
+            owner, self._owner = self._owner, None
+        word = "allowed" if allowed else "revoked"
+        with self.core.lock:
+            if not allowed:
+                self.core.model.clear_source(Source.LIVE, "the operator revoked the remote drive")
+            self.core.model.events.message.emit(
+                f"remote drive {word} by the operator" + (f" ({owner} stopped)" if owner else "")
+            )
+
     def twist(self, client: str, linear_m_s: float, angular_rad_s: float) -> str | None:
         """One /cmd_vel from a client; None if taken, else why it was not."""
         now = self.clock()
         with self._lock:
+            if not self._allowed:
+                return REVOKED
             owner = self._owner
             if owner is not None and owner != client and now < self._deadline:
                 return f"{owner} commands /cmd_vel now"

@@ -516,6 +516,11 @@ class LiveServer:
             client.last_warning = text
             self._control(client, wire.status(wire.StatusLevel.WARNING, text))
 
+    @property
+    def control(self) -> LiveControl | None:
+        """The remote drive (with --live-control, once a console serves it), else None."""
+        return self._teleop
+
     def serve_control(self, core: Core) -> None:
         """With `control`: clients' /cmd_vel drive this core's model (ocu.live.control)."""
         if self.allow_control:

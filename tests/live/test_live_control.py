@@ -16,6 +16,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import pytest
+from PySide6.QtCore import Qt
+from PySide6.QtTest import QTest
+from pytestqt.qtbot import QtBot
 from websockets.sync.client import connect
 
 from ocu.console.channels import Source
@@ -28,6 +31,7 @@ from ocu.live.server import LiveServer
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.sim.simulator import RobotSimulator, SimState
+from ocu.widgets.live_status import LiveIndicator
 from tests.live.node_client import NodeClient, require_node
 
 TWIST = "geometry_msgs/msg/Twist"
@@ -299,3 +303,30 @@ def test_without_live_control_nothing_a_client_sends_moves_the_robot(
         server.stop()
         sim.stop()
     assert still(sim.state())
+
+
+def test_the_operator_revokes_the_remote_drive_from_the_status_bar(
+    driven: Driven, qtbot: QtBot
+) -> None:
+    """The console's LIVE indicator: who drives; a click revokes (the robot stops at once and
+    stays still while the client goes on publishing), a second click allows again."""
+    indicator = LiveIndicator(driven.server)
+    qtbot.addWidget(indicator)
+    assert indicator.text() == "LIVE 0 · drive allowed"
+    client = publish(driven.url, "json", 20.0, 400, 0.3)  # 20 s of /cmd_vel
+    try:
+        assert driven.sim.wait_until(moving, 10.0)
+        qtbot.waitUntil(lambda: indicator.text().startswith("LIVE 1 · drive: 127.0.0.1:"))
+        QTest.mouseClick(indicator, Qt.MouseButton.LeftButton)
+        assert indicator.text() == "LIVE 1 · drive revoked"
+        assert driven.sim.wait_until(still, 2.0)
+        # The client goes on publishing: nothing moves the robot while revoked.
+        count = len(client.of("published"))
+        assert client.wait(lambda events: len([e for e in events if "n" in e]) > count + 10)
+        assert still(driven.sim.state())
+        QTest.mouseClick(indicator, Qt.MouseButton.LeftButton)
+        assert driven.sim.wait_until(moving, 5.0)  # allowed again: its next message drives
+        qtbot.waitUntil(lambda: indicator.text().startswith("LIVE 1 · drive: "))
+    finally:
+        client.close()
+    indicator.stop()
