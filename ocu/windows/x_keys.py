@@ -433,10 +433,13 @@ class RawKeys:
             with self.lock:
                 held = name in self.model.held_keys
             return held and self._act(name, pressed, server_ms)
-        if not focused or self.typing:
-            log.debug("%s left to Qt (%s)", name, "typing" if focused else "focus elsewhere")
+        if not focused:
+            log.debug("%s left to Qt (focus elsewhere)", name)
             return False
-        if name != hotkeys.ESTOP_KEY and self._shortcut_down:
+        if name != hotkeys.ESTOP_KEY and (self.typing or self._shortcut_down):
+            # Letters typed into a text box are text; with Ctrl, Alt or Super a shortcut.
+            # Space stops, as Qt's filter does, wherever the keyboard focus is.
+            log.debug("%s left to Qt (%s)", name, "typing" if self.typing else "a shortcut")
             return False
         return self._act(name, pressed, server_ms)
 

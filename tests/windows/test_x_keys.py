@@ -67,6 +67,8 @@ def test_a_press_outside_the_console_or_while_typing_or_with_ctrl_is_left_alone(
     assert not raw.key(code("W"), True, 1, focused=False)
     raw.typing = True
     assert not raw.key(code("W"), True, 2, focused=True)
+    assert raw.key(code("Space"), True, 20, focused=True)  # Space stops, typing or not
+    assert model.estopped
     raw.typing = False
     raw.key(CTRL, True, 3, focused=True)
     assert not raw.key(code("W"), True, 4, focused=True)  # Ctrl+W: a shortcut, Qt's
@@ -74,7 +76,7 @@ def test_a_press_outside_the_console_or_while_typing_or_with_ctrl_is_left_alone(
     assert not raw.key(code("F1"), True, 6, focused=True)  # a command key: Qt's
     assert model.velocities() == {}
     assert not raw.key(code("W"), False, 7, focused=True)  # nothing held: nothing to stop
-    assert raw.acted == 0
+    assert raw.acted == 1  # Space only
 
 
 def test_space_stops_everything_and_shift_is_the_fine_speed(
