@@ -360,6 +360,7 @@ class ReplayLink(Link):
                 if self._stop or self._seek_to is not None:
                     continue
                 if next_ns is None:
+                    self._at_end()
                     self._anchor_ns = self.end_ns
                     self._playing = False
                     self._finished = True
@@ -373,6 +374,9 @@ class ReplayLink(Link):
                     self.on_finished()
                 except Exception:
                     log.exception("replay finished callback failed")
+
+    def _at_end(self) -> None:
+        """The end of the file is reached (player thread): a subclass emits what it held."""
 
     def _emit_until(self, position_ns: int) -> int | None:
         """Emit the messages up to a log time; the time of the next one, None at the end."""

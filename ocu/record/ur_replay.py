@@ -29,6 +29,7 @@ from ocu.protocol.ur import (
     parse_script_line,
     realtime_size,
 )
+from ocu.protocol.ur.realtime import RealtimeState
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.reader import RecordedMessage, Recording
@@ -90,6 +91,9 @@ class UrReplayLink(ReplayLink):
         self._status: UrRobotStatus | None = None
         self._emitted_at = -math.inf
         self._echo = SpeedEcho()
+        # The newest state the telemetry rate held back, emitted at the end of the file: the
+        # live link would have sent it with the next packet, a file has none.
+        self._held: tuple[RealtimeState, float] | None = None
 
     def _reset_decoding(self) -> None:
         super()._reset_decoding()
@@ -141,11 +145,16 @@ class UrReplayLink(ReplayLink):
         now = self.clock()
         # The live link's rule: the newest state at most at the telemetry rate.
         if now - self._emitted_at < 1.0 / self.profile.link.telemetry_rate_hz:
+            self._held = (states[-1], recorded_at)
             return
+        self._emit_state(states[-1], recorded_at, now)
+
+    def _emit_state(self, state: RealtimeState, recorded_at: float, now: float) -> None:
         self._emitted_at = now
+        self._held = None
         self.emit(
             telemetry_frame(
-                states[-1],
+                state,
                 self.arm.joint_names,
                 ticks_per_s=self.arm.realtime_hz,
                 ticks_per_rad=UR_TICKS_PER_RAD,
@@ -154,6 +163,11 @@ class UrReplayLink(ReplayLink):
                 delay_s=self._echo.delay_s,
             )
         )
+
+    def _at_end(self) -> None:
+        held = self._held
+        if held is not None:
+            self._emit_state(held[0], held[1], self.clock())
 
 
 def recorded_profile(path: str | Path, fallback: RobotProfile) -> RobotProfile:
