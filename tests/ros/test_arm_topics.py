@@ -151,9 +151,16 @@ def test_named_pose_and_a_twist_that_stops_after_its_last_message(
     assert sim.wait_until(arm_still, 20.0)
     publishers["named"].publish(String(data="look_forward"))
     assert sim.wait_until(lambda s: not arm_still(s), 5.0), node.output()
-    assert sim.wait_until(arm_still, 20.0)
     look_forward = kinematics.vector(kinematics.settings.poses["look_forward"])
-    assert np.allclose(kinematics.vector(sim.state().joints_rad), look_forward, atol=0.01)
+
+    def there(state: SimState) -> bool:
+        # Still and at the pose: every joint can be still for a moment on the way - a late
+        # control cycle lets the link end each command at its planned end (Command.until),
+        # the next cycle goes on (a hog run saw the arm still half way).
+        at = np.allclose(kinematics.vector(state.joints_rad), look_forward, atol=0.01)
+        return arm_still(state) and bool(at)
+
+    assert sim.wait_until(there, 20.0), (sim.state().joints_rad, node.output())
 
     start = truth(kinematics, sim.state())
     message = TwistStamped()
