@@ -47,6 +47,8 @@ RESCAN_S = 1.0
 JOIN_TIMEOUT_S = 2.0
 # How often the thread looks for a pad while none is open.
 NO_PAD_PERIOD_S = 0.1
+# With a pad open and no events, read it whole with SDL's getters this often.
+RESYNC_S = 0.25
 # SDL's controller types, grouped by the labels printed on the buttons.
 _FAMILIES = {3: "playstation", 4: "playstation", 7: "playstation", 6: "virtual"}
 # Events the poller does not need; SDL stops queueing them. (The joystick events stay: SDL
@@ -67,7 +69,11 @@ class _OpenPad:
     def __init__(self, handle: Any, info: PadInfo, buttons: tuple[bool, ...]) -> None:
         self.handle = handle
         self.info = info
-        self.buttons = buttons
+        self.buttons = buttons  # as last published
+        # As SDL's events say (the getters' values when read whole, at `read_at`).
+        self.axes = [0] * len(AXES)
+        self.held = list(buttons)
+        self.read_at = 0.0
 
 
 class PadPoller:
@@ -169,9 +175,13 @@ class PadPoller:
                 try:
                     if waiting:
                         pending = sdl.SDL_WaitEventTimeout(ctypes.byref(event), timeout_ms)
+                        if pending:
+                            self._one_event(sdl, event)
+                        else:
+                            self._quiet(sdl)
                     else:
                         pending = sdl.SDL_PollEvent(ctypes.byref(event))
-                    self._poll(sdl, event, bool(pending))
+                        self._poll(sdl, event, bool(pending))
                 except Exception as err:  # an SDL call failed: the pad's motion must stop
                     log.exception("gamepad poll failed")
                     self._close(sdl)
@@ -191,30 +201,75 @@ class PadPoller:
             self._close(sdl)
             sdl_loader.release(sdl)
 
+    def _one_event(self, sdl: ModuleType, event: Any) -> None:
+        """A wake-up by one event: the pad's state follows it, published at once.
+
+        The state is taken from the event itself (SDL's controller events carry the axis's
+        value and the button's state), not read back with SDL's getters: every ctypes call
+        lets the GIL go and waits for it again behind the GUI thread, and reading the whole
+        pad is 22 calls. The events still queued wake the thread again at once.
+        """
+        taps: set[str] = set()
+        changed = self._handle(sdl, event, taps)
+        pad = self._pad
+        if pad is not None and (changed or taps):
+            self._publish(pad, tuple(pad.axes), tuple(pad.held), taps)
+
+    def _quiet(self, sdl: ModuleType) -> None:
+        """A poll period without events: is the pad there; now and then, read it whole."""
+        pad = self._pad
+        if pad is None:
+            return
+        if not sdl.SDL_GameControllerGetAttached(pad.handle):
+            self._lost(sdl, "disconnected")
+            return
+        now = self._clock()
+        if now >= pad.read_at + RESYNC_S:
+            # What SDL says, in case an event was dropped (its queue was full).
+            self._read(sdl, pad, set())
+
+    def _handle(self, sdl: ModuleType, event: Any, taps: set[str]) -> bool:
+        """One event: hot-plug, or the open pad's axis or button (its tracked state follows;
+        a press goes into `taps`). Whether the pad's state may have changed."""
+        kind = event.type
+        pad = self._pad
+        if kind == sdl.SDL_CONTROLLERDEVICEADDED:
+            if pad is None:
+                return self._open(sdl, event.cdevice.which)
+        elif kind == sdl.SDL_CONTROLLERDEVICEREMOVED:
+            if pad is not None and event.cdevice.which == pad.info.instance_id:
+                self._lost(sdl, "unplugged")
+        elif kind == sdl.SDL_JOYDEVICEADDED:
+            self._check_supported(sdl, event.jdevice.which)
+        elif kind in (sdl.SDL_CONTROLLERBUTTONDOWN, sdl.SDL_CONTROLLERBUTTONUP):
+            if pad is not None and event.cbutton.which == pad.info.instance_id:
+                button = event.cbutton.button
+                if 0 <= button < len(BUTTONS):
+                    down = kind == sdl.SDL_CONTROLLERBUTTONDOWN
+                    # A press counts only for a button last read up: one held when the pad
+                    # was opened is not pressed now.
+                    if down and not pad.buttons[button]:
+                        taps.add(BUTTONS[button])
+                    pad.held[button] = down
+                return True
+        elif (
+            kind == sdl.SDL_CONTROLLERAXISMOTION
+            and pad is not None
+            and event.caxis.which == pad.info.instance_id
+        ):
+            axis = event.caxis.axis
+            if 0 <= axis < len(AXES):
+                pad.axes[axis] = event.caxis.value
+            return True
+        return False
+
     def _poll(self, sdl: ModuleType, event: Any, pending: bool) -> None:
-        """Handle `event` (if `pending`) and every other queued event, then read the pad."""
+        """Handle `event` (if `pending`) and every other queued event, then read the pad
+        (the polling mode: no pad open, or `wake_on_events=False`)."""
         changed = False
         taps: set[str] = set()
         while pending:
-            kind = event.type
-            if kind == sdl.SDL_CONTROLLERDEVICEADDED:
-                if self._pad is None:
-                    changed |= self._open(sdl, event.cdevice.which)
-            elif kind == sdl.SDL_CONTROLLERDEVICEREMOVED:
-                if self._pad is not None and event.cdevice.which == self._pad.info.instance_id:
-                    self._lost(sdl, "unplugged")
-            elif kind == sdl.SDL_JOYDEVICEADDED:
-                self._check_supported(sdl, event.jdevice.which)
-            elif kind == sdl.SDL_CONTROLLERBUTTONDOWN:
-                pad = self._pad
-                if pad is not None and event.cbutton.which == pad.info.instance_id:
-                    button = event.cbutton.button
-                    # A press counts only for a button last read up: one held when the pad
-                    # was opened is not pressed now.
-                    if 0 <= button < len(BUTTONS) and not pad.buttons[button]:
-                        taps.add(BUTTONS[button])
-            elif kind in (sdl.SDL_CONTROLLERAXISMOTION, sdl.SDL_CONTROLLERBUTTONUP):
-                changed = True
+            changed |= self._handle(sdl, event, taps)
             pending = bool(sdl.SDL_PollEvent(ctypes.byref(event)))
         if self._pad is None and self._clock() >= self._rescan_at:
             self._rescan_at = self._clock() + RESCAN_S
@@ -229,11 +284,22 @@ class PadPoller:
             self._read(sdl, pad, taps)
 
     def _read(self, sdl: ModuleType, pad: _OpenPad, taps: set[str], *, notify: bool = True) -> None:
+        """The pad read whole with SDL's getters (the tracked state follows), published."""
         handle = pad.handle
-        axes = tuple(sdl.SDL_GameControllerGetAxis(handle, i) for i in range(len(AXES)))
-        buttons = tuple(
-            bool(sdl.SDL_GameControllerGetButton(handle, i)) for i in range(len(BUTTONS))
-        )
+        pad.axes = [sdl.SDL_GameControllerGetAxis(handle, i) for i in range(len(AXES))]
+        pad.held = [bool(sdl.SDL_GameControllerGetButton(handle, i)) for i in range(len(BUTTONS))]
+        pad.read_at = self._clock()
+        self._publish(pad, tuple(pad.axes), tuple(pad.held), taps, notify=notify)
+
+    def _publish(
+        self,
+        pad: _OpenPad,
+        axes: tuple[int, ...],
+        buttons: tuple[bool, ...],
+        taps: set[str],
+        *,
+        notify: bool = True,
+    ) -> None:
         went_down = {BUTTONS[i] for i, down in enumerate(buttons) if down and not pad.buttons[i]}
         pad.buttons = buttons
         with self._lock:
