@@ -391,6 +391,7 @@ def time_paints() -> None:
 
 
 READER: dict[str, list[float]] = {}
+ACT_STARTED = threading.local()  # when the reader's action began (--reader-times)
 
 
 def time_reader() -> None:
@@ -416,12 +417,35 @@ def time_reader() -> None:
 
     def timed_act(self: x_keys.RawKeys, name: str, pressed: bool, server_ms: int) -> bool:
         started = time.perf_counter()
+        ACT_STARTED.at = started
         result = act(self, name, pressed, server_ms)
+        ACT_STARTED.at = None
         READER.setdefault("act (lock, model, link)", []).append(
             1000 * (time.perf_counter() - started)
         )
         return result
 
+    send_current = UdpLink._send_current
+    send_rcp = UdpLink._send_rcp
+
+    def timed_send_current(self: UdpLink) -> None:
+        at = getattr(ACT_STARTED, "at", None)
+        if at is not None:
+            READER.setdefault("act: to the link's send", []).append(
+                1000 * (time.perf_counter() - at)
+            )
+        send_current(self)
+
+    def timed_send_rcp(self: UdpLink, packet: RemoteControlPacket) -> None:
+        at = getattr(ACT_STARTED, "at", None)
+        if at is not None:
+            READER.setdefault("act: to the socket (send lock taken)", []).append(
+                1000 * (time.perf_counter() - at)
+            )
+        send_rcp(self, packet)
+
+    UdpLink._send_current = timed_send_current  # type: ignore[method-assign,assignment]
+    UdpLink._send_rcp = timed_send_rcp  # type: ignore[method-assign,assignment]
     x_keys.XKeyReader._dispatch = timed_dispatch  # type: ignore[method-assign]
     x_keys.XKeyReader._focused = timed_focused  # type: ignore[method-assign]
     x_keys.RawKeys._act = timed_act  # type: ignore[method-assign]

@@ -116,6 +116,9 @@ def run_window(app: QApplication, window: MainWindow, quit_after_s: float | None
         window.showMaximized()
     code = app.exec()
     window.shutdown()
+    from ocu.windows.teardown import dispose
+
+    dispose(window)
     pulse.stop()
     STOP.looping = False
     STOP.received.clear()  # handled

@@ -123,6 +123,7 @@ def _shoot(
     from ocu.record.recorder import Recorder
     from ocu.sim.launcher import SimulatorProcess, with_default_world
     from ocu.windows.main_window import MainWindow
+    from ocu.windows.teardown import dispose
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
@@ -166,7 +167,7 @@ def _shoot(
             app.exec()
         finally:
             window.shutdown()
-            window.deleteLater()
+            dispose(window)
     if not saved:
         raise ScreenshotError(f"cannot write {args.out}")
     print(f"wrote {args.out} ({size[0]}x{size[1]}); 3D view drawn through {drawn_through[0]}")

@@ -54,6 +54,10 @@ XI_RAW_KEY_PRESS = 13
 XI_RAW_KEY_RELEASE = 14
 XI_ALL_MASTER_DEVICES = 1
 POINTER_ROOT = 1  # the input focus follows the pointer
+FOCUS_IN, FOCUS_OUT = 9, 10  # X11 core events
+FOCUS_CHANGE_MASK = 1 << 21
+NOTIFY_INFERIOR = 2  # FocusOut's detail: the focus went to a window inside this one
+NOTIFY_POINTER = 5  # this detail and those above: the focus follows the pointer (or is none)
 # X key codes (evdev + 8) of the modifiers: Shift sets the fine speed; with Ctrl, Alt or
 # Super down a key is a shortcut, left to Qt.
 SHIFT_CODES = frozenset({50, 62})
@@ -76,10 +80,23 @@ class _XGenericEventCookie(ctypes.Structure):
     ]
 
 
+class _XFocusChangeEvent(ctypes.Structure):
+    _fields_ = [
+        ("type", ctypes.c_int),
+        ("serial", ctypes.c_ulong),
+        ("send_event", ctypes.c_int),
+        ("display", ctypes.c_void_p),
+        ("window", ctypes.c_ulong),
+        ("mode", ctypes.c_int),
+        ("detail", ctypes.c_int),
+    ]
+
+
 class _XEvent(ctypes.Union):
     _fields_ = [
         ("type", ctypes.c_int),
         ("cookie", _XGenericEventCookie),
+        ("focus", _XFocusChangeEvent),
         ("pad", ctypes.c_long * 24),
     ]
 
@@ -154,6 +171,7 @@ def _declare(x11: ctypes.CDLL, xi: ctypes.CDLL) -> None:
     x11.XFreeEventData.argtypes = [vp, ctypes.POINTER(_XGenericEventCookie)]
     x11.XGetInputFocus.argtypes = [vp, ctypes.POINTER(ctypes.c_ulong), ctypes.POINTER(c_int)]
     x11.XFlush.argtypes = [vp]
+    x11.XSelectInput.argtypes = [vp, ctypes.c_ulong, ctypes.c_long]
     if hasattr(x11, "XSetIOErrorExitHandler"):
         x11.XSetIOErrorExitHandler.argtypes = [vp, _IOErrorExitHandler, vp]
         x11.XSetIOErrorExitHandler.restype = None
@@ -166,6 +184,47 @@ def _declare(x11: ctypes.CDLL, xi: ctypes.CDLL) -> None:
     ]
     xi.XIQueryVersion.argtypes = [vp, ctypes.POINTER(c_int), ctypes.POINTER(c_int)]
     xi.XISelectEvents.argtypes = [vp, ctypes.c_ulong, ctypes.POINTER(_XIEventMask), c_int]
+
+
+class FocusTracker:
+    """Whether the X input focus is in one of the console's windows, from the FocusIn and
+    FocusOut events the reader asks for on each of them: no round trip to the server per key.
+
+    Asking the server (XGetInputFocus) lets the GIL go for the round trip, and getting it back
+    behind the GUI thread's paints took up to 5 ms (the interpreter's switch interval) before
+    the key could act. The server sends a window's focus events before any key that follows
+    the change, on the reader's own connection, so the events keep the answer exact once it is
+    `known`: from a first round trip after the windows were (re)selected, or from a FocusIn or
+    FocusOut on one of them. While the focus follows the pointer (PointerRoot, or none) it is
+    not known, and each key asks the server as before. Any doubt leaves a key to Qt's filter.
+    """
+
+    def __init__(self) -> None:
+        self.known = False
+        self.window: int | None = None  # the console's window that has the focus, if any
+
+    def forget(self) -> None:
+        """Ask the server at the next key (the windows watched changed)."""
+        self.known = False
+        self.window = None
+
+    def event(self, kind: int, window: int, detail: int) -> None:
+        """A FocusIn or FocusOut on a console window."""
+        if detail >= NOTIFY_POINTER:
+            self.forget()
+        elif kind == FOCUS_IN:
+            self.known, self.window = True, window
+        elif detail != NOTIFY_INFERIOR and self.window in (window, None):
+            # Out of this window: to another console window (its FocusIn comes next) or to
+            # someone else's.
+            self.known, self.window = True, None
+
+    def asked(self, focus: int, windows: frozenset[int]) -> None:
+        """What XGetInputFocus said (POINTER_ROOT: still not known)."""
+        if focus == POINTER_ROOT:
+            self.forget()
+        else:
+            self.known, self.window = True, focus if focus in windows else None
 
 
 class TakenEvents:
@@ -201,8 +260,12 @@ class XKeyReader:
         self.taken = TakenEvents()
         self.keys: RawKeys | None = None  # set by start()
         self._windows: frozenset[int] = frozenset()
+        self._watched: frozenset[int] = frozenset()  # windows whose focus events come (thread)
+        self.focus = FocusTracker()  # the reader thread's
+        self.focus_queries = 0  # round trips to the server for the focus
         self._typing = False
         self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -269,7 +332,11 @@ class XKeyReader:
 
     def set_windows(self, windows: frozenset[int]) -> None:
         """The console's top-level X windows (any thread)."""
+        if windows == self._windows:
+            return
         self._windows = windows
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"w")  # the thread asks for their focus events
 
     def set_typing(self, typing: bool) -> None:
         """Whether a text box has the keyboard focus (any thread)."""
@@ -317,12 +384,16 @@ class XKeyReader:
         log.info(STARTED)
         try:
             while not self._stop.is_set():
+                self._watch(display)
                 while events.XPending(display) and not self._broken.is_set():
                     events.XNextEvent(display, ctypes.byref(event))
                     self._dispatch(display, event)
                 if self._stop.is_set() or self._broken.is_set():
                     break
-                select.select([fd, self._wake_r], [], [])
+                ready, _, _ = select.select([fd, self._wake_r], [], [])
+                if self._wake_r in ready:
+                    with contextlib.suppress(OSError):
+                        os.read(self._wake_r, 64)
                 if not _connected(peek):
                     self._broken.set()
                     break
@@ -333,7 +404,24 @@ class XKeyReader:
         if self._broken.is_set():
             log.warning("the X key reader lost the X server: keys go through Qt's events only")
 
+    def _watch(self, display: int) -> None:
+        """Ask for the focus events of the console's windows published since the last time.
+        (A window gone meanwhile is an X error that Qt's Xlib error handler ignores.)"""
+        windows = self._windows
+        if windows == self._watched:
+            return
+        for window in windows - self._watched:
+            self._events.XSelectInput(display, window, FOCUS_CHANGE_MASK)
+        self._events.XFlush(display)
+        self._watched = windows
+        self.focus.forget()  # a change before the selection was not seen: ask once
+
     def _dispatch(self, display: int, event: _XEvent) -> None:
+        if event.type in (FOCUS_IN, FOCUS_OUT):
+            change = event.focus
+            if change.window in self._watched:
+                self.focus.event(change.type, change.window, change.detail)
+            return
         cookie = event.cookie
         if event.type != GENERIC_EVENT or cookie.extension != self._opcode:
             return
@@ -356,8 +444,14 @@ class XKeyReader:
             log.exception("X key reader: key %d failed", code)
 
     def _focused(self, display: int) -> bool:
+        tracked = self.focus
+        if tracked.known:
+            return tracked.window is not None and tracked.window in self._windows
+        self.focus_queries += 1
+        log.debug("X focus asked of the server (%d)", self.focus_queries)
         focus, revert = ctypes.c_ulong(), ctypes.c_int()
         self._x11.XGetInputFocus(display, ctypes.byref(focus), ctypes.byref(revert))
+        tracked.asked(focus.value, self._watched)
         if focus.value == POINTER_ROOT:
             # No window has the focus: keys go to the top-level window under the pointer.
             root, child = ctypes.c_ulong(), ctypes.c_ulong()

@@ -13,6 +13,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -21,7 +22,17 @@ from ocu.hotkeys import KEY_POSITIONS, load_key_map
 from ocu.profile import RobotProfile
 from ocu.sim.simulator import RobotSimulator
 from ocu.windows.held_keys import X_KEYCODE_OFFSET
-from ocu.windows.x_keys import STARTED, RawKeys, XKeyReader
+from ocu.windows.x_keys import (
+    FOCUS_IN,
+    FOCUS_OUT,
+    NOTIFY_INFERIOR,
+    NOTIFY_POINTER,
+    POINTER_ROOT,
+    STARTED,
+    FocusTracker,
+    RawKeys,
+    XKeyReader,
+)
 from tests.test_safety import (
     XDOTOOL,
     find_window,
@@ -106,6 +117,37 @@ def test_whoever_sees_an_event_first_acts_on_it_the_other_does_not(
     # ...and a later event of the same key, at another server time, is the reader's.
     assert raw.key(code("W"), True, 43, focused=True)
     assert not raw.taken.take("W", True, 43)
+
+
+def test_the_focus_tracker_knows_only_what_the_events_say() -> None:
+    console, dock, other = 0x400001, 0x500001, 0x900001
+    ours = frozenset({console, dock})
+    focus = FocusTracker()
+    assert not focus.known  # until asked or told
+    focus.asked(other, ours)
+    assert focus.known
+    assert focus.window is None
+    focus.event(FOCUS_IN, console, 3)  # NotifyNonlinear: from someone else's window
+    assert focus.known
+    assert focus.window == console
+    focus.event(FOCUS_OUT, console, NOTIFY_INFERIOR)  # to a window inside it: still ours
+    assert focus.window == console
+    focus.event(FOCUS_OUT, console, 3)  # to the dock: out, then the dock's FocusIn
+    assert focus.known
+    assert focus.window is None
+    focus.event(FOCUS_IN, dock, 3)
+    assert focus.window == dock
+    focus.event(FOCUS_OUT, console, 3)  # a late word about a window left before: ignored
+    assert focus.window == dock
+    focus.event(FOCUS_OUT, dock, NOTIFY_POINTER)  # the focus follows the pointer: ask
+    assert not focus.known
+    focus.asked(POINTER_ROOT, ours)
+    assert not focus.known  # still asked at every key
+    focus.asked(console, ours)
+    assert focus.window == console
+    focus.forget()
+    assert not focus.known
+    assert focus.window is None
 
 
 # ---- the real program, its GUI thread held busy ------------------------------------------
@@ -211,3 +253,104 @@ def test_no_reader_where_it_is_switched_off_or_there_is_no_x_server(
     assert XKeyReader.open(f"{xvfb}9") is None  # no such display
     monkeypatch.setenv("OCU_X_KEYS", "0")
     assert XKeyReader.open(xvfb) is None
+
+
+def foreign_window(display: str, name: bytes) -> tuple[tuple[Any, int], int]:
+    """A window of another X client (this test's own connection), mapped: (connection, id)."""
+    import ctypes
+
+    x11 = ctypes.CDLL("libX11.so.6")
+    vp, ul = ctypes.c_void_p, ctypes.c_ulong
+    x11.XOpenDisplay.restype = vp
+    x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
+    x11.XDefaultRootWindow.restype = ul
+    x11.XDefaultRootWindow.argtypes = [vp]
+    x11.XCreateSimpleWindow.restype = ul
+    c_int, c_uint = ctypes.c_int, ctypes.c_uint
+    x11.XCreateSimpleWindow.argtypes = [vp, ul, c_int, c_int, c_uint, c_uint, c_uint, ul, ul]
+    x11.XStoreName.argtypes = [vp, ul, ctypes.c_char_p]
+    x11.XMapWindow.argtypes = [vp, ul]
+    x11.XSync.argtypes = [vp, ctypes.c_int]
+    x11.XCloseDisplay.argtypes = [vp]
+    connection = x11.XOpenDisplay(display.encode())
+    assert connection
+    window = x11.XCreateSimpleWindow(
+        connection, x11.XDefaultRootWindow(connection), 300, 300, 200, 200, 0, 0, 0
+    )
+    x11.XStoreName(connection, window, name)
+    x11.XMapWindow(connection, window)
+    x11.XSync(connection, 0)
+    return (x11, connection), window
+
+
+def test_the_reader_follows_the_focus_from_x_events_not_a_query_per_key(
+    xvfb: str, sim: RobotSimulator, tmp_path: Path
+) -> None:
+    """The X focus leaves the console for another client's window and comes back: the reader
+    knows it from the focus events on its own connection (no round trip per key, each a wait
+    for the GIL), so W drives while the console has the focus and not while the other has."""
+    env = x_env(xvfb, tmp_path)
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[2])
+    log_path = tmp_path / "ocu.log"
+    host, port = sim.address
+    with log_path.open("w") as log:
+        program = subprocess.Popen(
+            [
+                *(sys.executable, "-m", "ocu"),
+                *("--robot", f"{host}:{port}", "--quit-after", "120", "--log-level", "DEBUG"),
+            ],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=log,
+        )
+    other: tuple[Any, int] | None = None
+    try:
+        assert sim.wait_until(lambda s: s.client is not None, 60.0), log_path.read_text()
+        assert log_shows(log_path, STARTED, 30.0), log_path.read_text()
+        console = find_window(env, "^ocu")
+        xdotool(env, "windowfocus", "--sync", console, "mousemove", "--window", console, "9", "9")
+        assert log_shows(log_path, "the console has the keyboard", 30.0), log_path.read_text()
+
+        def drive(key: str, action: str) -> None:
+            xdotool(env, f"key{action}", key)
+
+        for _ in range(2):
+            drive("w", "down")
+            assert sim.wait_until(lambda s: s.velocities["drive_linear"] > 0, 10.0), (
+                log_path.read_text()
+            )
+            drive("w", "up")
+            assert sim.wait_until(lambda s: s.velocities["drive_linear"] == 0, 10.0)
+        assert "(X key reader)" in log_path.read_text()
+
+        other, other_id = foreign_window(xvfb, b"not the console")
+        xdotool(env, "windowfocus", "--sync", str(other_id))
+        since = time.monotonic()
+        drive("w", "down")
+        assert log_shows(log_path, "left to Qt (focus elsewhere)", 30.0), log_path.read_text()
+        drive("w", "up")
+        assert not motion_after(sim, since), log_path.read_text()
+
+        xdotool(env, "windowfocus", "--sync", console)
+        drive("w", "down")
+        assert sim.wait_until(lambda s: s.velocities["drive_linear"] > 0, 10.0), (
+            log_path.read_text()
+        )
+        drive("w", "up")
+        assert sim.wait_until(lambda s: s.velocities["drive_linear"] == 0, 10.0)
+        # At most one question to the server after the windows were published (none when a
+        # focus event came first), not one per key.
+        asked = log_path.read_text().count("X focus asked of the server")
+        assert asked <= 1, log_path.read_text()
+    finally:
+        subprocess.run([XDOTOOL or "", "keyup", "w"], env=env, timeout=30, check=False)
+        program.send_signal(signal.SIGTERM)
+        try:
+            program.wait(30)
+        except subprocess.TimeoutExpired:
+            program.kill()
+            program.wait()
+        if other is not None:
+            library, connection = other
+            library.XCloseDisplay(connection)
+    assert program.returncode == 0, log_path.read_text()
