@@ -80,8 +80,9 @@ class Client:
         self.peak_bytes = max(self.peak_bytes, self.data_bytes + self.control_bytes)
         self.wake.set()
 
-    def queue_control(self, text: str) -> bool:
-        """Queue a control message; False when the client has left too many unread."""
+    def queue_control(self, text: str | bytes) -> bool:
+        """Queue a control message (a service's answer too); False when the client has left
+        too many unread."""
         if self.control_bytes + len(text) > MAX_CONTROL_BYTES:
             return False
         self.outbox.append((text, len(text), CONTROL))

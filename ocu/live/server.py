@@ -55,6 +55,7 @@ from ocu.live.goals import GoalCore, LiveGoals
 from ocu.live.inputs import ClientInputs
 from ocu.live.messages import ENCODINGS
 from ocu.live.options import DEFAULT_HOST, LiveError
+from ocu.live.services import Services
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.convert import (
@@ -161,6 +162,7 @@ class LiveServer:
         self.max_clients = max_clients
         self._crowded = 0
         self._inputs = ClientInputs(control, self._control)
+        self._services = Services()
         self._converter = MessageConverter(profile, self.wall_ns, self._publish)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_event: asyncio.Event | None = None
@@ -387,7 +389,7 @@ class LiveServer:
         for client in list(self._clients):
             self._control(client, text)
 
-    def _control(self, client: Client, text: str) -> None:
+    def _control(self, client: Client, text: str | bytes) -> None:
         if not client.queue_control(text) and not client.closing:
             client.closing = True
             task = asyncio.ensure_future(client.connection.close(CLOSE_POLICY, "not reading"))
@@ -420,14 +422,16 @@ class LiveServer:
         log.info("live: %s connected (%s)", client.address, connection.subprotocol)
         metadata = {"profile": self.profile.name}
         capabilities = ["assets"] if self.frames is not None and self.frames.assets else []
-        encodings = []
-        if self.allow_control:
-            capabilities.append("clientPublish")
-            encodings = list(ENCODINGS)
+        services = self._services.advertisement()
+        capabilities += ["clientPublish"] if self.allow_control else []
+        capabilities += ["services"] if services is not None else []
+        encodings = list(ENCODINGS) if self.allow_control or services is not None else []
         name = f"ocu {self.profile.name}"
         info = wire.server_info(name, self.session_id, metadata, capabilities, encodings)
         self._control(client, info)
         self._control(client, wire.advertise([c.info for c in self._channels.values()]))
+        if services is not None:
+            self._control(client, services)
         sender = asyncio.create_task(self._send_loop(client), name="ocu-live-send")
         try:
             async for frame in connection:
@@ -464,6 +468,8 @@ class LiveServer:
                 self._subscribe(client, subscription, channel_id)
         elif isinstance(message, wire.FetchAsset):
             self._fetch_asset(client, message)
+        elif isinstance(message, wire.ServiceCallRequest):
+            self._control(client, self._services.call(client.address, message))
         elif isinstance(
             message, wire.ClientAdvertise | wire.ClientUnadvertise | wire.ClientPublish
         ):
@@ -489,6 +495,7 @@ class LiveServer:
         if self.allow_control:
             arm = LiveGoals(core, goals) if goals is not None else None
             self._inputs.teleop = LiveControl(core, self.clock, arm)
+        self._services.serve(core, self._inputs.teleop)
 
     async def _control_loop(self) -> None:
         while True:
