@@ -84,12 +84,15 @@ function publish(spec) {
     linear: { x: spec.linear, y: 0, z: 0 },
     angular: { x: 0, y: 0, z: spec.angular },
   };
-  const data = spec.encoding === "cdr"
-    ? writer.writeMessage(message)
-    : new TextEncoder().encode(JSON.stringify(message));
+  const encode = (m) => (spec.encoding === "cdr" ? writer.writeMessage(m) : new TextEncoder().encode(JSON.stringify(m)));
+  const data = encode(message);
+  // `alternate`: every second Twist's linear.x (a stream whose every message is news).
+  const other = spec.alternate === undefined
+    ? data
+    : encode({ ...message, linear: { ...message.linear, x: spec.alternate } });
   let sent = 0;
   const send = () => {
-    client.sendMessage(channel, data);
+    client.sendMessage(channel, sent % 2 === 0 ? data : other);
     sent += 1;
     print({ event: "published", topic: spec.topic, n: sent, local_ms: performance.timeOrigin + performance.now() });
     if (sent >= spec.count) {
