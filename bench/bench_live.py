@@ -30,14 +30,16 @@ carrying that speed, p50/p99 (the robot in motion, as a panel at a usable rate d
 --console N: the real console (`ocu --sim-arg=--extended`: its built-in simulator in its own
 process, four cameras), first without --live, then with --live and no client, then with N
 npm clients subscribed to the four cameras, /joint_states and /tf; the console process's CPU
-(its own, not the simulator's) per phase from /proc, in % of one core.
+(its own, not the simulator's) per phase from /proc, in % of one core; three rounds of the
+three, each console started afresh, as the machine's other load comes and goes.
 
     .venv/bin/python bench/bench_live.py --keys 300       # key -> datagram, 20 clients
 
 --keys N: bench_keys's W presses through the real window (Qt offscreen, the event filter,
 the model, the link) onto the simulator (in this process, telemetry 50 Hz), N presses each
-without a live server, with one and no client, and with 20 npm clients subscribed to every
-channel; p50/p99 of press -> the RCP the simulator read.
+without a live server, with one and no client, with 20 npm clients subscribed to every
+channel, and with the same 20 niced to 19 (clients on other machines, their own decoding out
+of the console's way); p50/p99 of press -> the RCP the simulator read.
 """
 
 from __future__ import annotations
