@@ -89,9 +89,9 @@ def add_live_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--live-control",
         action="store_true",
-        help="let one live client drive with /cmd_vel (Foxglove's Teleop panel), as the "
-        "input mux's `live` source: any operator input, Space, LINK LOST or focus loss stops "
-        "it (docs/live.md)",
+        help="let one live client drive with /cmd_vel (Foxglove's Teleop panel) and move the "
+        "arm (/joint_goals, /arm/twist_cmd, /arm/named_pose), as the input mux's `live` "
+        "source: any operator input, Space, LINK LOST or focus loss stops it (docs/live.md)",
     )
     parser.add_argument(
         "--live-token",

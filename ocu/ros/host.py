@@ -31,7 +31,8 @@ def live_goal_core(model: ConsoleModel) -> BridgeCore:
     """The goal core of a live client's arm topics (ocu.live.goals): the bridge's joint goals,
     arm moves and jog, with the console's stored poses."""
     arm = model.arm
-    return BridgeCore(model.profile, arm_poses_path=arm.poses.path if arm is not None else None)
+    path = arm.poses.path if arm is not None else None
+    return BridgeCore(model.profile, arm_poses_path=path, source="live client")
 
 
 class ModelSink:

@@ -20,9 +20,19 @@ from ocu.console.model import ConsoleModel
 from ocu.hardware.registry import HARDWARE
 from ocu.headless import HeadlessConsole
 from ocu.live.options import serve_console
-from ocu.live.scene import ARM_GOAL, PLAN, ZONES, zone_outline
+from ocu.live.scene import (
+    ARM_GOAL,
+    LIMITING_LINE_M,
+    PLAN,
+    ZONE_LINE_M,
+    ZONES,
+    zone_outline,
+    zones_update,
+)
 from ocu.live.server import LiveServer
+from ocu.nav.navigator import NO_ZONES, ZoneState
 from ocu.nav.world import load_world
+from ocu.nav.zones import ZoneDecision
 from ocu.profile import RobotProfile
 from ocu.sim.simulator import RobotSimulator
 from tests.live.node_client import DEADLINE_S, NodeClient, require_node
@@ -183,3 +193,29 @@ def until(condition: Callable[[], bool], timeout_s: float = DEADLINE_S) -> bool:
             return False
         time.sleep(0.01)
     return True
+
+
+def test_the_zone_limiting_the_drive_is_drawn_thicker_and_off_zones_faint(
+    profile: RobotProfile,
+) -> None:
+    footprint = profile.navigation.footprint
+    assert footprint is not None
+    settings = profile.navigation.zones
+    stamp = {"sec": 1, "nanosec": 0}
+    slowed = ZoneDecision(0.2, 0.1, distance_m=0.5, zone=1, limited=True)
+    state = ZoneState(slowed, active=True, overridden=False, text=slowed.message())
+    lines = zones_update(footprint, settings, state, stamp)["entities"][0]["lines"]
+    assert [line["thickness"] for line in lines] == [
+        ZONE_LINE_M,
+        ZONE_LINE_M,
+        LIMITING_LINE_M,  # zone 1: ring 2 (the stop zone is ring 0)
+        ZONE_LINE_M,
+    ]
+    stopped = ZoneDecision(0.0, 0.0, distance_m=0.05, zone=-1, limited=True)
+    state = ZoneState(stopped, active=True, overridden=False, text=stopped.message())
+    entity = zones_update(footprint, settings, state, stamp)["entities"][0]
+    assert entity["lines"][0]["thickness"] == LIMITING_LINE_M
+    assert metadata(entity)["state"] == "stopped: obstacle 0.05 m ahead"
+    off = zones_update(footprint, settings, NO_ZONES, stamp)["entities"][0]
+    assert {line["color"]["a"] for line in off["lines"]} == {0.27}
+    assert metadata(off)["active"] == "false"
