@@ -63,6 +63,8 @@ class Client:
         self.control_bytes = 0
         self.asset_bytes = 0
         self.wake = asyncio.Event()
+        # Set by the send loop whenever the outbox is empty (all of it on the socket).
+        self.flushed = asyncio.Event()
         self.sent = 0
         self.dropped = 0
         self.refused = 0

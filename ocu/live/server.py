@@ -439,6 +439,11 @@ class LiveServer:
                 if client.refused >= MAX_REFUSED and not client.closing:
                     client.closing = True
                     self._closed_for_refused += 1
+                    # The reasons queued for it go out before the close, within a second.
+                    client.flushed.clear()
+                    client.wake.set()
+                    with contextlib.suppress(TimeoutError):
+                        await asyncio.wait_for(client.flushed.wait(), 1.0)
                     await connection.close(CLOSE_POLICY, "too many refused messages")
                     break
         except ConnectionClosed:
@@ -566,6 +571,7 @@ class LiveServer:
                         client.data_bytes -= size
                     await client.connection.send(frame)
                     client.sent += 1
+                client.flushed.set()
         except ConnectionClosed:
             pass
 
