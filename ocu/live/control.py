@@ -8,7 +8,8 @@
   interval between messages, at least MIN_TIMEOUT_S and at most the mux table's 0.6 s (the
   first message gets the 0.6 s), so a panel publishing once a second drives 0.6 s per
   message, not a second and more. A goal (`/joint_goals`, `/arm/named_pose`) is one message
-  for one move: the client commands until the move ends. The server's loop expires it; the
+  for one move: the client commands until the move ends, while each of its streams still
+  stops on its own timeout. The server's loop expires them; the
   model's own timeout (the table's 0.6 s, the control thread) stops the source even if the
   server's thread stalls.
 - A client that leaves or unadvertises stops what it drove at once.
@@ -90,9 +91,10 @@ class LiveControl:
         self._allowed = True
         self._owner: str | None = None
         self._topic = ""
-        self._deadline = 0.0
-        # The owner's last command was a goal: it commands while the move goes on.
-        self._holding_goal = False
+        # The owner's streams and when each stops (its rate's timeout), and until when its
+        # last goal holds the command at least (it holds on while the move goes on).
+        self._streams: dict[str, float] = {}
+        self._goal_until: float | None = None
         self._last: dict[tuple[str, str], float] = {}
         with core.lock:
             core.model.mux.register(Source.LIVE.value, self._stopped)
@@ -135,13 +137,21 @@ class LiveControl:
                 f"remote drive {word} by the operator" + (f" ({owner} stopped)" if owner else "")
             )
 
+    def _held(self, now: float, moving: bool) -> bool:
+        """Whether the owner still commands (self._lock held): a stream not yet timed out,
+        or a goal whose move goes on (`moving`: the goal core commands)."""
+        streaming = any(now < deadline for deadline in self._streams.values())
+        goal = self._goal_until is not None and (now < self._goal_until or moving)
+        return streaming or goal
+
     def _claim(self, client: str, topic: str, now: float) -> tuple[str | None, float]:
         """Whether the client may command now (None, its timeout) or why not."""
+        moving = self.goals is not None and self.goals.commanding  # not under self._lock
         with self._lock:
             if not self._allowed:
                 return REVOKED, 0.0
             owner = self._owner
-            if owner is not None and owner != client and now < self._deadline:
+            if owner is not None and owner != client and self._held(now, moving):
                 return f"{owner} commands {self._topic} now", 0.0
             if topic not in STREAMS:
                 return None, self.timeout_max_s
@@ -155,10 +165,14 @@ class LiveControl:
     def _took(self, client: str, topic: str, now: float, timeout: float) -> None:
         with self._lock:
             first = self._owner != client
+            if first:
+                self._streams, self._goal_until = {}, None
             self._owner = client
             self._topic = topic
-            self._deadline = now + timeout
-            self._holding_goal = topic not in STREAMS
+            if topic in STREAMS:
+                self._streams[topic] = now + timeout
+            else:
+                self._goal_until = now + timeout
         if first:
             with self.core.lock:
                 self.core.model.events.message.emit(f"live client {client} drives ({topic})")
@@ -219,17 +233,25 @@ class LiveControl:
         return arm.base_link if arm is not None else ""
 
     def expire(self) -> None:
-        """Stop the commanding client's drive once its timeout has passed (a goal's: once its
-        move has ended)."""
+        """Stop each of the commanding client's streams once its timeout has passed, and let
+        the client go when nothing it sent holds any more (a goal: once its move has ended)."""
+        moving = self.goals is not None and self.goals.commanding  # not under self._lock
+        now = self.clock()
         with self._lock:
             owner = self._owner
-            late = owner is not None and self.clock() >= self._deadline
-            goal = self._holding_goal
-        if owner is None or not late:
-            return
-        if goal and self.goals is not None and self.goals.commanding:
-            return
-        self.release(owner, "its goal ended" if goal else "no message within its timeout")
+            if owner is None:
+                return
+            late = [topic for topic, deadline in self._streams.items() if now >= deadline]
+            for topic in late:
+                del self._streams[topic]
+            held = self._held(now, moving)
+        if not held:
+            self.release(owner, "nothing within its timeout, no move going on")
+        elif CMD_VEL in late and self.drive is not None:
+            # Its drive stream went quiet while a goal of its goes on: the tracks stop.
+            with self.core.lock:
+                zeros = dict.fromkeys(self.drive, 0.0)
+                self.core.model.set_source_velocities(Source.LIVE, zeros)
 
     def release(self, client: str, reason: str) -> None:
         """The client stops commanding (it left, unadvertised, timed out)."""

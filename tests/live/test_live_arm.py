@@ -240,6 +240,24 @@ def test_one_client_commands_the_arm_at_a_time_until_its_move_ends(profile: Robo
     assert control.command("a:1", "/joint_goals", goal) == NOT_FREE
 
 
+def test_a_quiet_drive_stream_stops_the_tracks_while_the_clients_goal_goes_on(
+    profile: RobotProfile,
+) -> None:
+    clock = Clock()
+    core = Core(ConsoleModel(profile, clock=clock))
+    control = LiveControl(core, clock, LiveGoals(core, BridgeCore(profile, clock=clock)))
+    model = core.model
+    assert control.twist("a:1", 0.2, 0.0) is None
+    assert control.command("a:1", "/joint_goals", JointGoal(("waist",), (0.5,))) is None
+    assert model.channel("drive_linear").velocity == 0.2
+    # Its Twists stop: the tracks stop after the stream's timeout, the goal goes on.
+    clock.now += 0.61
+    control.expire()
+    assert model.channel("drive_linear").velocity == 0.0
+    assert control.owner == "a:1"
+    assert control.twist("b:2", 0.2, 0.0) == "a:1 commands /joint_goals now"
+
+
 # ---- the UR: the URScript the simulator received ------------------------------------------
 
 
