@@ -18,11 +18,34 @@ baseline.
 server with --live-control; one npm client publishes a Twist once a second (a Teleop panel's
 default: the robot stops between messages), N; latency from its send to the simulator's
 first datagram carrying the drive, p50/p99.
+
+    .venv/bin/python bench/bench_live.py --stream 600     # client Twist stream -> datagram
+
+--stream N: the same path, one client publishing N Twists at 10 Hz whose linear.x
+alternates between two speeds; latency from each send to the simulator's first datagram
+carrying that speed, p50/p99 (the robot in motion, as a panel at a usable rate drives it).
+
+    .venv/bin/python bench/bench_live.py --console 5      # the console's CPU, cameras
+
+--console N: the real console (`ocu --sim-arg=--extended`: its built-in simulator in its own
+process, four cameras), first without --live, then with --live and no client, then with N
+npm clients subscribed to the four cameras, /joint_states and /tf; the console process's CPU
+(its own, not the simulator's) per phase from /proc, in % of one core; three rounds of the
+three, each console started afresh, as the machine's other load comes and goes.
+
+    .venv/bin/python bench/bench_live.py --keys 300       # key -> datagram, 20 clients
+
+--keys N: bench_keys's W presses through the real window (Qt offscreen, the event filter,
+the model, the link) onto the simulator (in this process, telemetry 50 Hz), N presses each
+without a live server, with one and no client, with 20 npm clients subscribed to every
+channel, and with the same 20 niced to 19 (clients on other machines, their own decoding out
+of the console's way); p50/p99 of press -> the RCP the simulator read.
 """
 
 from __future__ import annotations
 
 import argparse
+import bisect
 import os
 import resource
 import sys
@@ -112,16 +135,78 @@ def teleop(profile: RobotProfile, count_n: int) -> None:
     )
 
 
+def stream(profile: RobotProfile, count_n: int) -> None:
+    """A client's Twist stream (10 Hz, alternating speeds) -> the simulator's datagram."""
+    sim = RobotSimulator(profile, telemetry_hz=50.0, video_fps=0.0)
+    sim.start()
+    hardware = HARDWARE.create("engineer", profile, f"{sim.address[0]}:{sim.address[1]}")
+    console = HeadlessConsole(ConsoleModel(profile), hardware)
+    server = LiveServer(profile, "127.0.0.1", 0, control=True)
+    server.start()
+    serve_console(server, console.manager)
+    console.start()
+    speeds = (0.2, 0.3)
+    axis = profile.channels["drive_linear"].axis
+    spec: dict[str, object] = {"topic": "/cmd_vel", "encoding": "cdr"}
+    spec |= {"schemaName": "geometry_msgs/msg/Twist", "rateHz": 10.0, "count": count_n}
+    spec |= {"linear": speeds[0], "angular": 0.0, "alternate": speeds[1]}
+    client = NodeClient(f"ws://127.0.0.1:{server.address[1]}", topics=[], publish=spec)
+    try:
+        assert client.wait(count_published(count_n), count_n / 10.0 + 60.0)
+        assert sim.wait_until(lambda s: s.commanded_velocities.get("drive_linear", 0) == 0, 5)
+    finally:
+        client.close()
+        server.stop()
+        console.stop()
+        sim.stop()
+    received = sim.received_commands()
+    times = [r.time_s for r in received]
+    wall_minus_mono = time.time() - time.monotonic()
+    latencies_ms = []
+    # From the second message on, each asks for a new speed: its latency is from its send to
+    # the first datagram whose drive differs from the one on the wire when it was sent.
+    for event in client.of("published")[1:]:
+        sent_s = event["local_ms"] / 1000.0 - wall_minus_mono
+        i = bisect.bisect_left(times, sent_s)
+        if i == 0:
+            continue
+        before = received[i - 1].packet.axes[axis]
+        changed = next((r for r in received[i:] if r.packet.axes[axis] != before), None)
+        if changed is not None:
+            latencies_ms.append((changed.time_s - sent_s) * 1000.0)
+    print(
+        f"client Twist stream -> datagram: p50 {percentile(latencies_ms, 50):.1f} ms "
+        f"p99 {percentile(latencies_ms, 99):.1f} ms max {max(latencies_ms):.1f} ms "
+        f"({len(latencies_ms)} of {count_n}, 10 Hz)"
+    )
+
+
 def main() -> int:
     parser = argparse.ArgumentParser()
     parser.add_argument("--clients", type=int, nargs="+", default=[1, 5, 20])
     parser.add_argument("--phase-s", type=float, default=10.0)
     parser.add_argument("--teleop", type=int, metavar="N", help="measure client Twist -> datagram")
+    parser.add_argument("--stream", type=int, metavar="N", help="a 10 Hz Twist stream -> datagram")
+    parser.add_argument("--console", type=int, metavar="N", help="the console's CPU, N clients")
+    parser.add_argument("--keys", type=int, metavar="N", help="key -> datagram with 20 clients")
     args = parser.parse_args()
     profile = load_profile()
     print(f"priority: {raise_priority(DEFAULT_NICE).text} (as the console asks)")
     if args.teleop:
         teleop(profile, args.teleop)
+        return 0
+    if args.stream:
+        stream(profile, args.stream)
+        return 0
+    if args.console:
+        from bench_live_console import console_cpu
+
+        console_cpu(profile, args.console, args.phase_s)
+        return 0
+    if args.keys:
+        from bench_live_console import keys
+
+        keys(profile, args.keys)
         return 0
     cameras = [s.camera_topic(name) for name in profile.link.camera_names]
     topics = [s.JOINT_STATES, "/tf", *cameras]

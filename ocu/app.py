@@ -592,7 +592,9 @@ def run_replay(
 def show_live(live: LiveServer | None, window: MainWindow) -> None:
     """The live server (if any) serves the window's control core; the status bar shows who
     watches and who drives, and a click there revokes the remote drive (docs/live.md)."""
-    serve_console(live, window.core)
+    from ocu.ros.host import live_goal_core
+
+    serve_console(live, window.core, live_goal_core)
     if live is not None:
         from ocu.widgets.live_status import LiveIndicator
 

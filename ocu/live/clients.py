@@ -63,6 +63,8 @@ class Client:
         self.control_bytes = 0
         self.asset_bytes = 0
         self.wake = asyncio.Event()
+        # Set by the send loop whenever the outbox is empty (all of it on the socket).
+        self.flushed = asyncio.Event()
         self.sent = 0
         self.dropped = 0
         self.refused = 0
@@ -80,8 +82,9 @@ class Client:
         self.peak_bytes = max(self.peak_bytes, self.data_bytes + self.control_bytes)
         self.wake.set()
 
-    def queue_control(self, text: str) -> bool:
-        """Queue a control message; False when the client has left too many unread."""
+    def queue_control(self, text: str | bytes) -> bool:
+        """Queue a control message (a service's answer too); False when the client has left
+        too many unread."""
         if self.control_bytes + len(text) > MAX_CONTROL_BYTES:
             return False
         self.outbox.append((text, len(text), CONTROL))

@@ -19,7 +19,9 @@ from ocu.link.base import Link
 from ocu.profile import RobotProfile
 
 if TYPE_CHECKING:  # the server (websockets, the CDR encoders) loads only with --live
+    from ocu.console.model import ConsoleModel
     from ocu.live.control import Core
+    from ocu.live.goals import GoalCore
     from ocu.live.server import LiveServer
 
 DEFAULT_HOST: Final = "127.0.0.1"
@@ -87,9 +89,9 @@ def add_live_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--live-control",
         action="store_true",
-        help="let one live client drive with /cmd_vel (Foxglove's Teleop panel), as the "
-        "input mux's `live` source: any operator input, Space, LINK LOST or focus loss stops "
-        "it (docs/live.md)",
+        help="let one live client drive with /cmd_vel (Foxglove's Teleop panel) and move the "
+        "arm (/joint_goals, /arm/twist_cmd, /arm/named_pose), as the input mux's `live` "
+        "source: any operator input, Space, LINK LOST or focus loss stops it (docs/live.md)",
     )
     parser.add_argument(
         "--live-token",
@@ -111,8 +113,6 @@ def start_live(
         if control:
             raise LiveError("--live-control needs --live")
         return None
-    if control and profile.drive_channels is None:
-        raise LiveError("--live-control: this robot has no drive channels for /cmd_vel")
     from ocu.live.server import LiveServer
 
     host, port = address
@@ -136,14 +136,21 @@ def serving(live: LiveServer | None, make_link: Callable[[], L]) -> Callable[[],
     return make_served_link
 
 
-def serve_console(live: LiveServer | None, core: Core) -> None:
-    """Serve the control core's model: a chassis's odometry and map, and with
-    --live-control a client's /cmd_vel into its mux (docs/live.md); nothing without a server."""
+def serve_console(
+    live: LiveServer | None,
+    core: Core,
+    goals: Callable[[ConsoleModel], GoalCore] | None = None,
+) -> None:
+    """Serve the control core's model: a chassis's odometry and map, the zones, path and arm
+    goal, and with --live-control a client's /cmd_vel and (`goals` makes the goal core) the
+    arm's topics into its mux (docs/live.md); nothing without a server."""
     if live is None:
         return
     if core.model.profile.drive_channels is not None:
         live.serve_navigation(core.model.nav)
-    live.serve_control(core)
+    live.serve_scene(core.model)
+    made = goals(core.model) if goals is not None and live.allow_control else None
+    live.serve_control(core, made)
 
 
 def serve(live: LiveServer | None, link: L) -> L:

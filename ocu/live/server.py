@@ -41,6 +41,7 @@ from ocu.link.base import Link
 from ocu.link.diagnostics import link_report
 from ocu.live import navigation as nv
 from ocu.live import robot as rb
+from ocu.live import scene as sc
 from ocu.live import wire
 from ocu.live.clients import (
     ASSET,
@@ -49,16 +50,12 @@ from ocu.live.clients import (
     Client,
     LiveStats,
 )
-from ocu.live.control import (
-    CMD_VEL,
-    ENCODINGS,
-    TWIST_SCHEMAS,
-    Core,
-    LiveControl,
-    TwistError,
-    decode_twist,
-)
+from ocu.live.control import Core, LiveControl
+from ocu.live.goals import GoalCore, LiveGoals
+from ocu.live.inputs import ClientInputs
+from ocu.live.messages import ENCODINGS
 from ocu.live.options import DEFAULT_HOST, LiveError
+from ocu.live.services import Services
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.convert import (
@@ -158,12 +155,14 @@ class LiveServer:
         self._by_id: dict[int, _Channel] = {}
         self._closing: set[asyncio.Future[None]] = set()
         self._navigator: nv.NavigationSource | None = None
+        self._scene: sc.SceneSource | None = None
         self._link_state = LinkState.CONNECTING
         # --live-control: clients may publish /cmd_vel (ocu.live.control) once a core is served.
         self.allow_control = control
         self.max_clients = max_clients
         self._crowded = 0
-        self._teleop: LiveControl | None = None
+        self._inputs = ClientInputs(control, self._control)
+        self._services = Services()
         self._converter = MessageConverter(profile, self.wall_ns, self._publish)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_event: asyncio.Event | None = None
@@ -194,6 +193,8 @@ class LiveServer:
                 now = self.wall_ns(self.clock())
                 message = nv.footprint_message(footprint.corners_m, s.stamp(now))
                 outline.latched = (now, outline.encoder(message))
+        for topic in sc.topics_of(self.profile):
+            self._channel(topic, sc.SCENE_UPDATE, keeps_last=True)
         self._channel(rb.TF, rb.TF_MESSAGE)
         frames = self.frames
         if frames is not None:
@@ -364,11 +365,31 @@ class LiveServer:
                 log.exception("live: cannot serve the navigator's state")
                 await asyncio.sleep(nv.MAP_PERIOD_S)
 
+    def serve_scene(self, model: sc.SceneModel) -> None:
+        """Serve this console model's zones, planned path and arm goal (ocu.live.scene)."""
+        self._scene = sc.SceneSource(model)
+
+    async def _scene_loop(self) -> None:
+        while True:
+            await asyncio.sleep(sc.SCENE_PERIOD_S)
+            source = self._scene
+            if source is None:
+                continue
+            try:
+                log_ns = self.wall_ns(self.clock())
+                for topic, message in source.changed(s.stamp(log_ns)):
+                    channel = self._channels.get(topic)
+                    if channel is not None:
+                        self._fan_out(channel, log_ns, channel.encoder(message))
+            except Exception:
+                log.exception("live: cannot serve the scene")
+                await asyncio.sleep(nv.MAP_PERIOD_S)
+
     def _broadcast(self, text: str) -> None:
         for client in list(self._clients):
             self._control(client, text)
 
-    def _control(self, client: Client, text: str) -> None:
+    def _control(self, client: Client, text: str | bytes) -> None:
         if not client.queue_control(text) and not client.closing:
             client.closing = True
             task = asyncio.ensure_future(client.connection.close(CLOSE_POLICY, "not reading"))
@@ -401,14 +422,16 @@ class LiveServer:
         log.info("live: %s connected (%s)", client.address, connection.subprotocol)
         metadata = {"profile": self.profile.name}
         capabilities = ["assets"] if self.frames is not None and self.frames.assets else []
-        encodings = []
-        if self.allow_control:
-            capabilities.append("clientPublish")
-            encodings = list(ENCODINGS)
+        services = self._services.advertisement()
+        capabilities += ["clientPublish"] if self.allow_control else []
+        capabilities += ["services"] if services is not None else []
+        encodings = list(ENCODINGS) if self.allow_control or services is not None else []
         name = f"ocu {self.profile.name}"
         info = wire.server_info(name, self.session_id, metadata, capabilities, encodings)
         self._control(client, info)
         self._control(client, wire.advertise([c.info for c in self._channels.values()]))
+        if services is not None:
+            self._control(client, services)
         sender = asyncio.create_task(self._send_loop(client), name="ocu-live-send")
         try:
             async for frame in connection:
@@ -416,6 +439,11 @@ class LiveServer:
                 if client.refused >= MAX_REFUSED and not client.closing:
                     client.closing = True
                     self._closed_for_refused += 1
+                    # The reasons queued for it go out before the close, within a second.
+                    client.flushed.clear()
+                    client.wake.set()
+                    with contextlib.suppress(TimeoutError):
+                        await asyncio.wait_for(client.flushed.wait(), 1.0)
                     await connection.close(CLOSE_POLICY, "too many refused messages")
                     break
         except ConnectionClosed:
@@ -424,8 +452,7 @@ class LiveServer:
             self._clients.discard(client)
             self._client_count = len(self._clients)
             sender.cancel()
-            if self._teleop is not None:
-                self._teleop.release(client.address, "left")
+            self._inputs.left(client)
             log.info(
                 "live: %s left (%d sent, %d dropped, %d refused)",
                 client.address,
@@ -446,10 +473,12 @@ class LiveServer:
                 self._subscribe(client, subscription, channel_id)
         elif isinstance(message, wire.FetchAsset):
             self._fetch_asset(client, message)
+        elif isinstance(message, wire.ServiceCallRequest):
+            self._control(client, self._services.call(client.address, message))
         elif isinstance(
             message, wire.ClientAdvertise | wire.ClientUnadvertise | wire.ClientPublish
         ):
-            self._client_publish(client, message)
+            self._inputs.on_message(client, message)
         else:
             for subscription in message.subscription_ids:
                 taken = client.subscriptions.pop(subscription, None)
@@ -460,81 +489,28 @@ class LiveServer:
                 if not ids:
                     client.by_channel.pop(taken, None)
 
-    def _client_publish(
-        self,
-        client: Client,
-        message: wire.ClientAdvertise | wire.ClientUnadvertise | wire.ClientPublish,
-    ) -> None:
-        if not self.allow_control:
-            client.refused += 1
-            off = "client publish is off (ocu --live-control)"
-            self._control(client, wire.status(wire.StatusLevel.ERROR, off))
-            return
-        if isinstance(message, wire.ClientAdvertise):
-            for channel in message.channels:
-                if (
-                    channel.topic != CMD_VEL
-                    or channel.schema_name not in TWIST_SCHEMAS
-                    or channel.encoding not in ENCODINGS
-                ):
-                    self._warn(
-                        client,
-                        f"{channel.topic} ({channel.schema_name}, {channel.encoding}) is not "
-                        f"taken: only {CMD_VEL} as a Twist in json or cdr",
-                    )
-                    continue
-                client.published[channel.id] = channel
-            return
-        if isinstance(message, wire.ClientUnadvertise):
-            for channel_id in message.channel_ids:
-                if client.published.pop(channel_id, None) is not None and self._teleop:
-                    self._teleop.release(client.address, f"{CMD_VEL} unadvertised")
-            return
-        published = client.published.get(message.channel_id)
-        if published is None:
-            client.refused += 1
-            self._warn(client, f"a message on channel {message.channel_id}, not advertised")
-            return
-        try:
-            linear, angular = decode_twist(published.encoding, message.payload)
-        except TwistError as err:
-            client.refused += 1
-            self._warn(client, f"{CMD_VEL}: {err}")
-            return
-        teleop = self._teleop
-        if teleop is None:  # a client that came while the console starts: not its fault
-            self._warn(client, f"{CMD_VEL} not taken: the console is starting")
-            return
-        refusal = teleop.twist(client.address, linear, angular)
-        if refusal is not None:
-            self._warn(client, f"{CMD_VEL} not taken: {refusal}")
-        else:
-            client.last_warning = ""
-
-    def _warn(self, client: Client, text: str) -> None:
-        if text != client.last_warning:  # once per reason, not per message at 20 Hz
-            client.last_warning = text
-            self._control(client, wire.status(wire.StatusLevel.WARNING, text))
-
     @property
     def control(self) -> LiveControl | None:
         """The remote drive (with --live-control, once a console serves it), else None."""
-        return self._teleop
+        return self._inputs.teleop
 
-    def serve_control(self, core: Core) -> None:
-        """With `control`: clients' /cmd_vel drive this core's model (ocu.live.control)."""
+    def serve_control(self, core: Core, goals: GoalCore | None = None) -> None:
+        """With `control`: clients' /cmd_vel and (given a goal core) the arm's topics drive
+        this core's model (ocu.live.control, ocu.live.goals)."""
         if self.allow_control:
-            self._teleop = LiveControl(core, self.clock)
+            arm = LiveGoals(core, goals) if goals is not None else None
+            self._inputs.teleop = LiveControl(core, self.clock, arm)
+        self._services.serve(core, self._inputs.teleop)
 
     async def _control_loop(self) -> None:
         while True:
             await asyncio.sleep(CONTROL_PERIOD_S)
-            teleop = self._teleop
+            teleop = self._inputs.teleop
             if teleop is not None:
                 try:
-                    teleop.expire()
+                    teleop.step()
                 except Exception:
-                    log.exception("live: cannot expire the remote drive")
+                    log.exception("live: cannot step the remote drive")
 
     def _fetch_asset(self, client: Client, request: wire.FetchAsset) -> None:
         assets = self.frames.assets if self.frames is not None else {}
@@ -595,6 +571,7 @@ class LiveServer:
                         client.data_bytes -= size
                     await client.connection.send(frame)
                     client.sent += 1
+                client.flushed.set()
         except ConnectionClosed:
             pass
 
@@ -646,15 +623,17 @@ class LiveServer:
         self._bound_port = int(server.sockets[0].getsockname()[1])
         navigation = asyncio.create_task(self._navigation_loop(), name="ocu-live-navigation")
         teleop = asyncio.create_task(self._control_loop(), name="ocu-live-control")
+        scene = asyncio.create_task(self._scene_loop(), name="ocu-live-scene")
         self._ready.set()
         await self._stop_event.wait()
         self._loop = None
-        navigation.cancel()
-        teleop.cancel()
-        if self._teleop is not None:
-            owner = self._teleop.owner
+        for task in (navigation, teleop, scene):
+            task.cancel()
+        remote = self._inputs.teleop
+        if remote is not None:
+            owner = remote.owner
             if owner is not None:
-                self._teleop.release(owner, "the live server stopped")
+                remote.release(owner, "the live server stopped")
         server.close(close_connections=True)
         await server.wait_closed()
 

@@ -32,6 +32,7 @@ class BinaryOpcode(IntEnum):
 
     MESSAGE_DATA = 1
     TIME = 2
+    SERVICE_CALL_RESPONSE = 3
     FETCH_ASSET_RESPONSE = 4
 
 
@@ -47,6 +48,8 @@ _MESSAGE_HEADER: Final = struct.Struct("<BIQ")
 _ASSET_HEADER: Final = struct.Struct("<BIBI")
 _CLIENT_MESSAGE_HEADER: Final = struct.Struct("<BI")
 CLIENT_MESSAGE_DATA: Final = 1  # a client's binary opcode for a message it publishes
+CLIENT_SERVICE_CALL: Final = 2  # ... and for a service call request
+_SERVICE_HEADER: Final = struct.Struct("<BIII")
 # A mesh's URI is a path: longer than this is not one.
 MAX_URI_CHARS: Final = 4096
 
@@ -119,8 +122,24 @@ class ClientPublish:
     payload: bytes
 
 
+@dataclass(frozen=True)
+class ServiceCallRequest:
+    """A binary service call from a client."""
+
+    service_id: int
+    call_id: int
+    encoding: str
+    payload: bytes
+
+
 ClientMessage = (
-    Subscribe | Unsubscribe | FetchAsset | ClientAdvertise | ClientUnadvertise | ClientPublish
+    Subscribe
+    | Unsubscribe
+    | FetchAsset
+    | ClientAdvertise
+    | ClientUnadvertise
+    | ClientPublish
+    | ServiceCallRequest
 )
 
 
@@ -192,6 +211,22 @@ def fetch_asset_response(request_id: int, data: bytes | None, error: str = "") -
     return header + message + (data or b"")
 
 
+def service_call_response(service_id: int, call_id: int, encoding: str, payload: bytes) -> bytes:
+    """serviceCallResponse: the answer to a call, in the call's encoding."""
+    name = encoding.encode()
+    header = _SERVICE_HEADER.pack(
+        BinaryOpcode.SERVICE_CALL_RESPONSE, service_id, call_id, len(name)
+    )
+    return header + name + payload
+
+
+def service_call_failure(service_id: int, call_id: int, message: str) -> str:
+    """serviceCallFailure: why a call was not answered."""
+    return _text(
+        {"op": "serviceCallFailure", "serviceId": service_id, "callId": call_id, "message": message}
+    )
+
+
 def _uint32(value: object, what: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_ID:
         raise ClientMessageError(f"{what} must be an integer 0..{MAX_ID}, not {value!r:.40}")
@@ -207,9 +242,25 @@ def _list(message: dict[str, Any], key: str) -> list[Any]:
     return value
 
 
+def _service_call(frame: bytes) -> ServiceCallRequest:
+    if len(frame) < _SERVICE_HEADER.size:
+        raise ClientMessageError("service call: shorter than its header")
+    _, service_id, call_id, length = _SERVICE_HEADER.unpack_from(frame)
+    end = _SERVICE_HEADER.size + length
+    if length > 64 or end > len(frame):
+        raise ClientMessageError("service call: a bad encoding length")
+    try:
+        encoding = frame[_SERVICE_HEADER.size : end].decode("ascii")
+    except UnicodeDecodeError as err:
+        raise ClientMessageError("service call: the encoding is not ASCII") from err
+    return ServiceCallRequest(service_id, call_id, encoding, frame[end:])
+
+
 def parse_client_message(frame: str | bytes) -> ClientMessage:
     """One frame from a client; ClientMessageError says why it is refused."""
     if isinstance(frame, bytes):
+        if frame[:1] == bytes([CLIENT_SERVICE_CALL]):
+            return _service_call(frame)
         if len(frame) < _CLIENT_MESSAGE_HEADER.size or frame[0] != CLIENT_MESSAGE_DATA:
             raise ClientMessageError("binary frame: not a message (opcode 1, channel id)")
         _, channel_id = _CLIENT_MESSAGE_HEADER.unpack_from(frame)

@@ -91,8 +91,11 @@ class BridgeCore:
         on_state_changed: StateCallback | None = None,
         arm: ArmKinematics | None = None,
         arm_poses_path: Path | None = None,
+        source: str = "ROS",
     ) -> None:
         self.profile = profile
+        # Who commands through it, in its messages: ROS, or a live client (ocu.live.goals).
+        self.source = source
         self.settings = settings if settings is not None else BridgeSettings.from_profile(profile)
         self.clock = clock
         # Runs under the bridge's lock on the calling thread: it must not block.
@@ -215,7 +218,7 @@ class BridgeCore:
         self._goal_channels = set()
         self._drive = self.settings.drive_zero
         if self._arm is not None:
-            self._arm.stop("ROS released the arm")
+            self._arm.stop(f"{self.source} released the arm")
             self._arm.pop_messages()
         self._arm_owned = False
 
@@ -253,9 +256,10 @@ class BridgeCore:
                 # A closed link is the normal end of a run: worth a line, not a warning.
                 log.log(
                     logging.WARNING if state is LinkState.LOST else logging.INFO,
-                    "%s%s: ROS commands refused, zeros sent%s",
+                    "%s%s: %s commands refused, zeros sent%s",
                     "LINK LOST" if state is LinkState.LOST else "link closed",
                     f" ({reason})" if reason else "",
+                    self.source,
                     f" (stopped {', '.join(stopped)})" if stopped else "",
                 )
             elif state is LinkState.CONNECTED and self._gate is LinkGate.LOST:
@@ -346,7 +350,7 @@ class BridgeCore:
         """Why cmd_vel is not obeyed now ('' when it is)."""
         with self._lock:
             if not self._in_control:
-                return f"ROS control {self._state.value}"
+                return f"{self.source} control {self._state.value}"
             if self._gate is not LinkGate.OPEN:
                 return gate_text(self._gate, self.settings.cmd_vel_timeout_s)
             return ""
@@ -410,7 +414,7 @@ class BridgeCore:
         """The arm controller when ROS may move it; ArmError (counted) otherwise."""
         if self._arm is None or not self._in_control:
             self._rejected += 1
-            reason = self.arm_error or f"ROS control {self._state.value}"
+            reason = self.arm_error or f"{self.source} control {self._state.value}"
             raise ArmError(f"{what} ignored: {reason}")
         if self._gate is LinkGate.LOST:
             self._rejected += 1
@@ -613,7 +617,7 @@ class BridgeCore:
         """Log (throttled) that a controller raised and was stopped; returns the reason."""
         reason = f"the {what} controller failed ({type(err).__name__}: {err})"
         if self._throttle.allow(f"failed {what}"):
-            log.error("%s: %s stopped, ROS control goes on", reason, what, exc_info=err)
+            log.error("%s: %s stopped, %s control goes on", reason, what, self.source, exc_info=err)
         return reason
 
     def halt(self, reason: str) -> list[str]:
@@ -629,7 +633,7 @@ class BridgeCore:
                 self._release()
                 self._update_state()
         if stopped:
-            log.error("ROS motion halted (%s): %s zeroed", reason, ", ".join(stopped))
+            log.error("%s motion halted (%s): %s zeroed", self.source, reason, ", ".join(stopped))
         return stopped
 
     def _send_drive(self, drive: dict[str, float]) -> None:

@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 
 from ocu.console.channels import Source
+from ocu.console.model import ConsoleModel
 from ocu.headless import HeadlessConsole
 from ocu.records import CommandError
 from ocu.ros.bridge import BridgeCore
@@ -24,6 +25,14 @@ log = logging.getLogger("ocu.ros")
 # How often the halt thread looks at the bridge thread's steps.
 WATCH_PERIOD_S = 0.05
 CLOSE_TIMEOUT_S = 2.0
+
+
+def live_goal_core(model: ConsoleModel) -> BridgeCore:
+    """The goal core of a live client's arm topics (ocu.live.goals): the bridge's joint goals,
+    arm moves and jog, with the console's stored poses."""
+    arm = model.arm
+    path = arm.poses.path if arm is not None else None
+    return BridgeCore(model.profile, arm_poses_path=path, source="live client")
 
 
 class ModelSink:

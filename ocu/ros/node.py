@@ -503,7 +503,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
     from ocu.headless import HeadlessConsole
     from ocu.link.base import LinkError
     from ocu.live.options import LiveError, serve, serve_console, start_live
-    from ocu.ros.host import ModelSink, end_path, follow_path
+    from ocu.ros.host import ModelSink, end_path, follow_path, live_goal_core
     from ocu.ros.rosbridge import RosBridge
     from ocu.sim.launcher import SimulatorProcess, SimulatorProcessError
 
@@ -582,7 +582,7 @@ def _command_robot(profile: RobotProfile, config: NodeConfig, stop: threading.Ev
         headless = console = HeadlessConsole(
             model, hardware, control_period_s=1.0 / config.bridge.rate_hz
         )
-        serve_console(live, console.manager)
+        serve_console(live, console.manager, live_goal_core)
         # The model feeds its own navigator (odometry, the zones, the path mode); the bridge
         # publishes from it, hands it other nodes' scans and /follow_path.
         sink = ModelSink(console, silent_after_s=profile.link.gui_alive_timeout_s)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import struct
 
 import pytest
 
@@ -73,7 +74,10 @@ def test_subscribe_and_unsubscribe_are_read() -> None:
     ("frame", "reason"),
     [
         (b"\x01\x02", "binary frame: not a message"),
-        (b"\x02\x00\x00\x00\x00", "binary frame: not a message"),
+        (b"\x03\x00\x00\x00\x00", "binary frame: not a message"),
+        (b"\x02\x00\x00\x00\x00", "service call: shorter than its header"),
+        (b"\x02" + struct.pack("<III", 1, 2, 9) + b"json", "service call: a bad encoding length"),
+        (b"\x02" + struct.pack("<III", 1, 2, 2) + b"\xff\xfe", "the encoding is not ASCII"),
         ('{"op":"advertise","channels":[{"id":1,"topic":5}]}', "topic, encoding and schemaName"),
         ('{"op":"advertise","channels":[3]}', "each channel must be an object"),
         ('{"op":"unadvertise","channelIds":[-1]}', "channel id"),
@@ -98,3 +102,19 @@ def test_malformed_client_frames_are_refused_with_the_reason(
 ) -> None:
     with pytest.raises(wire.ClientMessageError, match=reason):
         wire.parse_client_message(frame)
+
+
+def test_service_calls_and_their_answers_are_the_protocols_bytes() -> None:
+    frame = b"\x02" + struct.pack("<III", 7, 9, 4) + b"json" + b'{"name":"ready"}'
+    assert wire.parse_client_message(frame) == wire.ServiceCallRequest(
+        7, 9, "json", b'{"name":"ready"}'
+    )
+    answer = wire.service_call_response(7, 9, "cdr", b"\x00\x01\x00\x00\x01")
+    assert answer == b"\x03" + struct.pack("<III", 7, 9, 3) + b"cdr" + b"\x00\x01\x00\x00\x01"
+    failure = json.loads(wire.service_call_failure(7, 9, "no service 7"))
+    assert failure == {
+        "op": "serviceCallFailure",
+        "serviceId": 7,
+        "callId": 9,
+        "message": "no service 7",
+    }

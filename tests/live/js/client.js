@@ -11,7 +11,11 @@
 // /robot_description it receives names (as Foxglove's 3D panel does); publish: {topic,
 // encoding ("json" or "cdr"), schemaName, rateHz, count, linear, angular}: advertise and
 // publish a Twist `count` times at `rateHz` (as Foxglove's Teleop panel does), once the
-// server declares clientPublish.
+// server declares clientPublish; with `message` (an object) and `definition` (its ros2msg
+// text, for cdr) any other message instead; `publishes`: a list of such specs.
+// calls: [{service, encoding, request, delayMs}]: call each advertised service by name
+// (as Foxglove's Call Service panel does), the request in json or cdr (from the service's
+// request schema), the response decoded likewise.
 // It prints one JSON object per line: serverInfo, advertise, message (decoded), status,
 // close, error; it runs until stdin closes or the server closes the connection.
 "use strict";
@@ -61,7 +65,9 @@ function fetchAsset(uri) {
 client.on("serverInfo", (info) => {
   print({ event: "serverInfo", name: info.name, capabilities: info.capabilities, protocol: ws.protocol });
   for (const uri of options.fetch || []) fetchAsset(uri);
-  if (options.publish && info.capabilities.includes("clientPublish")) publish(options.publish);
+  if (info.capabilities.includes("clientPublish")) {
+    for (const spec of [options.publish, ...(options.publishes || [])]) if (spec) publish(spec);
+  }
   for (let i = 0; i < (options.garbage || 0); i++) {
     ws.send(i % 2 === 0 ? `not json ${i}` : Buffer.from([0xff, 0x00, i & 0xff]));
   }
@@ -73,19 +79,22 @@ const TWIST = "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n" +
 
 function publish(spec) {
   const channel = client.advertise({ topic: spec.topic, encoding: spec.encoding, schemaName: spec.schemaName });
-  const writer = new MessageWriter(parse(TWIST, { ros2: true }));
-  const message = {
+  const writer = new MessageWriter(parse(spec.definition || TWIST, { ros2: true }));
+  const message = spec.message || {
     linear: { x: spec.linear, y: 0, z: 0 },
     angular: { x: 0, y: 0, z: spec.angular },
   };
-  const data = spec.encoding === "cdr"
-    ? writer.writeMessage(message)
-    : new TextEncoder().encode(JSON.stringify(message));
+  const encode = (m) => (spec.encoding === "cdr" ? writer.writeMessage(m) : new TextEncoder().encode(JSON.stringify(m)));
+  const data = encode(message);
+  // `alternate`: every second Twist's linear.x (a stream whose every message is news).
+  const other = spec.alternate === undefined
+    ? data
+    : encode({ ...message, linear: { ...message.linear, x: spec.alternate } });
   let sent = 0;
   const send = () => {
-    client.sendMessage(channel, data);
+    client.sendMessage(channel, sent % 2 === 0 ? data : other);
     sent += 1;
-    print({ event: "published", n: sent, local_ms: performance.timeOrigin + performance.now() });
+    print({ event: "published", topic: spec.topic, n: sent, local_ms: performance.timeOrigin + performance.now() });
     if (sent >= spec.count) {
       clearInterval(timer);
       if (spec.unadvertise) client.unadvertise(channel);
@@ -155,6 +164,41 @@ client.on("fetchAssetResponse", (response) => {
   }
   print(out);
 });
+
+const services = new Map();
+let nextCall = 1;
+
+client.on("advertiseServices", (advertised) => {
+  for (const service of advertised) services.set(service.name, service);
+  print({ event: "services", services: advertised.map((s) => [s.name, s.type, s.request && s.request.schemaName]) });
+  for (const call of options.calls || []) {
+    const service = services.get(call.service);
+    if (!service) continue;
+    setTimeout(() => callService(service, call), call.delayMs || 0);
+  }
+});
+
+function callService(service, call) {
+  const callId = nextCall++;
+  const data = call.encoding === "cdr"
+    ? new MessageWriter(parse(service.request.schema, { ros2: true })).writeMessage(call.request)
+    : new TextEncoder().encode(JSON.stringify(call.request));
+  client.sendServiceCallRequest({ serviceId: service.id, callId, encoding: call.encoding, data });
+  print({ event: "called", service: service.name, callId, local_ms: performance.timeOrigin + performance.now() });
+}
+
+client.on("serviceCallResponse", (response) => {
+  const service = [...services.values()].find((s) => s.id === response.serviceId);
+  const out = { event: "serviceResponse", service: service && service.name, callId: response.callId, encoding: response.encoding };
+  if (response.encoding === "cdr") {
+    out.decoded = plain(new MessageReader(parse(service.response.schema, { ros2: true })).readMessage(response.data));
+  } else {
+    out.decoded = JSON.parse(new TextDecoder().decode(response.data));
+  }
+  print(out);
+});
+
+client.on("serviceCallFailure", (failure) => print({ event: "serviceFailure", callId: failure.callId, message: failure.message }));
 
 client.on("status", (status) => print({ event: "status", level: status.level, message: status.message }));
 client.on("error", (error) => print({ event: "error", message: String(error && error.message) }));
