@@ -262,13 +262,16 @@ class FrameReader:
     `bad_frames` counts each such episode, `skipped_bytes` the bytes lost.
     """
 
-    def __init__(self, direction: Direction) -> None:
+    def __init__(self, direction: Direction, *, keep_skipped: bool = False) -> None:
         self.direction = direction
+        # Whether skipped bytes are kept for take_skipped (a link that records them).
+        self.keep_skipped = keep_skipped
         self._buffer = bytearray()
         self._in_garbage = False
         self.bad_frames = 0
         self.skipped_bytes = 0
         self.frames = 0
+        self._skipped = bytearray()
 
     @property
     def pending(self) -> int:
@@ -316,6 +319,8 @@ class FrameReader:
                 if not self._in_garbage:
                     self._in_garbage = True
                     self.bad_frames += 1
+                if self.keep_skipped:
+                    self._skipped.append(self._buffer[offset])
                 offset += 1
                 self.skipped_bytes += 1
                 continue
@@ -326,3 +331,8 @@ class FrameReader:
             offset += verdict
         del self._buffer[:offset]
         return frames
+
+    def take_skipped(self) -> bytes:
+        """The bytes skipped since the last call (garbage, for a recording), in order."""
+        skipped, self._skipped = bytes(self._skipped), bytearray()
+        return skipped
