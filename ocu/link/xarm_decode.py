@@ -84,14 +84,17 @@ class XarmDecoder:
         frames = self.reader.feed(data)
         now = self.clock()
         tap = self.tap
-        if tap is not None:
-            skipped = self.reader.take_skipped()
-            if skipped:
-                tap(DatagramReceived(skipped, now, OTHER))
+        skipped = self.reader.take_skipped()
         replies: list[Reply] = []
-        for frame in frames:
+        for index, frame in enumerate([*frames, None]):
             if tap is not None:
-                tap(DatagramReceived(frame.encode(), now, XARM_FROM_BOARD))
+                # In the order the bytes came: each run of garbage, then the frame after it.
+                for _ in range(sum(1 for before, _ in skipped if before == index)):
+                    tap(DatagramReceived(skipped.pop(0)[1], now, OTHER))
+                if frame is not None:
+                    tap(DatagramReceived(frame.encode(), now, XARM_FROM_BOARD))
+            if frame is None:
+                break
             try:
                 if frame.command == Cmd.MULT_SERVO_POS_READ:
                     replies.append(PositionsReply(decode_positions(frame.parameters)))

@@ -271,7 +271,8 @@ class FrameReader:
         self.bad_frames = 0
         self.skipped_bytes = 0
         self.frames = 0
-        self._skipped = bytearray()
+        # Runs of skipped bytes: (how many of the next feed's frames came before, bytes).
+        self._skipped: list[tuple[int, bytes]] = []
 
     @property
     def pending(self) -> int:
@@ -310,6 +311,7 @@ class FrameReader:
         """Add received bytes; the whole frames now complete, in order."""
         self._buffer += data
         frames: list[Frame] = []
+        run = bytearray()
         offset = 0
         while offset < len(self._buffer):
             verdict = self._judge(offset)
@@ -320,19 +322,25 @@ class FrameReader:
                     self._in_garbage = True
                     self.bad_frames += 1
                 if self.keep_skipped:
-                    self._skipped.append(self._buffer[offset])
+                    run.append(self._buffer[offset])
                 offset += 1
                 self.skipped_bytes += 1
                 continue
             self._in_garbage = False
+            if run:
+                self._skipped.append((len(frames), bytes(run)))
+                run = bytearray()
             frame_bytes = self._buffer[offset : offset + verdict]
             frames.append(Frame(frame_bytes[3], bytes(frame_bytes[4:])))
             self.frames += 1
             offset += verdict
+        if run:
+            self._skipped.append((len(frames), bytes(run)))
         del self._buffer[:offset]
         return frames
 
-    def take_skipped(self) -> bytes:
-        """The bytes skipped since the last call (garbage, for a recording), in order."""
-        skipped, self._skipped = bytes(self._skipped), bytearray()
+    def take_skipped(self) -> list[tuple[int, bytes]]:
+        """The runs of bytes skipped by the last feed (with `keep_skipped`: garbage, for a
+        recording): each with how many of that feed's frames came before it."""
+        skipped, self._skipped = self._skipped, []
         return skipped
