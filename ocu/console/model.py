@@ -218,7 +218,8 @@ class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoReques
         the link is to end the position controller's motions by itself."""
         velocities = self.velocities()
         ends = self._ends(velocities)
-        goals = self.arm.controller.goals if self.arm is not None else {}
+        goals = dict(self.arm.controller.goals) if self.arm is not None else {}
+        goals.update(g for _, timed in self._source_ends.values() for g in timed.items())
         return Command(
             velocities=velocities,
             torch=self._torch,
@@ -231,10 +232,12 @@ class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoReques
     def _ends(self, velocities: Mapping[str, float]) -> dict[str, float]:
         """The position controller's and the arm's channels that end by themselves, and when
         (the arm's timed move: ocu.control.arm_timed)."""
-        arm = self.arm.controller.until if self.arm is not None else {}
+        timed = [(Source.POSITION, self.controller.until)]
+        timed += [(Source.ARM, self.arm.controller.until)] if self.arm is not None else []
+        timed += [(source, until) for source, (until, _) in self._source_ends.items()]
         return {
             channel: at
-            for source, ends in ((Source.POSITION, self.controller.until), (Source.ARM, arm))
+            for source, ends in timed
             for channel, at in ends.items()
             if channel in velocities and self._channels[channel].source is source
         }

@@ -161,6 +161,9 @@ class BridgeCore:
                 self._arm = ArmController(
                     self.profile, self._limits, self.arm_kinematics, self._controller
                 )
+                # A sink over hardware with timed moves takes the arm's move as one position
+                # command with a duration (its `set_ends`; ocu.control.arm_timed).
+                self._arm.timed_moves = bool(getattr(sink, "timed_moves", False))
             self._goal_channels = set()
             self._drive = self.settings.drive_zero
             self._timeout = CmdVelTimeout(self.settings.cmd_vel_timeout_s)
@@ -602,10 +605,13 @@ class BridgeCore:
                     velocities[channel] = arm_velocities.get(channel, 0.0)
                 self._arm_owned = self._arm.active
                 messages += self._arm.pop_messages()
+            ends = self._arm.until if self._arm is not None and self._arm_owned else {}
             if velocities:
+                if self._arm is not None and self._arm.timed_moves:
+                    self._sink.set_ends(ends, self._arm.goals)  # type: ignore[attr-defined]
                 self._sink.set_velocities(**velocities)
                 # The controller's prediction integrates what the bridge sent (delay-aware).
-                self._controller.note_sent(now, {**self._drive, **velocities})
+                self._controller.note_sent(now, {**self._drive, **velocities}, ends)
             self._update_state()
             return messages
 
