@@ -84,17 +84,17 @@ class XarmDecoder:
         frames = self.reader.feed(data)
         now = self.clock()
         tap = self.tap
-        skipped = self.reader.take_skipped()
+        if tap is not None:
+            # In the order the bytes came: each run of garbage before the frame it preceded.
+            runs = self.reader.take_skipped()
+            for index, frame in enumerate(frames):
+                for _, run in (r for r in runs if r[0] == index):
+                    tap(DatagramReceived(run, now, OTHER))
+                tap(DatagramReceived(frame.encode(), now, XARM_FROM_BOARD))
+            for _, run in (r for r in runs if r[0] == len(frames)):
+                tap(DatagramReceived(run, now, OTHER))
         replies: list[Reply] = []
-        for index, frame in enumerate([*frames, None]):
-            if tap is not None:
-                # In the order the bytes came: each run of garbage, then the frame after it.
-                for _ in range(sum(1 for before, _ in skipped if before == index)):
-                    tap(DatagramReceived(skipped.pop(0)[1], now, OTHER))
-                if frame is not None:
-                    tap(DatagramReceived(frame.encode(), now, XARM_FROM_BOARD))
-            if frame is None:
-                break
+        for frame in frames:
             try:
                 if frame.command == Cmd.MULT_SERVO_POS_READ:
                     replies.append(PositionsReply(decode_positions(frame.parameters)))

@@ -55,14 +55,15 @@ class XarmReplayLink(ReplayLink):
         super().__init__(path, None, clock=clock, on_finished=on_finished)
 
     def _reset_xarm(self) -> None:
-        self.decoder = XarmDecoder(self.arm, clock=self.clock_or_now)
+        self.decoder = XarmDecoder(self.arm, clock=self.recorded_now)
         self.moves = XarmMoves(self.arm)
         self._velocities: dict[str, float] = {}
         self._replies = 0
         self._at = 0.0  # the recorded time of the message being replayed (s)
 
-    def clock_or_now(self) -> float:
-        """The recorded time of the message being decoded (the decoder's clock)."""
+    def recorded_now(self) -> float:
+        """The recorded time of the message being decoded (the decoder's clock: the live
+        link's decoder read its clock on arrival, which the log time is)."""
         return self._at
 
     def _reset_decoding(self) -> None:
