@@ -10,7 +10,8 @@ believable reading on. From a command (docs/xarm.md "The link"):
   whole units, and a slow jog whose step is under half a unit would otherwise never move;
 - a joint with a goal (`Command.goals`: a position command with a duration): one move to the
   goal within the time left to its `until`, sent once; the joints of one goal with the same
-  end go in one frame (one synchronized move of the board);
+  end go in one frame (one synchronized move of the board), which takes longer than that
+  only when a joint would have to go faster than its top speed (a goal that came late);
 - a joint whose velocity went to zero while its setpoint moves: the stop move, the setpoint
   held where it is now, within 0 ms.
 
@@ -20,6 +21,7 @@ one), velocities to its top speed. A joint never read is not moved.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 from ocu.link.xarm_wire import Ramp
@@ -61,7 +63,7 @@ class XarmMoves:
         command = command.expired(now)
         stops: dict[int, int] = {}
         jogs: dict[int, int] = {}
-        timed: dict[int, dict[int, int]] = {}  # duration (ms) -> servo -> target
+        timed: dict[float, dict[int, tuple[int, float, float]]] = {}  # end -> servo -> move
         sent: dict[str, float] = {}
         move_s = self.arm.timing.jog_move_s
         for joint in self.arm.joints:
@@ -74,10 +76,15 @@ class XarmMoves:
                 key = (goal, command.until[joint.name])
                 if self._timed.get(joint.servo) != key:
                     self._timed[joint.servo] = key
-                    duration_ms = min(round((key[1] - now) * 1000.0), DURATION_MAX_MS)
-                    target = self._goal_units(joint, goal)
-                    timed.setdefault(duration_ms, {})[joint.servo] = target
-                    self.ramps[joint.servo] = Ramp(here, target, now, duration_ms / 1000.0)
+                    # Never faster than the joint's top speed (a goal that comes late).
+                    slowest = abs(self._goal_units(joint, goal) - here) / (
+                        joint.max_speed_rad_s * self.arm.units_per_rad
+                    )
+                    timed.setdefault(key[1], {})[joint.servo] = (
+                        self._goal_units(joint, goal),
+                        here,
+                        slowest,
+                    )
                 sent[joint.name] = command.velocity(joint.name)
                 continue
             self._timed.pop(joint.servo, None)
@@ -95,8 +102,14 @@ class XarmMoves:
         frames = []
         if stops:
             frames.append(servo_move(0, stops))
-        for duration_ms, targets in sorted(timed.items()):
-            frames.append(servo_move(duration_ms, targets))
+        for end, group in sorted(timed.items()):
+            # One duration for the group: the time left to its end, or longer when a joint
+            # could not make it at its top speed (all of them stay synchronized).
+            duration_s = max(end - now, *(slowest for _, _, slowest in group.values()))
+            duration_ms = min(math.ceil(duration_s * 1000.0), DURATION_MAX_MS)
+            for servo, (target, here, _) in group.items():
+                self.ramps[servo] = Ramp(here, target, now, duration_ms / 1000.0)
+            frames.append(servo_move(duration_ms, {s: t for s, (t, _, _) in group.items()}))
         if jogs:
             frames.append(servo_move(round(move_s * 1000), jogs))
         return frames, command.with_velocities(

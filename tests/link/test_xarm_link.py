@@ -189,6 +189,28 @@ def test_a_goal_goes_as_one_move_of_several_servos(
     assert dict(stop.positions)[BASE] < 600  # the goal was 500 + 0.5 rad = 619
 
 
+def test_a_late_goal_is_never_run_faster_than_the_joints_top_speed(
+    rig: tuple[XarmSimulator, XarmLink, Events],
+) -> None:
+    """A goal whose end is 20 ms away (a command that came late) would be a jump of the
+    servo: the move takes the time the joint's top speed needs, the others in it too."""
+    simulator, link, _ = rig
+    arm = link.arm
+    since = simulator.snapshot().time
+    end = link.clock() + 0.02
+    goals = {"elbow": -0.5, "shoulder": 0.1}
+    link.set_command(
+        Command(velocities=dict.fromkeys(goals, 1.0), until=dict.fromkeys(goals, end), goals=goals)
+    )
+    wait_for(lambda: bool(simulator.board.moves_since(since)), "the move")
+    move = simulator.board.moves_since(since)[0][1]
+    assert {servo for servo, _ in move.positions} == {4, 5}  # still one synchronized move
+    top_speed = arm.joint("elbow").max_speed_rad_s * arm.units_per_rad  # 60°/s in units/s
+    travel = abs(dict(move.positions)[4] - 500)  # the elbow's, from the middle
+    assert move.duration_ms >= travel / top_speed * 1000
+    link.set_command(Command())
+
+
 def test_reads_are_rate_limited_while_moves_stream(
     rig: tuple[XarmSimulator, XarmLink, Events],
 ) -> None:
