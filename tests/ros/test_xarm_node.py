@@ -221,11 +221,12 @@ def test_arm_twist_on_the_xarm_moves_tool0_and_the_servos_stop_after_the_last(
         twists.unregister()
     assert true_tool(bent_board)[2] - start[2] > 0.008, "tool0 did not move up"
     # The last move the board received that goes anywhere: within the twist's timeout
-    # (0.1 s) and a control cycle or two of the last twist; its 150 ms is all the servos run on.
+    # (0.1 s) of the last twist; its 150 ms is all the servos run on after it.
     moves = [(t, m) for t, m in bent_board.board.moves_since(last_sent - 1.0) if m.duration_ms]
     assert moves
     last_at, last = moves[-1]
-    assert last_at - last_sent < 0.1 + 0.25, f"a move {last_at - last_sent:.3f} s after"
+    # (0.4 s of margin: the node, another process, hears the twists late on a loaded machine.)
+    assert last_at - last_sent < 0.1 + 0.4, f"a move {last_at - last_sent:.3f} s after"
     assert last.duration_ms == 150
 
 
