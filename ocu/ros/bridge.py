@@ -161,8 +161,7 @@ class BridgeCore:
                 self._arm = ArmController(
                     self.profile, self._limits, self.arm_kinematics, self._controller
                 )
-                # A sink over hardware with timed moves takes the arm's move as one position
-                # command with a duration (its `set_ends`; ocu.control.arm_timed).
+                # A sink over timed-move hardware: moves as one command (ocu.control.arm_timed).
                 self._arm.timed_moves = bool(getattr(sink, "timed_moves", False))
             self._goal_channels = set()
             self._drive = self.settings.drive_zero
