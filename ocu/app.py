@@ -230,8 +230,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if ur_arm is not None and args.sim_arg:
         parser.error("--sim-arg is not available for a UR arm yet (docs/ur.md)")
     if xarm is not None:
-        for given, option in ((args.replay, "--replay"), (args.record, "--record"),
-                              (args.sim_arg, "--sim-arg"), (args.live, "--live")):  # fmt: skip
+        for given, option in ((args.sim_arg, "--sim-arg"), (args.live, "--live")):
             if given:
                 parser.error(f"{option} is not available for the xArm yet (docs/xarm.md)")
     if args.replay is not None:
@@ -277,13 +276,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     STOP.install()
     # Before Qt, the link or the control core start a thread: threads inherit it.
     log.info("scheduling priority: %s", raise_priority(nice).text)
-    if xarm is not None:
+    if xarm is not None and args.replay is None:
         from ocu.hardware.xarm import XARM_CAPABILITIES, ConsoleLinks
+        from ocu.record.errors import RecordingError
+        from ocu.record.recorder import Recorder
 
+        recorder = Recorder(profile)
         try:
+            if args.record is not None:
+                recorder.start(args.record)
             links = ConsoleLinks(xarm, profile, args.robot)
-        except OSError as err:
+        except (OSError, RecordingError) as err:
             log.error("%s", err)
+            recorder.stop()
             return 1
         try:
             return run_arm_window(
@@ -295,8 +300,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                 key_map=key_map,
                 pad_mapping=None if args.no_gamepad else pad_mapping,
                 control_hz=args.control_hz,
+                recorder=recorder,
             )
         finally:
+            recorder.stop()  # after the window's shutdown: the link's closing stop move in it
             links.close()
     if ur_arm is not None and args.replay is None:
         return run_ur_console(

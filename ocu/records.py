@@ -31,6 +31,13 @@ class Command:
     monotonic time given, then zero, whether or not a newer command comes (a position
     controller's motion ends where the target is even when its next tick is late). A channel
     without an entry runs until the next command.
+
+    `goals` gives some of those channels a position command with a duration: the joint's
+    angle (rad) the robot is to reach at the channel's `until`, by one move of its own, on
+    hardware with the capability "timed_moves" (a board that takes "go to P within T"). The
+    channel's velocity is then the mean speed of that move: a link without timed moves sends
+    it until `until`, which ends at the same angle, and the position controller's prediction
+    integrates it as it integrates any velocity.
     """
 
     velocities: Mapping[str, float] = field(default_factory=dict)
@@ -38,6 +45,7 @@ class Command:
     camera: int | None = None
     video_bitrate: float = 0.0
     until: Mapping[str, float] = field(default_factory=dict)
+    goals: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         # Which channels exist is the profile's business (CommandMapper checks them).
@@ -47,6 +55,9 @@ class Command:
         for name, at in self.until.items():
             if not math.isfinite(at):
                 raise CommandError(f"{name}: the end of its motion must be finite, got {at!r}")
+        for name, goal in self.goals.items():
+            if not math.isfinite(goal) or name not in self.until:
+                raise CommandError(f"{name}: a goal must be finite and have an end, got {goal!r}")
         if self.camera is not None and not 0 <= self.camera < 255:
             raise CommandError(f"camera index must be in [0, 254], got {self.camera}")
 
@@ -68,11 +79,12 @@ class Command:
         velocities = dict(self.velocities)
         velocities.update(values)
         until = {name: at for name, at in self.until.items() if name not in values}
-        return replace(self, velocities=velocities, until=until)
+        goals = {name: at for name, at in self.goals.items() if name not in values}
+        return replace(self, velocities=velocities, until=until, goals=goals)
 
     def stopped(self) -> Command:
         """The same switches with every velocity zero (the e-stop command)."""
-        return replace(self, velocities={}, until={})
+        return replace(self, velocities={}, until={}, goals={})
 
     def expired(self, now: float) -> Command:
         """This command at `now`: the channels whose end has come are zero (self if none)."""
@@ -83,6 +95,7 @@ class Command:
             self,
             velocities={n: v for n, v in self.velocities.items() if n not in ended},
             until={n: at for n, at in self.until.items() if n not in ended},
+            goals={n: at for n, at in self.goals.items() if n not in ended},
         )
 
     def same_wire(self, other: Command) -> bool:
@@ -90,6 +103,7 @@ class Command:
         return (
             {n: v for n, v in self.velocities.items() if v != 0.0}
             == {n: v for n, v in other.velocities.items() if v != 0.0}
+            and self.goals == other.goals
             and self.torch == other.torch
             and self.camera == other.camera
             and self.video_bitrate == other.video_bitrate
@@ -467,6 +481,9 @@ UR_SCRIPT = "ur_script"
 UR_PRIMARY = "ur_primary"
 UR_SECONDARY = "ur_secondary"
 UR_REALTIME = "ur_realtime"
+# An xArm board's (ocu.link.xarm): each frame written to it, each whole frame read from it.
+XARM_TO_BOARD = "xarm_to_board"
+XARM_FROM_BOARD = "xarm_from_board"
 
 
 @dataclass(frozen=True)

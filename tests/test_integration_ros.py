@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from PySide6.QtCore import Qt, QTimer
+from PySide6.QtCore import QSettings, Qt, QTimer
 from PySide6.QtTest import QTest
 from pytestqt.qtbot import QtBot
 
@@ -148,7 +148,7 @@ def test_ros_control_from_the_console(tmp_path: Path) -> None:
     )
     output = result.stdout + result.stderr
     assert result.returncode == 0, output
-    assert "1 passed" in result.stdout, output
+    assert "2 passed" in result.stdout, output
 
 
 # ---- in the child process ---------------------------------------------------------------
@@ -292,3 +292,99 @@ def ros_scenario_toggle_drives_and_the_operator_overrides(
         subscriber.unregister()
         console.shutdown()
     assert state() is BridgeState.OFF
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning:rospy")
+@pytest.mark.filterwarnings("ignore::DeprecationWarning:rosgraph")
+@pytest.mark.filterwarnings("ignore::ResourceWarning")
+def ros_scenario_an_xarm_pose_goal_through_the_console_is_one_move(
+    ros_master: RosMaster, qtbot: QtBot, settings: QSettings
+) -> None:
+    """The console's ROS control on the xArm (its simulator on a pty, bent): /arm/pose_goal
+    goes to the board as ONE move of the four arm servos (the hardware's timed moves, which
+    the console's sink passes on), tool0 within 3 mm of the goal."""
+    import math
+
+    import numpy as np
+
+    from ocu.hardware.xarm import XARM_CAPABILITIES, ConsoleLinks
+    from ocu.hotkeys import load_key_map
+    from ocu.profile.xarm import load_xarm_profile
+    from ocu.profile.xarm_robot import xarm_robot_profile
+    from ocu.records import LinkState
+    from ocu.sim.xarm import XarmSimulator
+
+    arm = load_xarm_profile("xarm1s")
+    profile = xarm_robot_profile(arm)
+    bent = {"shoulder": 30.0, "elbow": 60.0, "wrist_pitch": 40.0}
+    initial = {
+        arm.joint(n).servo: arm.raw_units(arm.joint(n), math.radians(d)) for n, d in bent.items()
+    }
+    board = XarmSimulator(arm, initial=initial, seed=2)
+    links = ConsoleLinks(arm, profile, board.start())
+    console = MainWindow(
+        profile,
+        links.make_link,
+        links.where,
+        settings,
+        load_key_map(profile),
+        hardware_for=links.hardware_for,
+        capabilities=XARM_CAPABILITIES,
+    )
+    qtbot.addWidget(console)
+    console.show()
+
+    import rospy
+    from geometry_msgs.msg import PoseStamped
+
+    poses: list[Any] = []
+    subscriber = rospy.Subscriber("arm/tool_pose", PoseStamped, poses.append)
+    goals = rospy.Publisher("arm/pose_goal", PoseStamped, queue_size=1)
+
+    def at_rest() -> bool:
+        snapshot = board.snapshot()
+        return all(
+            abs(snapshot.velocities[s]) < 0.5
+            and abs(snapshot.positions[s] - snapshot.setpoints[s]) < 1
+            for s in snapshot.positions
+        )
+
+    def tool() -> tuple[float, float, float]:
+        assert console.model.arm is not None
+        positions = board.snapshot().positions
+        q = [
+            arm.angle_rad(arm.joint(n), positions[arm.joint(n).servo])
+            for n in ("base", "shoulder", "elbow", "wrist_pitch")
+        ]
+        pose = console.model.arm.kinematics.tool_pose(np.array(q))
+        return (pose.x, pose.y, pose.z)
+
+    try:
+        qtbot.waitUntil(
+            lambda: console.link_status.state == LinkState.CONNECTED, timeout=ROS_DEADLINE_MS
+        )
+        qtbot.waitUntil(console.ros.action.isEnabled, timeout=ROS_DEADLINE_MS)
+        console.ros.action.trigger()
+        qtbot.waitUntil(lambda: goals.get_num_connections() > 0, timeout=ROS_DEADLINE_MS)
+        qtbot.waitUntil(lambda: bool(poses), timeout=ROS_DEADLINE_MS)
+        now = poses[-1].pose
+        target = (now.position.x - 0.02, now.position.y - 0.03, now.position.z + 0.03)
+        goal = PoseStamped()
+        goal.header.frame_id = "base_link"
+        goal.pose.position.x, goal.pose.position.y, goal.pose.position.z = target
+        goal.pose.orientation = now.orientation
+        since = board.snapshot().time
+        goals.publish(goal)
+        qtbot.waitUntil(lambda: bool(board.board.moves_since(since)), timeout=ROS_DEADLINE_MS)
+        qtbot.waitUntil(
+            lambda: at_rest() and math.dist(tool(), target) < 0.003, timeout=2 * ROS_DEADLINE_MS
+        )
+        moves = [move for _, move in board.board.moves_since(since)]
+        assert len(moves) == 1, moves
+        assert {servo for servo, _ in moves[0].positions} == {6, 5, 4, 3}
+    finally:
+        goals.unregister()
+        subscriber.unregister()
+        console.shutdown()
+        links.close()
+        board.stop()

@@ -20,6 +20,7 @@ class Arbitration(ModelPart):
         """Each source of the table registers its stop (a new source registers its own)."""
         self.mux = mux if mux is not None else InputMux.shipped()
         self._fed_at: dict[Source, float] = {}
+        self._source_ends: dict[Source, tuple[dict[str, float], dict[str, float]]] = {}
         self._pad_background = False
         for zeroed in (Source.SLIDER, Source.TEXT, Source.SWITCH, Source.GAMEPAD, Source.ROS):
             self.mux.register(zeroed.value, self._zeroer(zeroed))

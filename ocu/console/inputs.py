@@ -151,8 +151,17 @@ class InputSources(ModelPart):
         self._publish()
         return applied
 
+    def set_source_ends(
+        self, source: Source, until: Mapping[str, float], goals: Mapping[str, float]
+    ) -> None:
+        """When `source`'s channels end by themselves (Command.until), and the goals they
+        reach then (Command.goals: a planner's arm move on hardware with timed moves); set
+        before its velocities, which carry them to the command."""
+        self._source_ends[source] = (dict(until), dict(goals))
+
     def clear_source(self, source: Source, reason: str = "") -> None:
         """Every channel `source` drives stops."""
+        self._source_ends.pop(source, None)
         for channel in self._channels:
             if self._requested(channel).source is source:
                 self._set_channel(channel, 0.0, Source.NONE)

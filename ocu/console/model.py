@@ -217,20 +217,29 @@ class ConsoleModel(Arbitration, Driving, ClickToTrack, InputSources, VideoReques
         """The command for the link: every channel's velocity and the switches, and when
         the link is to end the position controller's motions by itself."""
         velocities = self.velocities()
+        ends = self._ends(velocities)
+        goals = dict(self.arm.controller.goals) if self.arm is not None else {}
+        goals.update(g for _, timed in self._source_ends.values() for g in timed.items())
         return Command(
             velocities=velocities,
             torch=self._torch,
             camera=self._camera,
             video_bitrate=self._bitrate,
-            until=self._ends(velocities),
+            until=ends,
+            goals={channel: goal for channel, goal in goals.items() if channel in ends},
         )
 
     def _ends(self, velocities: Mapping[str, float]) -> dict[str, float]:
-        """The position controller's channels that end by themselves, and when."""
+        """The position controller's and the arm's channels that end by themselves, and when
+        (the arm's timed move: ocu.control.arm_timed)."""
+        timed = [(Source.POSITION, self.controller.until)]
+        timed += [(Source.ARM, self.arm.controller.until)] if self.arm is not None else []
+        timed += [(source, until) for source, (until, _) in self._source_ends.items()]
         return {
             channel: at
-            for channel, at in self.controller.until.items()
-            if channel in velocities and self._channels[channel].source is Source.POSITION
+            for source, ends in timed
+            for channel, at in ends.items()
+            if channel in velocities and self._channels[channel].source is source
         }
 
     @property

@@ -37,6 +37,8 @@ class ModelPart:
     controller: PositionController
     mux: InputMux
     _fed_at: dict[Source, float]
+    # A source's channels that end by themselves (until) and their goals (Command.goals).
+    _source_ends: dict[Source, tuple[dict[str, float], dict[str, float]]]
     nav: Navigator
     arm: ArmConsole | None
     arm_error: str

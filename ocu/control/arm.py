@@ -16,7 +16,9 @@ Two kinds of motion, one at a time:
   position, K at most one over the horizon, so a late tick carries no joint past the profile
   or the goal; a joint is never driven back against its move on the prediction alone (it
   stops until a reading taken after the stop shows it past); done when a reading taken after
-  the last command confirms every joint within the tolerance.
+  the last command confirms every joint within the tolerance. On hardware that takes a
+  position command with a duration ("timed_moves") the move is ONE such command instead,
+  nothing streamed on top (ocu.control.arm_timed).
 
 Safety, after MoveIt Servo: a jog slows down when the Jacobian's condition number passes
 `singularity_slow` and stops at `singularity_stop` — only while moving toward the singularity
@@ -46,7 +48,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ocu.control.arm_task import Reference, TaskSpace, task_for, task_rows
+from ocu.control.arm_task import Reference, TaskSpace, singularity_cause, task_for, task_rows
+from ocu.control.arm_timed import arrival_tolerances, timed_command
 from ocu.control.commands import VelocityLimits
 from ocu.control.position import PositionController
 from ocu.kinematics.arm import ArmError, ArmKinematics, ToolPose
@@ -142,6 +145,12 @@ class ArmController:
         self.settings = kinematics.settings
         self.tolerance_rad = tolerance_rad
         self.joints = kinematics.joints
+        self.tolerances = arrival_tolerances(profile, self.joints, tolerance_rad)
+        # Hardware that takes a position command with a duration ("timed_moves"): a move is
+        # sent as one, its goals and end here while it runs (ocu.control.arm_timed).
+        self.timed_moves = False
+        self.goals: dict[str, float] = {}
+        self.until: dict[str, float] = {}
         channels = []
         for joint in self.joints:
             channel = profile.motors[joint].channel
@@ -418,6 +427,7 @@ class ArmController:
         """
         last, self._last_tick = self._last_tick, now
         self.position.note_tick(now)
+        self.goals, self.until = {}, {}
         dt = 0.0 if last is None else min(max(now - last, 0.0), MAX_TICK_S)
         jog = self._jog
         if jog is not None and jog.expires_at is not None and now > jog.expires_at:
@@ -532,7 +542,7 @@ class ArmController:
         ahead = kin.condition(q + unit * 0.01)
         if ahead > condition:
             low, high = settings.singularity_slow, settings.singularity_stop
-            cause = self._singularity_cause(q)
+            cause = singularity_cause(self.kinematics, q)
             if condition >= high:
                 results.append((0.0, f"{cause} (condition {condition:.0f} ≥ {high:g})"))
             elif condition > low:
@@ -590,19 +600,6 @@ class ArmController:
             return (contact.distance_m - settings.clearance_m) / band, f"close: {text}"
         return 1.0, ""
 
-    def _singularity_cause(self, q: Vector) -> str:
-        arm = self.kinematics.analytic
-        if arm is None:
-            return "near a singular pose"
-        bend = self.kinematics.elbow_bend(q)
-        if abs(math.sin(bend)) < math.sin(math.radians(25.0)) and math.cos(bend) > 0.0:
-            return "the arm is stretched out: the edge of the workspace"
-        if abs(math.sin(bend)) < math.sin(math.radians(25.0)):
-            return "the arm is folded onto itself"
-        if self.kinematics.wrist_radius(q) < 0.1 * self.kinematics.length_scale_m:
-            return "the wrist is over the waist axis"
-        return "near a singular pose"
-
     def _move_step(self, move: _Move, eventual: Vector, now: float) -> Vector | None:
         elapsed = now - move.started_at
         reference, _ = move.path.sample(elapsed)
@@ -632,13 +629,19 @@ class ArmController:
         ahead, _ = move.path.sample(elapsed + horizon)
         gain = min(gain, 1.0 / horizon)
         if elapsed < move.path.duration_s:
+            if self.timed_moves:
+                velocities, self.goals, self.until = timed_command(
+                    move.path, move.started_at, self.channels
+                )
+                return velocities
             return self._no_reversal(move, (ahead - reference) / horizon + gain * error)
-        # The profile has ended: hold the goal until a reading confirms it.
-        velocities = gain * error
-        velocities[np.abs(error) <= self.tolerance_rad / 2.0] = 0.0
+        # The profile has ended: hold the goal until a reading confirms it (a timed move's
+        # goal is the robot's own: nothing is fed back on top).
+        velocities = np.zeros(len(self.joints)) if self.timed_moves else gain * error
+        velocities[np.abs(error) <= self.tolerances / 2.0] = 0.0
         velocities = self._no_reversal(move, velocities)
         self._set_status(ArmStatus("holding", goal=move.label))
-        if np.all(np.abs(error) <= self.tolerance_rad) and self._confirmed(now):
+        if np.all(np.abs(error) <= self.tolerances) and self._confirmed(now):
             pose = self.kinematics.tool_pose(eventual)
             off = float(np.linalg.norm(pose.position - move.goal_pose.position))
             self._finish_move(

@@ -153,3 +153,17 @@ def task_rows(twist_size: int) -> int:
 def task_for(kinematics: ArmKinematics, twist_size: int) -> TaskSpace:
     """The task space of a twist of 4 or 6 values."""
     return WholeTask(kinematics) if twist_size == 6 else PitchTask(kinematics)
+
+
+def singularity_cause(kinematics: ArmKinematics, q: Vector) -> str:
+    """Why the arm is near a singular pose, in words (for a jog's status)."""
+    if kinematics.analytic is None:
+        return "near a singular pose"
+    bend = kinematics.elbow_bend(q)
+    if abs(math.sin(bend)) < math.sin(math.radians(25.0)) and math.cos(bend) > 0.0:
+        return "the arm is stretched out: the edge of the workspace"
+    if abs(math.sin(bend)) < math.sin(math.radians(25.0)):
+        return "the arm is folded onto itself"
+    if kinematics.wrist_radius(q) < 0.1 * kinematics.length_scale_m:
+        return "the wrist is over the waist axis"
+    return "near a singular pose"

@@ -52,6 +52,8 @@ CAPABILITIES: Mapping[str, str] = {
     "imu": "roll, pitch and heading reports",
     "arm": "a manipulator arm with joint positions: the Arm dock, stored poses",
     "calibration": "first-contact calibration over its wire (ocu calibrate): the Calibration dock",
+    "timed_moves": "joint position commands with a duration the robot runs itself "
+    "(Command.goals): the arm's moves go as one such command",
 }
 
 

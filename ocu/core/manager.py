@@ -45,6 +45,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 from ocu.console.stall import StallWatch
+from ocu.control.arm_timed import TIMED_MOVES
 from ocu.priority import current_nice
 from ocu.records import CameraRequest, Command
 
@@ -158,6 +159,11 @@ class ControllerManager:
         events = self.model.events
         with self.lock:
             self.hardware = hardware
+            if self.model.arm is not None:
+                # A robot that runs a position command with a duration gets the arm's moves
+                # as one such command (ocu.control.arm_timed).
+                capabilities: frozenset[str] = getattr(hardware, "capabilities", frozenset())
+                self.model.arm.controller.timed_moves = TIMED_MOVES in capabilities
             events.command_changed.connect(self._write_now, direct=True)
             events.estop_requested.connect(self._estop_now, direct=True)
             events.stream_request_changed.connect(self._streams_now, direct=True)

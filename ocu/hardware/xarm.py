@@ -3,7 +3,8 @@
 Its joints are the six servos: each reports its position (and a speed derived from two
 readings) and takes a velocity command, which the link turns into short moves
 (ocu.link.xarm). Its capabilities: the arm (its URDF and seed 003's IK: the Arm dock, the 3D
-model, stored poses) and the battery.
+model, stored poses), the battery, and timed moves: an arm move is one CMD_SERVO_MOVE of
+all its servos with one duration (Command.goals, ocu.control.arm_timed).
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from ocu.sim.xarm import XarmSimulator
 
 log = logging.getLogger("ocu.hardware")
 
-XARM_CAPABILITIES = frozenset({"arm", "battery"})
+# "timed_moves": the board takes "go to P within T" (CMD_SERVO_MOVE), several servos at once.
+XARM_CAPABILITIES = frozenset({"arm", "battery", "timed_moves"})
 
 
 def xarm_joints(arm: XarmProfile) -> tuple[JointInterfaces, ...]:

@@ -213,6 +213,9 @@ class CollisionModel:
             p for p, d in zip(self._capsule_pairs, capsule_d, strict=True) if d > 0.0
         ]
         self._box_pairs = [p for p, d in zip(self._box_pairs, box_d, strict=True) if d > 0.0]
+        # The index arrays were built for the measurement above, over every pair: again, over
+        # the pairs kept (else the columns of `gaps_along` are not those `pair_contact` names).
+        self._prepare()
 
     def _relevant(self, a: str, b: str) -> bool:
         """Whether an arm joint moves the two links relative to each other (not neighbours)."""

@@ -15,6 +15,9 @@ stops (a crash, a freeze, the cable) the servos stop within `jog_move_s` by them
 velocity that goes to zero sends a move to the setpoint where it is now, within 0 ms: the
 joint stops at once. Positions are read every `read_period_s`, every `read_period_moving_s`
 while moves stream (a read holds the servo bus: commands come first), one read at a time.
+The frames a command becomes are ocu.link.xarm_moves' (jogs, the stop move, and a goal's
+one move: `Command.goals`); the replies are decoded by ocu.link.xarm_decode, which hands
+every frame read to the listeners as this link hands every frame it writes (a recording).
 
 Safety rules (as the UR link's):
 - velocities are clamped to each joint's top speed, targets to its limits;
@@ -40,35 +43,19 @@ from collections.abc import Callable, Sequence
 
 from ocu.link.base import Link
 from ocu.link.stats import RateMeter
-from ocu.link.xarm_wire import (
-    PortOpener,
-    Ramp,
-    SerialPort,
-    XarmMotor,
-    XarmStatus,
-    XarmTelemetry,
-)
+from ocu.link.xarm_decode import BatteryReply, XarmDecoder, plausible
+from ocu.link.xarm_moves import XarmMoves
+from ocu.link.xarm_wire import PortOpener, SerialPort, XarmStatus, XarmTelemetry
 from ocu.profile import RobotProfile
-from ocu.profile.xarm import XarmJoint, XarmProfile
+from ocu.profile.xarm import XarmProfile
 from ocu.profile.xarm_robot import xarm_robot_profile
-from ocu.protocol.xarm import (
-    POSITION_MAX,
-    POSITION_MIN,
-    Cmd,
-    Direction,
-    FrameReader,
-    XarmProtocolError,
-    decode_battery,
-    decode_positions,
-    read_battery,
-    read_positions,
-    servo_move,
-)
+from ocu.protocol.xarm import read_battery, read_positions
 from ocu.records import (
+    XARM_TO_BOARD,
     CameraRequest,
     Command,
     CommandSent,
-    JointReading,
+    DatagramSent,
     LinkState,
     LinkStateChanged,
     LinkStats,
@@ -90,8 +77,6 @@ BACKOFF_S = (0.0, 0.1, 0.2, 0.4, 0.8, 1.6, 2.0)
 #: A loop step later than this after the previous one: the process was frozen.
 FREEZE_LIMIT_S = 0.3
 MAX_WAIT_S = 0.02
-#: Readings outside this window (servo units) are impossible: not believed.
-PLAUSIBLE_UNITS = (-100, 1100)
 
 
 class XarmLink(Link):
@@ -137,9 +122,9 @@ class XarmLink(Link):
         self._gui_tripped = False
         self._state = LinkState.CONNECTING
         self._serial: SerialPort | None = None
-        self._reader = FrameReader(Direction.FROM_BOARD)
-        self._ramps: dict[int, Ramp] = {}  # servo id -> its setpoint (known after a reading)
-        self._last_units: dict[int, tuple[float, float]] = {}  # servo -> (units, at)
+        # Replies in (every frame read handed to the listeners: a recording), moves out.
+        self._decoder = XarmDecoder(arm, tap=self.emit, clock=clock)
+        self._moves = XarmMoves(arm)
         self._read_sent_at: float | None = None
         self._last_reply_at: float | None = None
         self._opened_at: float | None = None
@@ -277,64 +262,7 @@ class XarmLink(Link):
         """An xArm sends no video."""
         return VideoStats()
 
-    # ---- moves -----------------------------------------------------------------------------
-
-    def _jog_frames(self, now: float) -> tuple[list[bytes], Command]:
-        """The frames for the command now (lock held): a stop move for the joints that have
-        stopped, a jog move for those that move; and the command they carry."""
-        command = self._command.expired(now)
-        stops: dict[int, int] = {}
-        jogs: dict[int, int] = {}
-        sent: dict[str, float] = {}
-        move_s = self.timing.jog_move_s
-        for joint in self.arm.joints:
-            ramp = self._ramps.get(joint.servo)
-            if ramp is None:
-                continue  # never read: where it is is not known, so it is not moved
-            here = ramp.value(now)
-            limit = joint.max_speed_rad_s
-            velocity = max(-limit, min(limit, command.velocity(joint.name)))
-            if velocity == 0.0:
-                if ramp.moving(now):
-                    stops[joint.servo] = self._hold(ramp, here, now)
-                continue
-            step = joint.sign * velocity * self.arm.units_per_rad * move_s
-            target = self._limited(joint, here, step)
-            jogs[joint.servo] = target
-            self._ramps[joint.servo] = Ramp(here, target, now, move_s)
-            sent[joint.name] = velocity
-        frames = []
-        if stops:
-            frames.append(servo_move(0, stops))
-        if jogs:
-            frames.append(servo_move(round(move_s * 1000), jogs))
-        return frames, command.with_velocities(
-            {name: sent.get(name, 0.0) for name in self.arm.joint_names}
-        )
-
-    @staticmethod
-    def _limited(joint: XarmJoint, here: float, step: float) -> int:
-        """Where a jog step from `here` may go: never further out past a limit (a servo found
-        beyond one, or carried past it, stays there until jogged back in), and never
-        backwards to the limit (a jog outward from beyond it does not pull the joint in)."""
-        if step > 0:
-            target = min(here + step, max(joint.max_units, here))
-        else:
-            target = max(here + step, min(joint.min_units, here))
-        return int(max(POSITION_MIN, min(POSITION_MAX, round(target))))
-
-    def _hold(self, ramp: Ramp, here: float, now: float) -> int:
-        """Stop a setpoint where it is (lock held): the target of the stop move."""
-        target = int(max(POSITION_MIN, min(POSITION_MAX, round(here))))
-        ramp.start, ramp.end, ramp.at, ramp.duration_s = target, target, now, 0.0
-        return target
-
-    def _stop_frame(self, now: float) -> bytes | None:
-        """The stop move (lock held): every known servo's setpoint held where it is now."""
-        stops = {
-            servo: self._hold(ramp, ramp.value(now), now) for servo, ramp in self._ramps.items()
-        }
-        return servo_move(0, stops) if stops else None
+    # ---- moves (ocu.link.xarm_moves) --------------------------------------------------------
 
     def _send_moves(self) -> None:
         with self._send_lock:
@@ -343,24 +271,25 @@ class XarmLink(Link):
                     return
                 if not self._command.is_motion and self._estop_latched:
                     return
-                frames, sent = self._jog_frames(self.clock())
-            if frames and self._write(b"".join(frames)):
+                frames, sent = self._moves.frames(self._command, self.clock())
+            if frames and self._write(*frames):
                 self.emit(CommandSent(sent, self.clock()))
 
     def _send_stop(self) -> None:
         with self._send_lock:
             with self._lock:
-                frame = self._stop_frame(self.clock()) if self._serial is not None else None
+                frame = self._moves.stop_frame(self.clock()) if self._serial is not None else None
             if frame is not None:
                 self._write(frame)
 
-    def _write(self, data: bytes) -> bool:
+    def _write(self, *frames: bytes) -> bool:
+        """Write frames in one go; each is handed to the listeners (a recording)."""
         with self._lock:
             port = self._serial
         if port is None:
             return False
         try:
-            port.write(data)
+            port.write(b"".join(frames))
         except OSError as err:
             with self._lock:
                 self._send_errors += 1
@@ -370,6 +299,8 @@ class XarmLink(Link):
         with self._lock:
             self._sent += 1
             self._send_rate.add(now)
+        for frame in frames:
+            self.emit(DatagramSent(frame, now, XARM_TO_BOARD))
         return True
 
     # ---- the loop --------------------------------------------------------------------------
@@ -421,7 +352,7 @@ class XarmLink(Link):
             now = self.clock()
         with self._lock:
             connected = self._serial is not None
-            moving = self._command.is_motion or any(r.moving(now) for r in self._ramps.values())
+            moving = self._command.is_motion or self._moves.moving(now)
             jog_due = connected and now >= self._next_jog
             if jog_due:
                 self._next_jog = max(self._next_jog + self._jog_period_s, now)
@@ -524,14 +455,11 @@ class XarmLink(Link):
         except OSError as err:
             self._drop_port(f"the port failed: {err}")
             return
-        for frame in self._reader.feed(data):
-            try:
-                if frame.command == Cmd.MULT_SERVO_POS_READ:
-                    self._on_positions(decode_positions(frame.parameters))
-                elif frame.command == Cmd.GET_BATTERY_VOLTAGE:
-                    self._on_battery(decode_battery(frame.parameters))
-            except XarmProtocolError as err:
-                log.debug("reply dropped: %s", err)
+        for reply in self._decoder.feed(data):
+            if isinstance(reply, BatteryReply):
+                self._on_battery(reply.millivolts)
+            else:
+                self._on_positions(reply.positions)
 
     def _on_reply(self) -> None:
         now = self.clock()
@@ -550,50 +478,19 @@ class XarmLink(Link):
 
     def _on_positions(self, positions: dict[int, int]) -> None:
         now, wall = self.clock(), time.time()
-        readings: dict[str, JointReading] = {}
-        motors = []
         with self._lock:
             self._read_sent_at = None
             self._telemetry_rate.add(now)
             for joint in self.arm.joints:
                 raw = positions.get(joint.servo)
-                if raw is None:
-                    continue
-                motors.append(XarmMotor(device_id=joint.servo, position=raw))
-                fault = None
-                if not PLAUSIBLE_UNITS[0] <= raw <= PLAUSIBLE_UNITS[1]:
-                    fault = f"servo {joint.servo} reported {raw}, outside its range"
-                elif joint.servo not in self._ramps:
-                    # The first reading: the setpoint the board holds is where the servo is.
-                    held = max(POSITION_MIN, min(POSITION_MAX, raw))
-                    self._ramps[joint.servo] = Ramp(held, held, now, 0.0)
-                speed = 0.0
-                previous = self._last_units.get(joint.servo)
-                if fault is None:
-                    if previous is not None and now > previous[1]:
-                        speed = (raw - previous[0]) / (now - previous[1])
-                    self._last_units[joint.servo] = (raw, now)
-                ramp = self._ramps.get(joint.servo)
-                readings[joint.name] = JointReading(
-                    name=joint.name,
-                    device_id=joint.servo,
-                    state=0,
-                    mode=0,
-                    angle_rad=None if fault else self.arm.angle_rad(joint, raw),
-                    speed_rad_s=joint.sign * speed / self.arm.units_per_rad,
-                    current_a=0.0,
-                    status=0,
-                    target_angle_rad=(
-                        None if ramp is None else self.arm.angle_rad(joint, ramp.end)
-                    ),
-                    speed_command_rad_s=self._command.velocity(joint.name),
-                    current_command_a=0.0,
-                    fault=fault,
-                )
+                if raw is not None and plausible(raw):  # never from an impossible reading
+                    self._moves.first_reading(joint.servo, raw, now)
+            readings, motors = self._decoder.readings(
+                positions, now, self._moves.targets(), self._command
+            )
             tick = self._replies + 1
         self._on_reply()
-        packet = XarmTelemetry(tick=tick, motors=tuple(motors))
-        self.emit(TelemetryFrame(packet, readings, now, wall))
+        self.emit(TelemetryFrame(XarmTelemetry(tick=tick, motors=motors), readings, now, wall))
 
     def _lost(self, reason: str) -> None:
         with self._lock:
@@ -636,7 +533,7 @@ class XarmLink(Link):
         """The link's copy of each servo's setpoint now (servo units; known servos only)."""
         now = self.clock()
         with self._lock:
-            return {servo: ramp.value(now) for servo, ramp in self._ramps.items()}
+            return self._moves.setpoints(now)
 
     def stats(self) -> LinkStats:
         """Counters and rates now."""
@@ -648,7 +545,7 @@ class XarmLink(Link):
                 received=self._replies,
                 telemetry=self._replies,
                 video=0,
-                malformed=self._reader.bad_frames + self._read_timeouts,
+                malformed=self._decoder.bad_frames + self._read_timeouts,
                 foreign=0,
                 send_errors=self._send_errors,
                 rcp_rate_hz=self._send_rate.rate(now),
@@ -666,7 +563,7 @@ class XarmLink(Link):
     def bad_frames(self) -> int:
         """Replies the frame reader could not make sense of (episodes of garbage)."""
         with self._lock:
-            return self._reader.bad_frames
+            return self._decoder.bad_frames
 
     # ---- shutdown --------------------------------------------------------------------------
 

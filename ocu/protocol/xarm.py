@@ -262,13 +262,17 @@ class FrameReader:
     `bad_frames` counts each such episode, `skipped_bytes` the bytes lost.
     """
 
-    def __init__(self, direction: Direction) -> None:
+    def __init__(self, direction: Direction, *, keep_skipped: bool = False) -> None:
         self.direction = direction
+        # Whether skipped bytes are kept for take_skipped (a link that records them).
+        self.keep_skipped = keep_skipped
         self._buffer = bytearray()
         self._in_garbage = False
         self.bad_frames = 0
         self.skipped_bytes = 0
         self.frames = 0
+        # Runs of skipped bytes: (how many of the next feed's frames came before, bytes).
+        self._skipped: list[tuple[int, bytes]] = []
 
     @property
     def pending(self) -> int:
@@ -307,6 +311,7 @@ class FrameReader:
         """Add received bytes; the whole frames now complete, in order."""
         self._buffer += data
         frames: list[Frame] = []
+        run = bytearray()
         offset = 0
         while offset < len(self._buffer):
             verdict = self._judge(offset)
@@ -316,13 +321,26 @@ class FrameReader:
                 if not self._in_garbage:
                     self._in_garbage = True
                     self.bad_frames += 1
+                if self.keep_skipped:
+                    run.append(self._buffer[offset])
                 offset += 1
                 self.skipped_bytes += 1
                 continue
             self._in_garbage = False
+            if run:
+                self._skipped.append((len(frames), bytes(run)))
+                run = bytearray()
             frame_bytes = self._buffer[offset : offset + verdict]
             frames.append(Frame(frame_bytes[3], bytes(frame_bytes[4:])))
             self.frames += 1
             offset += verdict
+        if run:
+            self._skipped.append((len(frames), bytes(run)))
         del self._buffer[:offset]
         return frames
+
+    def take_skipped(self) -> list[tuple[int, bytes]]:
+        """The runs of bytes skipped by the last feed (with `keep_skipped`: garbage, for a
+        recording): each with how many of that feed's frames came before it."""
+        skipped, self._skipped = self._skipped, []
+        return skipped

@@ -41,7 +41,12 @@ EVENT: Final = 6
 COMMAND: Final = 7
 
 # The raw channel of each kind of datagram (ocu.records).
-SENT_TOPICS = {r.RCP: s.RAW_RCP, r.HELLO: s.RAW_HELLO, r.UR_SCRIPT: s.RAW_UR_SCRIPT}
+SENT_TOPICS = {
+    r.RCP: s.RAW_RCP,
+    r.HELLO: s.RAW_HELLO,
+    r.UR_SCRIPT: s.RAW_UR_SCRIPT,
+    r.XARM_TO_BOARD: s.RAW_XARM_TO_BOARD,
+}
 RECEIVED_TOPICS = {
     r.TELEMETRY: s.RAW_TELEMETRY,
     r.VIDEO: s.RAW_VIDEO,
@@ -51,6 +56,7 @@ RECEIVED_TOPICS = {
     r.UR_PRIMARY: s.RAW_UR_PRIMARY,
     r.UR_SECONDARY: s.RAW_UR_SECONDARY,
     r.UR_REALTIME: s.RAW_UR_REALTIME,
+    r.XARM_FROM_BOARD: s.RAW_XARM_FROM_BOARD,
 }
 
 # The decoded channels every recording has, with their types (cameras come from the profile).
@@ -109,7 +115,8 @@ def item_of(event: LinkEvent, clock: Callable[[], float]) -> tuple[Item, int] | 
 
 def topic_type(topic: str) -> s.MessageType:
     """The message type of a topic of a recording (any other topic is a camera's)."""
-    if topic in s.RAW_TOPICS or topic in s.RAW_UR_TOPICS:  # a UR's: registered when used
+    # A UR's and an xArm's raw channels are registered when used.
+    if topic in s.RAW_TOPICS or topic in s.RAW_UR_TOPICS or topic in s.RAW_XARM_TOPICS:
         return s.RAW_PACKET
     for name, message_type in DECODED_TOPICS:
         if name == topic:

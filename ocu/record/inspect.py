@@ -38,6 +38,7 @@ from ocu.protocol.ur import (
     parse_script_line,
     realtime_size,
 )
+from ocu.protocol.xarm import Cmd, Direction, FrameReader, XarmProtocolError, decode_servo_move
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 from ocu.record.reader import Recording
@@ -130,6 +131,14 @@ class Summary:
     ur: bool = False
     stopj_sent: int = 0
     controller_stops: int = 0
+    # An xArm's recording: frames written to the board and read from it (ocu.link.xarm).
+    xarm: bool = False
+    xarm_moves: int = 0
+    xarm_stop_moves: int = 0
+    xarm_reads: int = 0
+    xarm_frames_received: int = 0
+    xarm_bad_frames: int = 0
+    xarm_skipped_bytes: int = 0
 
     @property
     def telemetry_loss(self) -> float | None:
@@ -183,6 +192,7 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
     # a UR's packets go through the UR link's decoder.
     receiver = Receiver(profile, count, extension=True)
     ur = UrFigures(tick_hz)
+    xarm = XarmFigures(recording.xarm() is not None)
     last_stats = None
     round_trips: list[float] = []
     jitters: list[float] = []
@@ -193,7 +203,10 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
         if channel is None:
             channel = channels[topic] = ChannelSummary(topic)
         channel.add(message.log_time_ns, len(message.data))
-        if topic in s.RAW_TOPICS:
+        if xarm.active and topic in (*s.RAW_XARM_TOPICS, s.RAW_OTHER):
+            raw = recording.decode(message)
+            xarm.add(topic, bytes(raw.data), raw.source)
+        elif topic in s.RAW_TOPICS:
             raw = recording.decode(message)
             if raw.source == s.SOURCE_ROBOT:
                 at = message.log_time_ns / 1e9
@@ -216,13 +229,29 @@ def summarize(recording: Recording, profile: RobotProfile) -> Summary:
     summary.channels = sorted(channels.values(), key=lambda c: c.topic)
 
     summary.ur = recording.ur_arm() is not None
+    summary.xarm = xarm.active
+    if xarm.active:
+        summary.xarm_moves = xarm.moves
+        summary.xarm_stop_moves = xarm.stop_moves
+        summary.xarm_reads = xarm.reads
+        summary.xarm_frames_received = xarm.reader.frames
+        summary.xarm_bad_frames = xarm.reader.bad_frames
+        summary.xarm_skipped_bytes = xarm.reader.skipped_bytes
     summary.stopj_sent = ur.stopj
-    rcp = channels.get(s.RAW_UR_SCRIPT if summary.ur else s.RAW_RCP)
+    rcp = channels.get(
+        s.RAW_UR_SCRIPT if summary.ur else s.RAW_XARM_TO_BOARD if summary.xarm else s.RAW_RCP
+    )
     if rcp is not None:
         summary.rcp_sent = rcp.messages
         summary.rcp_rate_hz = rcp.rate_hz
         summary.rcp_longest_gap_s = rcp.longest_gap_s
-    raw_telemetry = channels.get(s.RAW_UR_REALTIME if summary.ur else s.RAW_TELEMETRY)
+    raw_telemetry = channels.get(
+        s.RAW_UR_REALTIME
+        if summary.ur
+        else s.RAW_XARM_FROM_BOARD
+        if summary.xarm
+        else s.RAW_TELEMETRY
+    )
     if raw_telemetry is not None:
         summary.telemetry_rate_hz = raw_telemetry.rate_hz
         summary.telemetry_longest_gap_s = raw_telemetry.longest_gap_s
@@ -286,6 +315,31 @@ class UrFigures:
                     self.decoder = UrDecoder(realtime_size(decoded.version))
 
 
+class XarmFigures:
+    """An xArm's frames counted: the board's replies through a frame reader as the live
+    link's (its bad frames and skipped bytes), the moves and reads the OCU wrote."""
+
+    def __init__(self, active: bool) -> None:
+        self.reader = FrameReader(Direction.FROM_BOARD)
+        self.active = active
+        self.moves = 0
+        self.stop_moves = 0
+        self.reads = 0
+
+    def add(self, topic: str, data: bytes, source: str) -> None:
+        """One recorded frame, or bytes the live reader skipped (/raw/other, the board's)."""
+        if topic == s.RAW_XARM_TO_BOARD:
+            for frame in FrameReader(Direction.TO_BOARD).feed(data):
+                if frame.command == Cmd.SERVO_MOVE:
+                    self.moves += 1
+                    with contextlib.suppress(XarmProtocolError):
+                        self.stop_moves += decode_servo_move(frame.parameters).duration_ms == 0
+                elif frame.command == Cmd.MULT_SERVO_POS_READ:
+                    self.reads += 1
+        elif source == s.SOURCE_ROBOT:
+            self.reader.feed(data)
+
+
 def _size(count: int) -> str:
     for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
         if count >= scale:
@@ -333,6 +387,8 @@ def render(summary: Summary) -> str:
     sent = (
         f"{summary.rcp_sent} URScript lines sent ({summary.stopj_sent} stopj)"
         if summary.ur
+        else f"{summary.rcp_sent} frames written"
+        if summary.xarm
         else f"{summary.rcp_sent} RCPs sent"
     )
     watchdog = "speedj t" if summary.ur else "robot watchdog"
@@ -369,6 +425,13 @@ def render(summary: Summary) -> str:
             f"  round trip    median {summary.round_trip_median_ms:.0f} ms, "
             f"max {summary.round_trip_max_ms:.0f} ms; jitter median "
             f"{'n/a' if jitter is None else f'{jitter:.0f} ms'} (link statistics)"
+        )
+    if summary.xarm:
+        lines.append(
+            f"  xArm board    {summary.xarm_moves} moves sent ({summary.xarm_stop_moves} stop "
+            f"moves), {summary.xarm_reads} position reads; {summary.xarm_frames_received} "
+            f"frames received, {summary.xarm_bad_frames} bad frame(s) "
+            f"({summary.xarm_skipped_bytes} bytes skipped)"
         )
     stops = f", {summary.controller_stops} controller stop(s)" if summary.ur else ""
     lines += ["", f"events ({summary.estops} emergency stop(s){stops})"]

@@ -47,6 +47,13 @@ from mcap_ros2.decoder import DecoderFactory
 from ocu.profile import ProfileError, RobotProfile, parse_profile
 from ocu.profile.ur import UrArmProfile, load_ur_profile, parse_ur_profile, shipped_ur_profiles
 from ocu.profile.ur_robot import ur_robot_profile
+from ocu.profile.xarm import (
+    XarmProfile,
+    load_xarm_profile,
+    parse_xarm_profile,
+    shipped_xarm_profiles,
+)
+from ocu.profile.xarm_robot import xarm_robot_profile
 from ocu.record import schemas as s
 from ocu.record.errors import RecordingError
 
@@ -309,11 +316,36 @@ class Recording:
                 return shipped  # the same file: its URDF, key map and pad mapping beside it
         return arm
 
+    def xarm(self) -> XarmProfile | None:
+        """The xArm the recording was made with (its attached profile is an xArm's: it has a
+        `baud`; a shipped one by its name when none is attached), else None."""
+        if self.profile_toml is None:
+            name = self.metadata.get("profile_name", "")
+            return load_xarm_profile(name) if name in shipped_xarm_profiles() else None
+        try:
+            data = tomllib.loads(self.profile_toml.decode("utf-8"))
+        except (UnicodeDecodeError, tomllib.TOMLDecodeError):
+            return None  # profile() says what is wrong with it
+        if "baud" not in data:
+            return None
+        try:
+            arm = parse_xarm_profile(data, source=f"{self.path}:{s.PROFILE_ATTACHMENT}")
+        except ProfileError as err:
+            raise RecordingError(f"{self.path}: recorded xArm profile unusable: {err}") from err
+        if arm.name in shipped_xarm_profiles():
+            shipped = load_xarm_profile(arm.name)
+            if Path(shipped.source).read_bytes() == self.profile_toml:
+                return shipped  # the same file: its key map and pad mapping beside it
+        return arm
+
     def profile(self, fallback: RobotProfile | None = None) -> RobotProfile:
         """The robot profile the recording was made with, else `fallback`."""
         arm = self.ur_arm()
         if arm is not None:
             return ur_robot_profile(arm)
+        xarm = self.xarm()
+        if xarm is not None:
+            return xarm_robot_profile(xarm)
         if self.profile_toml is not None:
             try:
                 data = tomllib.loads(self.profile_toml.decode("utf-8"))

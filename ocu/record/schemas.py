@@ -44,6 +44,11 @@ RAW_UR_PRIMARY: Final = "/raw/ur/primary"
 RAW_UR_SECONDARY: Final = "/raw/ur/secondary"
 RAW_UR_REALTIME: Final = "/raw/ur/realtime"
 RAW_UR_TOPICS: Final = (RAW_UR_SCRIPT, RAW_UR_PRIMARY, RAW_UR_SECONDARY, RAW_UR_REALTIME)
+# An xArm board's serial frames, one message per frame: those the OCU wrote, and the whole
+# frames it read (bytes its frame reader skipped go to /raw/other). Registered when used.
+RAW_XARM_TO_BOARD: Final = "/raw/xarm/to_board"
+RAW_XARM_FROM_BOARD: Final = "/raw/xarm/from_board"
+RAW_XARM_TOPICS: Final = (RAW_XARM_TO_BOARD, RAW_XARM_FROM_BOARD)
 
 # Decoded channels.
 CMD_VEL: Final = "/cmd_vel_sent"

@@ -44,11 +44,17 @@ def open_replay(
     clock: Callable[[], float] = time.monotonic,
     on_finished: Callable[[], None] | None = None,
 ) -> ReplayLink:
-    """The replay of a recording, for the robot it was made with; RecordingError, LinkError."""
+    """The replay of a recording, for the robot it was made with (an Engineer, a UR, an
+    xArm: ocu.record.xarm_replay); RecordingError, LinkError."""
     with Recording(path) as recording:
         arm = recording.ur_arm()
+        xarm = recording.xarm()
     if arm is not None:
         return UrReplayLink(path, arm, clock=clock, on_finished=on_finished)
+    if xarm is not None:
+        from ocu.record.xarm_replay import XarmReplayLink
+
+        return XarmReplayLink(path, xarm, clock=clock, on_finished=on_finished)
     return ReplayLink(path, profile, clock=clock, on_finished=on_finished)
 
 

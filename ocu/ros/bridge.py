@@ -4,20 +4,17 @@
 velocities for a velocity sink (a `Link`, or the console model), and stops what it started
 when cmd_vel stops coming or the link is lost. The rospy wrapper (`ocu.ros.rosbridge`) only
 converts messages and calls it; the console can host the same core and take control back
-from ROS at once (`override`). The pure conversions it makes (a Twist to drive velocities,
-quaternions, joint goals and states) are in `ocu.ros.convert`, its state and diagnostics
-reports in `ocu.ros.diagnostics`; every public name of both is importable from here too.
+from ROS at once (`override`). Its pure conversions are in `ocu.ros.convert`, its reports in
+`ocu.ros.diagnostics` (every public name of both is importable from here too).
 
 Link loss: while the link is LOST the bridge sends zeros whatever cmd_vel says; once it is
 CONNECTED again, cmd_vel must have been zero or silent for the cmd_vel timeout before a
 non-zero one drives again, so a planner still streaming its old command does not restart
 the robot the moment the link comes back (the console's rule: nothing resumes by itself).
 
-The arm (profile [arm], ocu.control.arm): a pose goal (tool0's position and pitch in the
-base frame) or a stored pose by name is one synchronized move; a twist (tool0's linear
-velocity and pitch rate in the base frame) jogs it and stops `twist_timeout_s` after the last
-one. They share the position controller's prediction, and stop with everything else when the
-link is lost, ROS is overridden or the bridge detaches.
+The arm (ocu.control.arm): a pose goal or a stored pose is one synchronized move; a twist
+jogs tool0 and stops `twist_timeout_s` after the last. They share the position controller's
+prediction and stop with everything else (link lost, ROS overridden, the bridge detached).
 """
 
 from __future__ import annotations
@@ -164,6 +161,8 @@ class BridgeCore:
                 self._arm = ArmController(
                     self.profile, self._limits, self.arm_kinematics, self._controller
                 )
+                # A sink over timed-move hardware: moves as one command (ocu.control.arm_timed).
+                self._arm.timed_moves = bool(getattr(sink, "timed_moves", False))
             self._goal_channels = set()
             self._drive = self.settings.drive_zero
             self._timeout = CmdVelTimeout(self.settings.cmd_vel_timeout_s)
@@ -606,10 +605,13 @@ class BridgeCore:
                     velocities[channel] = arm_velocities.get(channel, 0.0)
                 self._arm_owned = self._arm.active
                 messages += self._arm.pop_messages()
+            ends = self._arm.until if self._arm is not None and self._arm_owned else {}
             if velocities:
+                if self._arm is not None and self._arm.timed_moves:
+                    self._sink.set_ends(ends, self._arm.goals)  # type: ignore[attr-defined]
                 self._sink.set_velocities(**velocities)
                 # The controller's prediction integrates what the bridge sent (delay-aware).
-                self._controller.note_sent(now, {**self._drive, **velocities})
+                self._controller.note_sent(now, {**self._drive, **velocities}, ends)
             self._update_state()
             return messages
 

@@ -12,10 +12,11 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 from ocu.console.channels import Source
 from ocu.console.model import ConsoleModel
+from ocu.control.arm_timed import TIMED_MOVES
 from ocu.headless import HeadlessConsole
 from ocu.records import CommandError
 from ocu.ros.bridge import BridgeCore
@@ -94,6 +95,17 @@ class ModelSink:
             self._silent = False
         if back:
             log.info("the ROS bridge thread runs again: ROS commands are obeyed")
+
+    @property
+    def timed_moves(self) -> bool:
+        """Whether the hardware runs a position command with a duration (the arm's moves go
+        as one: ocu.control.arm_timed)."""
+        return TIMED_MOVES in self.console.hardware.capabilities
+
+    def set_ends(self, until: Mapping[str, float], goals: Mapping[str, float]) -> None:
+        """When the bridge's channels end by themselves and their goals (its arm's timed
+        move), for the velocities that follow."""
+        self.console.call(lambda: self.model.set_source_ends(Source.ROS, until, goals))
 
     def set_velocities(self, **velocities: float) -> None:
         """The bridge's command (its core's lock held): into the model."""

@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QAction
 from PySide6.QtWidgets import QWidget
 
+from ocu.console.channels import Source
 from ocu.console.model import ConsoleModel
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
@@ -54,14 +55,32 @@ SHORT_TEXT = {
 }
 
 
-class _ModelSink:
-    """Where the hosted bridge's velocities go: into the model, on the GUI thread."""
+Ends = tuple[dict[str, float], dict[str, float]]  # until, goals (Command.until, .goals)
 
-    def __init__(self, post: Callable[[dict[str, float]], None]) -> None:
+
+class _ModelSink:
+    """Where the hosted bridge's velocities go: into the model, on the GUI thread; with the
+    ends and goals of its arm's timed move when the hardware takes one (ocu.control.arm_timed:
+    the console's arm knows, the control manager told it)."""
+
+    def __init__(
+        self, post: Callable[[tuple[dict[str, float], Ends]], None], timed: Callable[[], bool]
+    ) -> None:
         self._post = post
+        self._timed = timed
+        self._ends: Ends = ({}, {})
+
+    @property
+    def timed_moves(self) -> bool:
+        """Whether the hardware runs a position command with a duration."""
+        return self._timed()
+
+    def set_ends(self, until: Mapping[str, float], goals: Mapping[str, float]) -> None:
+        """The ends and goals that go with the next velocities."""
+        self._ends = (dict(until), dict(goals))
 
     def set_velocities(self, **velocities: float) -> None:
-        self._post(dict(velocities))
+        self._post((dict(velocities), self._ends))
 
 
 class RosControl(QObject):
@@ -109,7 +128,7 @@ class RosControl(QObject):
         self._probed.connect(self._on_probed)
         self._velocities.connect(self._apply_velocities)
         self._path.connect(self._follow_path)
-        self._sink = _ModelSink(to_gui(self._velocities.emit))
+        self._sink = _ModelSink(to_gui(self._velocities.emit), self._timed_moves)
         self._show_availability()
         self.probe()
 
@@ -165,12 +184,18 @@ class RosControl(QObject):
         self.action.setChecked(False)
         self._show_availability()
 
-    def _apply_velocities(self, velocities: dict[str, float]) -> None:
+    def _timed_moves(self) -> bool:
+        arm = self.model.arm
+        return arm is not None and bool(arm.controller.timed_moves)
+
+    def _apply_velocities(self, command: tuple[dict[str, float], Ends]) -> None:
         # GUI thread. A command the bridge sent before it was overridden may still be queued:
         # only a bridge in control may move the robot.
         if not self.in_control:
             return
+        velocities, (until, goals) = command
         try:
+            self.model.set_source_ends(Source.ROS, until, goals)
             self.model.set_external_velocities(velocities)
         except CommandError as err:
             log.warning("ROS command refused: %s", err)

@@ -27,7 +27,8 @@ from ocu.sim.simulator import RobotSimulator
 
 DEADLINE_S = 10.0
 T = TypeVar("T")
-EVERY_CAPABILITY = frozenset(CAPABILITIES)
+# The Engineer has every capability but timed moves (its protocol carries velocities only).
+EVERY_CAPABILITY = frozenset(CAPABILITIES) - {"timed_moves"}
 
 
 def wait_for(condition: Callable[[], bool], what: str) -> None:

@@ -13,6 +13,7 @@ import math
 import threading
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 
 import pytest
 
@@ -137,3 +138,22 @@ def test_a_packet_built_after_the_end_carries_zero(profile: RobotProfile) -> Non
     command = Command(velocities={"shoulder": SPEED_RAD_S}, until={"shoulder": 5.0})
     assert shoulder_axis(profile, mapper.to_packet(command.expired(4.9)).axes) != 0
     assert shoulder_axis(profile, mapper.to_packet(command.expired(5.0)).axes) == 0
+
+
+def test_a_goal_needs_an_end_and_goes_with_its_channel() -> None:
+    """Command.goals (a position command with a duration) belongs to a channel with an end:
+    refused without one; dropped with the channel's end when it comes, when the channel is
+    set again, and by a stop."""
+    with pytest.raises(CommandError, match="a goal must be finite and have an end"):
+        Command(velocities={"elbow": 0.2}, goals={"elbow": 0.5})
+    with pytest.raises(CommandError):
+        Command(velocities={"elbow": 0.2}, until={"elbow": 3.0}, goals={"elbow": math.nan})
+    command = Command(
+        velocities={"elbow": 0.2, "base": 0.1},
+        until={"elbow": 3.0, "base": 5.0},
+        goals={"elbow": 0.5, "base": -0.2},
+    )
+    assert command.expired(4.0).goals == {"base": -0.2}
+    assert command.with_velocity("base", 0.3).goals == {"elbow": 0.5}
+    assert command.stopped().goals == {}
+    assert not command.same_wire(replace(command, goals={"elbow": 0.6, "base": -0.2}))

@@ -133,6 +133,84 @@ def test_jog_streams_short_moves_and_the_release_stops_at_once(
     assert simulator.snapshot().targets[BASE] == stopped.targets[BASE]
 
 
+def test_a_slow_jog_moves_at_its_speed(rig: tuple[XarmSimulator, XarmLink, Events]) -> None:
+    """0.01 rad/s is 0.36 units per 0.15 s jog move, under the half unit a move's target
+    is rounded to: the link keeps its setpoint in fractions of a unit, so the base still
+    moves at the speed asked (the whole units the board takes come in turn)."""
+    simulator, link, _ = rig
+    speed = 0.01
+    link.set_command(Command({"base": speed}))
+    wait_for(lambda: simulator.snapshot().moves >= 1, "moving")
+    start = simulator.snapshot()
+    wait_for(lambda: simulator.snapshot().time > start.time + 2.0, "2 s of jogging")
+    later = simulator.snapshot()
+    link.set_command(Command())
+    moved = later.setpoints[BASE] - start.setpoints[BASE]
+    assert moved == pytest.approx(speed * link.arm.units_per_rad * 2.0, abs=1.5)
+
+
+def test_a_goal_goes_as_one_move_of_several_servos(
+    rig: tuple[XarmSimulator, XarmLink, Events],
+) -> None:
+    """Command.goals (a position command with a duration): one CMD_SERVO_MOVE with every
+    servo given a goal and one duration, the time left to its end; not sent again while the
+    same command stands, nor streamed."""
+    simulator, link, _ = rig
+    arm = link.arm
+    since = simulator.snapshot().time
+    end = link.clock() + 0.8
+    goals = {"shoulder": 0.3, "elbow": -0.4, "wrist_pitch": 0.1}
+    command = Command(
+        velocities=dict.fromkeys(goals, 0.4),
+        until=dict.fromkeys(goals, end),
+        goals=goals,
+    )
+    link.set_command(command)
+    link.set_command(command)
+    wait_for(lambda: link.clock() > end + 0.3, "the move's end")
+    moves = [move for _, move in simulator.board.moves_since(since)]
+    assert len(moves) == 1, moves
+    assert 700 <= moves[0].duration_ms <= 800
+    expected = {
+        arm.joint(name).servo: round(arm.raw_units(arm.joint(name), angle))
+        for name, angle in goals.items()
+    }
+    assert dict(moves[0].positions) == expected
+    wait_for(lambda: simulator.snapshot().setpoints[4] == expected[4], "the elbow's setpoint")
+    # A stop while such a move runs holds every servo where its setpoint is.
+    since = simulator.snapshot().time
+    end = link.clock() + 2.0
+    link.set_command(Command(velocities={"base": 0.3}, until={"base": end}, goals={"base": 0.5}))
+    wait_for(lambda: simulator.snapshot().setpoints[BASE] > 510, "the base on its way")
+    link.set_command(Command())
+    wait_for(lambda: len(simulator.board.moves_since(since)) >= 2, "the stop move")
+    stop = simulator.board.moves_since(since)[1][1]
+    assert stop.duration_ms == 0
+    assert dict(stop.positions)[BASE] < 600  # the goal was 500 + 0.5 rad = 619
+
+
+def test_a_late_goal_is_never_run_faster_than_the_joints_top_speed(
+    rig: tuple[XarmSimulator, XarmLink, Events],
+) -> None:
+    """A goal whose end is 20 ms away (a command that came late) would be a jump of the
+    servo: the move takes the time the joint's top speed needs, the others in it too."""
+    simulator, link, _ = rig
+    arm = link.arm
+    since = simulator.snapshot().time
+    end = link.clock() + 0.02
+    goals = {"elbow": -0.5, "shoulder": 0.1}
+    link.set_command(
+        Command(velocities=dict.fromkeys(goals, 1.0), until=dict.fromkeys(goals, end), goals=goals)
+    )
+    wait_for(lambda: bool(simulator.board.moves_since(since)), "the move")
+    move = simulator.board.moves_since(since)[0][1]
+    assert {servo for servo, _ in move.positions} == {4, 5}  # still one synchronized move
+    top_speed = arm.joint("elbow").max_speed_rad_s * arm.units_per_rad  # 60°/s in units/s
+    travel = abs(dict(move.positions)[4] - 500)  # the elbow's, from the middle
+    assert move.duration_ms >= travel / top_speed * 1000
+    link.set_command(Command())
+
+
 def test_reads_are_rate_limited_while_moves_stream(
     rig: tuple[XarmSimulator, XarmLink, Events],
 ) -> None:

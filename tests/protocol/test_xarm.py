@@ -181,3 +181,19 @@ def test_reader_resynchronises_after_any_garbage(junk: bytes, move: int) -> None
     good = Frame(Cmd.SERVO_MOVE, frame[4:])
     assert frames[-4:] == [good] * 4
     assert reader.pending == 0
+
+
+def test_the_reader_keeps_each_run_of_skipped_bytes_where_it_came() -> None:
+    """For a recording: each run of garbage with how many of the feed's frames came before
+    it, so that the runs and the frames can be written in the order the bytes came."""
+    one, two = battery_reply(7400), positions_reply({6: 500})
+    reader = FrameReader(Direction.FROM_BOARD, keep_skipped=True)
+    frames = reader.feed(b"\x01\x02" + one + b"\x55\x03" + two + b"\x04")
+    assert [f.encode() for f in frames] == [one, two]
+    assert reader.take_skipped() == [(0, b"\x01\x02"), (1, b"\x55\x03"), (2, b"\x04")]
+    assert reader.take_skipped() == []
+    assert reader.bad_frames == 3
+    # Without keep_skipped nothing is kept (a reader nobody records).
+    plain = FrameReader(Direction.FROM_BOARD)
+    plain.feed(b"\x01" + one)
+    assert plain.take_skipped() == []
