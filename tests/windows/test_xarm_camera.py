@@ -116,6 +116,7 @@ def test_the_xarm_shows_its_gripper_camera_and_snapshots_it(
     path = panel.save_snapshot()
     assert path is not None
     picture = cv2.imread(str(path))
+    assert picture is not None
     assert picture.shape[:2] == (480, 640)  # whole, not the size the cell shows
     hsv = cv2.cvtColor(picture, cv2.COLOR_BGR2HSV)
     red = (hsv[:, :, 1] > 120) & ((hsv[:, :, 0] < 10) | (hsv[:, :, 0] > 170))
