@@ -431,21 +431,22 @@ class ReachController:
 
     def _bounded(self, velocities: Mapping[str, float]) -> dict[str, float]:
         """Each joint within its limit, and its change within ACCELERATION_RAD_S2 (a step of
-        velocity rings the lightly damped servos); the pitch joints are scaled together (the
-        direction of the height, reach and pitch motion is kept), the base on its own."""
+        velocity rings the lightly damped servos); the pitch joints together (the direction
+        of the height, reach and pitch motion is kept), the base on its own."""
         base = self.kinematics.joints[0]
-        bounded = {}
+        step = ACCELERATION_RAD_S2 * max(self._dt, MIN_STEP_S)
+        bounded: dict[str, float] = {}
         for group in ([base], [j for j in velocities if j != base]):
             factor = 1.0
             for joint in group:
                 velocity, limit = velocities[joint], self.limits.get(joint, math.inf)
                 if abs(velocity) > limit > 0.0:
                     factor = min(factor, limit / abs(velocity))
-            bounded.update({joint: velocities[joint] * factor for joint in group})
-        step = ACCELERATION_RAD_S2 * max(self._dt, MIN_STEP_S)
-        for joint, velocity in bounded.items():
-            last = self._sent.get(joint, 0.0)
-            bounded[joint] = min(last + step, max(last - step, velocity))
+            last = {joint: self._sent.get(joint, 0.0) for joint in group}
+            change = {joint: velocities[joint] * factor - last[joint] for joint in group}
+            largest = max((abs(value) for value in change.values()), default=0.0)
+            share = 1.0 if largest <= step else step / largest
+            bounded.update({joint: last[joint] + share * change[joint] for joint in group})
         self._sent = dict(bounded)
         return bounded
 
