@@ -82,7 +82,7 @@ def test_a_video_file_plays_on_its_own_thread_at_its_rate_then_ends(tmp_path: Pa
 def test_a_camera_that_stops_delivering_is_not_passed_off_as_live() -> None:
     class Stalled:
         name = "/dev/video7"
-        period_s = None
+        period_s: float | None = None
         finite = False
 
         def __init__(self) -> None:
