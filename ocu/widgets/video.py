@@ -128,7 +128,8 @@ class VideoControls(QWidget):
         top.addWidget(self.single_button)
         top.addWidget(self.grid_button)
         top.addWidget(self.camera_box)
-        top.addWidget(QLabel("Bit-rate"))
+        bitrate_label = QLabel("Bit-rate")
+        top.addWidget(bitrate_label)
         top.addWidget(self.bitrate_box)
         top.addStretch(1)
         top.addWidget(self.track_button)
@@ -161,9 +162,18 @@ class VideoControls(QWidget):
         second.addWidget(self.colour_box)
         second.addWidget(self.undistort_box)
         second.addSpacing(12)
-        second.addWidget(QLabel("Stream"))
+        stream_label = QLabel("Stream")
+        second.addWidget(stream_label)
         second.addWidget(self.size_box)
         second.addWidget(self.fps_box)
+        # A robot that streams no camera of its own (an arm with --camera): nothing of its
+        # video is asked for, so its controls are not shown.
+        self.robot_widgets = (
+            bitrate_label, self.bitrate_box, stream_label, self.size_box, self.fps_box
+        )  # fmt: skip
+        if not model.profile.link.camera_names:
+            for widget in self.robot_widgets:
+                widget.hide()
         second.addStretch(1)
 
         metrics = self.fontMetrics()
@@ -366,6 +376,10 @@ class VideoPanel(QWidget):
         layout.addLayout(status)
         layout.addWidget(self.counters_label)
         layout.addWidget(self.message_label)
+        if not self.profile.link.camera_names:
+            # Only local cameras: the robot reports nothing of its video, light or attitude.
+            for widget in (self.protocol_label, self.headlight, self.attitude):
+                widget.hide()
 
         robot = model.robot.events
         robot.status_changed.connect(self._show_status)
