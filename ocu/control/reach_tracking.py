@@ -285,6 +285,7 @@ class ReachController:
         self._seen: deque[tuple[float, dict[str, float]]] = deque()
         self._sent: dict[str, float] = {}
         self._setpoints: dict[str, float] = {}
+        self._others: dict[str, float] = {}  # the joints not steered (the wrist roll, ...)
         self._dt = 0.0
         self._last_update: float | None = None
 
@@ -367,6 +368,7 @@ class ReachController:
             return {}
         if any(joint not in eventual for joint in self.kinematics.joints):
             return {}
+        self._others = {j: a for j, a in eventual.items() if j not in self.kinematics.joints}
         options = self.options
         if options.predict:
             # The board's setpoints: where tracking started, plus every velocity it sent
@@ -415,17 +417,21 @@ class ReachController:
             current.reach + rates["reach"] * STEP_S,
             current.pitch + pitch_rate * STEP_S,
         )
+        joints = self.kinematics.joints
         try:
             solved = self.kinematics.solve(ahead.pose(), current=q)
+            # The arm's own clearance from itself and the table (the Arm dock's checks).
+            hit = self.kinematics.check_path([q, solved], self._others)
+            if hit is not None:
+                raise ArmError(hit.describe(2))
         except ArmError as err:
-            # Out of reach: the base alone still follows the object around.
+            # Out of reach or too close: the pitch joints stop at once; the base alone still
+            # follows the object around.
             self.reason = str(err)
-            base = self.kinematics.joints[0]
-            return dict.fromkeys(self.kinematics.joints, 0.0) | {
-                base: self._bounded({base: rates["yaw"]})[base]
-            }
+            stopped = dict.fromkeys(joints[1:], 0.0)
+            base = self._bounded({joints[0]: rates["yaw"]} | stopped)[joints[0]]
+            return {joints[0]: base} | stopped
         self.reason = ""
-        joints = self.kinematics.joints
         velocities = {joint: float(solved[i] - q[i]) / STEP_S for i, joint in enumerate(joints)}
         return self._bounded(velocities)
 

@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from ocu.console.model import ConsoleModel
@@ -65,13 +66,15 @@ class CameraRig:
         return self.frames[-1]
 
     def start_tracking(self) -> None:
-        """Click the object where it is in the newest picture."""
+        """Click the object where the newest picture shows it (the red disc's middle)."""
         pixels = self.latest().pixels
         assert pixels is not None
-        seen = self.scene.project(self.object_at(time.monotonic()))
-        assert seen is not None
-        width, height = self.scene.calibration.size_px
-        point = (seen[0] / width, seen[1] / height)
+        hsv = cv2.cvtColor(pixels, cv2.COLOR_BGR2HSV)
+        red = (hsv[:, :, 1] > 120) & ((hsv[:, :, 0] < 10) | (hsv[:, :, 0] > 170))
+        rows, columns = np.nonzero(red)
+        assert rows.size, "the object is not in the picture"
+        height, width = pixels.shape[:2]
+        point = ((float(columns.mean()) + 0.5) / width, (float(rows.mean()) + 0.5) / height)
         self.headless.call(lambda: self.model.start_tracking(0, pixels, point))
 
     def error(self) -> tuple[float, float, float]:

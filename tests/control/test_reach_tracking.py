@@ -159,3 +159,20 @@ def test_the_scene_camera_and_the_blob_agree_with_the_geometry(
     local = pose[:3, :3].T @ (np.array(beside) - pose[:3, 3])
     assert controller.distance_m == pytest.approx(float(local[0]), rel=0.03)
     assert controller.targets["yaw"] == pytest.approx(math.atan2(beside[1], beside[0]), abs=0.005)
+
+
+def test_the_table_stops_the_height_not_the_base(kinematics: ArmKinematics) -> None:
+    """An object low in the picture asks the tool down into the table (the arm's clearance,
+    as the Arm dock checks): the pitch joints stop, the base still follows, and why is said."""
+    controller = ReachController(kinematics, CAMERA, dict.fromkeys(kinematics.joints, 1.0))
+    # A tool 21 mm above the table, level: shoulder 69°, elbow 74°, wrist -53°.
+    angles = {"base": 0.0, "shoulder": 1.2, "elbow": 1.3, "wrist_pitch": -0.93}
+    low = kinematics.tool_pose(kinematics.vector(angles))
+    assert low.z < 0.03
+    controller.on_measurement((0.5, 0.5), 0.195, 0.0, angles)
+    controller.on_measurement((0.7, 0.95), 0.195, 0.1, angles)  # right, and far below
+    for step in range(1, 6):
+        velocities = controller.update(0.02 * step, angles, 0.05)
+    assert controller.reason
+    assert velocities["base"] < 0.0
+    assert velocities["shoulder"] == velocities["elbow"] == velocities["wrist_pitch"] == 0.0
