@@ -180,3 +180,11 @@ class ClickToTrack(ModelPart):
         for channel, velocity in session.velocities(now, eventual, self.controller.delay_s).items():
             if self._requested(channel).source is Source.TRACK:
                 self._set_channel(channel, self.limits.clamp(channel, velocity), Source.TRACK)
+        if isinstance(session, ReachTrackSession) and session.reach.reason != session.said:
+            # Why the arm stopped following in height and reach (out of reach, the table).
+            session.said = session.reach.reason
+            self.events.message.emit(
+                f"tracking: the base only: {session.said}"
+                if session.said
+                else "tracking: height and reach follow again"
+            )

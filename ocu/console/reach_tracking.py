@@ -75,6 +75,8 @@ class ReachTrackSession(TrackSession):
         self.update_ms = 0.0
         # The link turns velocities into moves this often: a command waits half of it.
         self.move_period_s = move_period_s
+        # The controller's reason last told the operator (the console model says it once).
+        self.said = ""
 
     def start(self, pixels: Image, box: Box, now: float) -> None:
         """Follow the coloured object at the box's centre; CommandError if it has no colour."""

@@ -9,20 +9,29 @@ picture (the seed's area, a proxy for its distance) moves the tool in or out (th
 What the Engineer's tracking does against the delay (ocu.control.tracking) is done here too:
 
 - Each frame becomes an absolute target: the object's position in the base frame, from the
-  tool's pose when the frame was taken (the prediction's angles then), the pixel offset and
+  tool's pose when the frame was taken (the shafts then: below), the pixel offset and
   the distance the object's size gives (an assumed diameter: only the ratio matters for the
   base; z and the reach scale with it). The target tool pose is the one that sees the object
   centred at the distance it had when clicked: base yaw = the object's azimuth, reach and
   height = the object's, less that distance along the tool's pitch.
-- The error is that target minus where the tool ends once every command sent has landed (the
-  Smith predictor's eventual angles through the forward kinematics), so motion on its way is
-  not asked for twice; the target's rate, from successive frames, is fed forward and the target
-  carried forward to when a command lands.
-- The gains follow the loop's dead time (the link's round trip if it reports one, a frame
-  interval, the link's move period) AND the servo: the seed's servos are lightly damped
-  second-order systems (ξ = 0.18, ωn = 5.83 rad/s). The loop is then Kp·e^(-sT)·G(s)/s, and
-  `loop_gain` picks the largest Kp that keeps a 60° phase margin and a 2x (6 dB) gain margin
-  at the servo's resonance: a plain integrator's rule (Kp·T = 30°) alone would ring the arm.
+- The error is that target minus where the tool ends once every command sent has landed (a
+  Smith predictor), so motion on its way is not asked for twice; the target's rate (a
+  least-squares slope over RATE_WINDOW_S of frames) is fed forward and the target carried
+  forward to when a command lands and the shaft has followed.
+- The seed's servos are lightly damped second-order systems (ξ = 0.18, ωn = 5.83 rad/s): a
+  target made from the predictor's angles (readings of ringing shafts) rings with them, and
+  the loop feeds the ringing back. The angles a frame is placed with are therefore the
+  shafts' when it was taken, modelled: the setpoints (integrated from the velocities sent)
+  through the servo's model (`ShaftModel`); the error is the target minus those setpoints.
+- The gains keep stable the loop their error goes through, behind the loop's dead time (the
+  link's round trip if it reports one, a frame interval, half the link's move period): with
+  the prediction, the setpoints' model (an integrator: the Engineer's rule, a 60° margin,
+  Kp·T = 30°, at most KP_MAX); without it, the servo too: Kp·e^(-sT)·G(s)/s, where
+  `loop_gain` takes the largest Kp with a 60° phase margin and a 2x gain margin at the
+  resonance (about 1 /s for this servo whatever the delay up to 0.2 s).
+- The pitch joints' velocities change at most ACCELERATION_RAD_S2 (a step rings the servos),
+  scaled together (the direction of the motion kept); a step that would take the arm through
+  the table or itself (the Arm dock's clearance) stops them, the base going on.
 
 The baseline (`ReachOptions.baseline()`: the seed's plain PID) acts on the last frame's errors
 with fixed gains: those that give the seed's 29.5° phase margin without delay (the margin its
@@ -282,6 +291,9 @@ class ReachController:
         self.reason = ""  # why the arm cannot follow (out of reach), '' while it can
         self.gains = pid_gains(KP_MIN)
         self.shaft = ShaftModel(servo)
+        self._servo_lag_s = (
+            0.0 if servo is None else 2.0 * servo.damping_ratio / servo.natural_frequency_rad_s
+        )
         self._seen: deque[tuple[float, dict[str, float]]] = deque()
         self._sent: dict[str, float] = {}
         self._setpoints: dict[str, float] = {}
@@ -381,13 +393,21 @@ class ReachController:
                     self._setpoints[joint] += velocity * dt
             eventual = self._setpoints
             self.shaft.advance(now, self._setpoints)
-        kp = (
-            loop_gain(dead_time_s, self.servo) if options.adapt_gains else seed_gains(self.servo).kp
-        )
+        # The gains keep stable the loop their error goes through: with the prediction, the
+        # setpoints' model (an integrator) behind the dead time, the servo's dynamics being in
+        # the shaft model (the Engineer's rule); without it, the servo too (`loop_gain`).
+        if not options.adapt_gains:
+            kp = seed_gains(self.servo).kp
+        elif options.predict:
+            kp = loop_gain(dead_time_s, None)
+        else:
+            kp = loop_gain(dead_time_s, self.servo)
         self.gains = pid_gains(kp)
         q, current = self._cylinder(eventual)
         age = 0.0 if self.targets_at is None else max(0.0, now - self.targets_at)
-        lead = age + (dead_time_s or 0.0) / 2.0
+        # A command lands half a dead time from now, and a servo's shaft follows a ramp of its
+        # setpoint 2ξ/ωn behind: aim the setpoints where the target will be by then.
+        lead = age + (dead_time_s or 0.0) / 2.0 + self._servo_lag_s
         scale = {"yaw": 1.0, "height": self.distance_m, "reach": self.distance_m}
         rates: dict[str, float] = {}
         for axis in AXES:

@@ -176,3 +176,24 @@ def test_the_table_stops_the_height_not_the_base(kinematics: ArmKinematics) -> N
     assert controller.reason
     assert velocities["base"] < 0.0
     assert velocities["shoulder"] == velocities["elbow"] == velocities["wrist_pitch"] == 0.0
+
+
+def test_the_gains_fit_the_loop_the_error_goes_through(kinematics: ArmKinematics) -> None:
+    """With the prediction the error goes through the setpoints' model (an integrator): the
+    delay's rule; without it, through the servo: its resonance limits; the seed's: fixed."""
+    angles = looking_ahead()
+    limits = dict.fromkeys(kinematics.joints, 1.0)
+    kps = {}
+    for name, options in (
+        ("ours", ReachOptions()),
+        ("no prediction", ReachOptions(predict=False)),
+        ("seed", ReachOptions.baseline()),
+    ):
+        controller = ReachController(kinematics, CAMERA, limits, servo=SEED_SERVO, options=options)
+        controller.on_measurement((0.5, 0.5), 0.195, 0.0, angles)
+        controller.update(0.1, angles, 0.3)
+        kps[name] = controller.gains.kp
+    assert kps["ours"] == pytest.approx(math.pi / 6 / 0.3, rel=0.02)  # 60° behind 0.3 s
+    assert kps["no prediction"] == pytest.approx(loop_gain(0.3, SEED_SERVO))
+    assert kps["no prediction"] < kps["ours"]
+    assert kps["seed"] == pytest.approx(seed_gains(SEED_SERVO).kp)
