@@ -315,10 +315,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             links.close()
             return refuse_file(str(err))
         try:
-            capabilities = XARM_CAPABILITIES | ({"cameras"} if args.camera else set())
             return run_arm_window(
                 profile,
-                (links.make_link, links.hardware_for, capabilities),
+                (links.make_link, links.hardware_for, XARM_CAPABILITIES),
                 links.where,
                 args.quit_after,
                 config_dir=config_dir,
@@ -587,6 +586,8 @@ def run_arm_window(
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
     make_link, hardware_for, capabilities = hardware
+    if cameras is not None and cameras.captures:
+        capabilities |= {"cameras"}  # the Video dock, for this machine's cameras
     settings, settings_status = open_settings(config_dir)
     guard = contextlib.ExitStack()
     guard.enter_context(last_zeros_guard())  # the window starts the link

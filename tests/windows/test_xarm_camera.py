@@ -270,3 +270,20 @@ def test_a_camera_that_cannot_be_opened_is_named(arm: XarmProfile, tmp_path: Pat
     )
     assert result.returncode == 2
     assert "camera /dev/video99: no such device or file" in result.stderr
+
+
+def test_ocu_gives_a_ur_arm_the_video_dock_for_a_camera(tmp_path: Path) -> None:
+    """`ocu --profile ur5e --camera FILE`: a robot without cameras gets the Video dock (it
+    used to fail on the missing capability) and the camera is read."""
+    video = clip(tmp_path / "desk.avi")
+    result = subprocess.run(
+        [sys.executable, "-m", "ocu", "--profile", "ur5e", "--camera", str(video),
+         "--quit-after", "3", "--config-dir", str(tmp_path / "config"), "--no-gamepad"],
+        capture_output=True,
+        text=True,
+        timeout=90,
+        cwd=ROOT,
+        check=False,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert f"camera {video} stopped delivering: end of the file" in result.stderr
