@@ -19,10 +19,11 @@ picture's centre in pixels (640x480, 70° across), from the optical axis in mm, 
 error (mm: how far the depth is from the clicked distance), RMS and p95 over the motion
 (its first second left out: the start).
 
-Ours (ocu.control.reach_tracking): gains from the servo model and the dead time (60° phase
-margin, 6 dB at the resonance), the targets from the shafts the commands give (the servo
-model), the targets' rates fed forward. Baseline, same run: the seed's plain PID, the last
-frame's errors with the fixed gains that give its 29.5° phase margin (ReachOptions.baseline()).
+Ours (ocu.control.reach_tracking): the targets placed with the shafts the commands give (the
+servo model), the error against the setpoints sent (a Smith predictor) with gains for the dead
+time (60° of phase, at most 4 /s), the targets' rates fed forward. Baseline, same run: the
+seed's plain PID, the last frame's errors with the fixed gains that give its 29.5° phase
+margin (ReachOptions.baseline()).
 
 This machine may be shared: when the console stops the tracking for a stall (its control or
 link thread starved past its watchdog, which is right to stop), the object is clicked again
