@@ -52,6 +52,7 @@ if TYPE_CHECKING:
     from ocu.link.base import Link
     from ocu.live.server import LiveServer
     from ocu.record.recorder import Recorder
+    from ocu.windows.cameras import LocalCameras
     from ocu.windows.main_window import MainWindow
     from ocu.windows.settings_file import SettingsStatus
 
@@ -146,6 +147,15 @@ def build_parser() -> argparse.ArgumentParser:
         f"{DEFAULT_NICE}, ahead of batch jobs; 0 keeps the default priority; needs "
         "CAP_SYS_NICE or an RLIMIT_NICE allowance, else the console says what it got)",
     )
+    parser.add_argument(
+        "--camera",
+        action="append",
+        default=[],
+        metavar="DEVICE",
+        help="a camera of this machine in the Video dock, for any robot: /dev/video0, an "
+        "index (0), a video file, or `scene` (the xArm simulator's gripper camera); on the "
+        "xArm the first rides on the gripper and click-to-track moves the arm (docs/xarm.md)",
+    )
     parser.add_argument("--log-level", default="INFO")
     add_live_options(parser)
     return parser
@@ -233,6 +243,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         for given, option in ((args.sim_arg, "--sim-arg"), (args.live, "--live")):
             if given:
                 parser.error(f"{option} is not available for the xArm yet (docs/xarm.md)")
+    from ocu.video.capture import CameraError
+    from ocu.windows.cameras import LocalCameras, add_cameras
+
+    if args.camera and args.replay is not None:
+        parser.error("--replay plays a file: --camera does not apply")
+    # The cameras of this machine come after the robot's (ocu.windows.cameras).
+    profile = add_cameras(profile, args.camera, tool_link="tool0" if xarm is not None else None)
     if args.replay is not None:
         from ocu.record.ur_replay import recorded_profile
 
@@ -277,19 +294,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Before Qt, the link or the control core start a thread: threads inherit it.
     log.info("scheduling priority: %s", raise_priority(nice).text)
     if xarm is not None and args.replay is None:
+        from ocu.control.reach_tracking import ServoModel
         from ocu.hardware.xarm import XARM_CAPABILITIES, ConsoleLinks
         from ocu.record.errors import RecordingError
         from ocu.record.recorder import Recorder
+        from ocu.windows.cameras import SCENE, SceneLinks
 
         recorder = Recorder(profile)
         try:
             if args.record is not None:
                 recorder.start(args.record)
-            links = ConsoleLinks(xarm, profile, args.robot)
+            scene = SCENE in args.camera and args.robot is None
+            links = SceneLinks(xarm, profile) if scene else ConsoleLinks(xarm, profile, args.robot)
         except (OSError, RecordingError) as err:
             log.error("%s", err)
             recorder.stop()
             return 1
+        servo = ServoModel(xarm.servo.damping_ratio, xarm.servo.natural_frequency_rad_s)
+        try:
+            cameras = LocalCameras(
+                profile, args.camera, scene=links if isinstance(links, SceneLinks) else None,
+                servo=servo,
+            )  # fmt: skip
+        except CameraError as err:
+            links.close()
+            recorder.stop()
+            return refuse_file(str(err))
         try:
             return run_arm_window(
                 profile,
@@ -301,10 +331,37 @@ def main(argv: Sequence[str] | None = None) -> int:
                 pad_mapping=None if args.no_gamepad else pad_mapping,
                 control_hz=args.control_hz,
                 recorder=recorder,
+                cameras=cameras,
             )
         finally:
+            cameras.stop()
             recorder.stop()  # after the window's shutdown: the link's closing stop move in it
             links.close()
+    try:
+        cameras = LocalCameras(profile, args.camera)
+    except CameraError as err:
+        return refuse_file(str(err))
+    with contextlib.ExitStack() as stack:
+        stack.callback(cameras.stop)
+        return run_other(
+            args, profile, (ur_arm, robot), config_dir, (key_map, pad_mapping), live=live,
+            cameras=cameras,
+        )  # fmt: skip
+
+
+def run_other(
+    args: argparse.Namespace,
+    profile: RobotProfile,
+    robots: tuple[UrArmProfile | None, tuple[str, int] | None],
+    config_dir: Path,
+    maps: tuple[KeyMap, PadMapping],
+    *,
+    live: LiveServer | None,
+    cameras: LocalCameras,
+) -> int:
+    """The console on a UR arm, a replay or the Engineer (main()'s last part)."""
+    ur_arm, robot = robots
+    key_map, pad_mapping = maps
     if ur_arm is not None and args.replay is None:
         return run_ur_console(
             ur_arm,
@@ -317,6 +374,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             pad_mapping=None if args.no_gamepad else pad_mapping,
             control_hz=args.control_hz,
             live=live,
+            cameras=cameras,
         )
     if args.replay is not None:
         return run_replay(
@@ -340,6 +398,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         pad_mapping=None if args.no_gamepad else pad_mapping,
         control_hz=args.control_hz,
         live=live,
+        cameras=cameras,
     )
 
 
@@ -356,6 +415,7 @@ def run_console(
     pad_mapping: PadMapping | None = None,
     control_hz: float = DEFAULT_CONTROL_HZ,
     live: LiveServer | None = None,
+    cameras: LocalCameras | None = None,
 ) -> int:
     """Start simulator (if no robot), link and window; run the Qt event loop."""
     from PySide6.QtWidgets import QApplication
@@ -424,6 +484,8 @@ def run_console(
             control_hz=control_hz,
         )
         show_live(live, window)
+        if cameras is not None:
+            cameras.attach(window)
         with guard:
             return run_window(app, window, quit_after_s)
     finally:
@@ -444,6 +506,7 @@ def run_ur_console(
     pad_mapping: PadMapping | None = None,
     control_hz: float = DEFAULT_CONTROL_HZ,
     live: LiveServer | None = None,
+    cameras: LocalCameras | None = None,
 ) -> int:
     """The console on a UR arm: the controller at `robot` (HOST[:PORT_BASE]), else the UR
     simulator in this process on 127.0.0.1 (docs/ur.md)."""
@@ -499,6 +562,7 @@ def run_ur_console(
             pad_mapping=pad_mapping,
             control_hz=control_hz,
             live=live,
+            cameras=cameras,
         )
     finally:
         recorder.stop()  # after the window's shutdown: the link's closing stopj is in it
@@ -518,6 +582,7 @@ def run_arm_window(
     control_hz: float,
     recorder: Recorder | None = None,
     live: LiveServer | None = None,
+    cameras: LocalCameras | None = None,
 ) -> int:
     """The console's window on an arm (a UR, an xArm): `hardware` is its link factory, its
     component factory and its capabilities; the window starts the link, zeros are last."""
@@ -529,6 +594,8 @@ def run_arm_window(
     app = QApplication.instance() or QApplication(sys.argv[:1])
     assert isinstance(app, QApplication)
     make_link, hardware_for, capabilities = hardware
+    if cameras is not None and cameras.captures:
+        capabilities |= {"cameras"}  # the Video dock, for this machine's cameras
     settings, settings_status = open_settings(config_dir)
     guard = contextlib.ExitStack()
     guard.enter_context(last_zeros_guard())  # the window starts the link
@@ -547,6 +614,8 @@ def run_arm_window(
         capabilities=capabilities,
     )
     show_live(live, window)
+    if cameras is not None:
+        cameras.attach(window)
     with guard:
         return run_window(app, window, quit_after_s)
 

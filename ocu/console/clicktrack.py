@@ -1,17 +1,21 @@
 """Click-to-track, a part of the console model: the operator clicks an object in a camera's
 picture and the joints that carry that camera keep it centred (`Source.TRACK`); any operator
 input, an e-stop, a halt, LINK LOST or the object lost for too long ends it. The session
-itself (tracker, controller, what to draw) is ocu.console.tracking's `TrackSession`."""
+itself (tracker, controller, what to draw) is ocu.console.tracking's `TrackSession`; a camera
+on the tool of the seed's arm (the xArm 1S) gets ocu.console.reach_tracking's, which moves the
+base, the height and the reach as seed 003 does."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 import numpy.typing as npt
 
 from ocu.console.channels import Source
 from ocu.console.part import ModelPart
+from ocu.console.reach_tracking import ReachTrackSession, camera_model, reach_camera
 from ocu.console.tracking import (
     FRAME_TIMEOUT_S,
     LOST_TIMEOUT_S,
@@ -20,12 +24,20 @@ from ocu.console.tracking import (
     camera_axes,
     click_box,
 )
+from ocu.control.reach_tracking import ReachOptions, ServoModel
+from ocu.profile import CameraSettings
 from ocu.records import CommandError, LinkState
 from ocu.video.tracker import TrackState
 
 
 class ClickToTrack(ModelPart):
     """Start, feed, step and stop a tracking session (the video view calls these)."""
+
+    # Seed 003's tracking with a camera on the tool (ocu.control.reach_tracking): the
+    # servo's model its gains account for (the xArm's: set by whoever builds the console),
+    # and what of the controller acts (the benchmark's baseline switches parts off).
+    servo_model: ServoModel | None = None
+    reach_options: ReachOptions = ReachOptions()
 
     # ---- click-to-track (ocu.console.tracking; the video view calls these) -----------------
 
@@ -53,21 +65,30 @@ class ClickToTrack(ModelPart):
             raise CommandError(f"point {point!r} outside the frame")
         now = self.clock()
         angles = self.controller.predicted_angles(now)
-        axes = camera_axes(self.profile.cameras[camera], self.arm.controller.kinematics, angles)
-        missing = [j for j in (axes.pan_joint, axes.tilt_joint) if j not in angles]
+        settings = self.profile.cameras[camera]
+        kinematics = self.arm.controller.kinematics
+        session: TrackSession
+        if reach_camera(settings, kinematics):
+            # Seed 003's rig: the camera on the tool; base, height and reach follow.
+            session = self._reach_session(camera, settings, angles)
+            joints = session.reach.kinematics.joints
+            text = "the base, the height and the reach"
+        else:
+            axes = camera_axes(settings, kinematics, angles)
+            joints = (axes.pan_joint, axes.tilt_joint)
+            pan, tilt = (self.controller.channel_of(joint) for joint in joints)
+            session = TrackSession(
+                camera,
+                axes,
+                (pan, tilt),
+                (self.limits.get(pan), self.limits.get(tilt)),
+                self.tracking_options,
+            )
+            text = f"the {axes.pan_joint} and {axes.tilt_joint}"
+        missing = [j for j in joints if j not in angles]
         if missing:
             raise CommandError(f"no reading of {', '.join(missing)} yet")
-        channels = (
-            self.controller.channel_of(axes.pan_joint),
-            self.controller.channel_of(axes.tilt_joint),
-        )
-        session = TrackSession(
-            camera,
-            axes,
-            channels,
-            (self.limits.get(channels[0]), self.limits.get(channels[1])),
-            self.tracking_options,
-        )
+        channels = session.channels
         height, width = pixels.shape[:2]
         session.start(pixels, click_box(point, (width, height)), now)
         self._end_tracking("a new object was clicked", quiet=True)
@@ -80,10 +101,29 @@ class ClickToTrack(ModelPart):
         name = self.profile.cameras[camera].name
         self.events.tracking_changed.emit(session.view())
         self.events.message.emit(
-            f"tracking in the {name} camera with the {axes.pan_joint} and {axes.tilt_joint}: "
-            "any motion input, Space or Esc takes over"
+            f"tracking in the {name} camera with {text}: any motion input, Space or Esc takes over"
         )
         self._publish()
+
+    def _reach_session(
+        self, camera: int, settings: CameraSettings, angles: Mapping[str, float]
+    ) -> ReachTrackSession:
+        """Seed 003's session for a camera on the tool (ocu.console.reach_tracking)."""
+        assert self.arm is not None
+        kinematics = self.arm.controller.kinematics
+        channels = {joint: self.controller.channel_of(joint) for joint in kinematics.joints}
+        link = self.profile.link
+        return ReachTrackSession(
+            camera,
+            kinematics,
+            camera_model(settings),
+            channels,
+            {joint: self.limits.get(channel) for joint, channel in channels.items()},
+            servo=self.servo_model,
+            options=self.reach_options,
+            # The link turns velocities into moves at its send rate (the xArm: its jog period).
+            move_period_s=1.0 / link.send_rate_hz,
+        )
 
     def on_tracking_frame(
         self, camera: int, pixels: npt.NDArray[np.uint8], received_at: float
@@ -140,3 +180,11 @@ class ClickToTrack(ModelPart):
         for channel, velocity in session.velocities(now, eventual, self.controller.delay_s).items():
             if self._requested(channel).source is Source.TRACK:
                 self._set_channel(channel, self.limits.clamp(channel, velocity), Source.TRACK)
+        if isinstance(session, ReachTrackSession) and session.reach.reason != session.said:
+            # Why the arm stopped following in height and reach (out of reach, the table).
+            session.said = session.reach.reason
+            self.events.message.emit(
+                f"tracking: the base only: {session.said}"
+                if session.said
+                else "tracking: height and reach follow again"
+            )

@@ -157,8 +157,8 @@ class TrackSession:
     ) -> None:
         self.camera = camera
         self.axes = axes
-        # The pan and the tilt joint's velocity channels.
-        self.channels = channels
+        # The pan and the tilt joint's velocity channels (a ReachTrackSession's: four).
+        self.channels: tuple[str, ...] = channels
         self.tracker = Tracker()
         self.controller = TrackingController(axes, limits_rad_s, options)
         self.result = TrackResult(TrackState.IDLE, None, 0.0)

@@ -92,8 +92,9 @@ class QtLink(QObject):
         self.setObjectName("ocu-qt-link")
         self.link = link
         profile = link.profile
-        # A robot without cameras (a UR arm) keeps one idle slot: no frame ever comes.
-        cameras = max(1, len(profile.link.camera_names))
+        # A robot without cameras (a UR arm) keeps one idle slot: no frame ever comes. The
+        # local cameras (ocu.video.capture) take the slots after the robot's.
+        cameras = max(1, len(profile.link.camera_names), len(profile.cameras))
         self.corrector = Corrector(profile.cameras)
         self.frames: LatestFrames[DecodedVideoFrame] = LatestFrames(cameras)
         self.decoder = VideoDecoder(

@@ -36,6 +36,7 @@ from PySide6.QtWidgets import (
 from ocu.console.model import ConsoleModel
 from ocu.qt.link import QtLink
 from ocu.records import CameraRequest, CommandError, LinkState, StatusFrame
+from ocu.video.capture import CameraCapture, is_local, video_names
 from ocu.video.correction import CorrectionSettings
 from ocu.widgets.video_status import AttitudeIndicator, BatteryGauge, HeadlightIndicator
 from ocu.widgets.video_view import (
@@ -80,7 +81,8 @@ class VideoControls(QWidget):
         self.model = model
         self.view = view
         self.link: QtLink | None = None
-        names = model.profile.link.camera_names
+        # The robot's cameras, then the local ones (ocu.video.capture: --camera).
+        names = video_names(model.profile)
         self.camera_names = names
 
         self.single_button = _named(QToolButton(), "single_view")
@@ -114,9 +116,9 @@ class VideoControls(QWidget):
         self.track_button = _named(QPushButton("Track"), "track_button")
         self.track_button.setCheckable(True)
         self.track_button.setToolTip(
-            "Click-to-track: click an object in a camera on the arm's head and the waist and "
-            "neck keep it centred; Esc, any motion input, Space or a click outside the "
-            "picture stops it"
+            "Click-to-track: click an object in a camera on the arm (the Engineer's head, the "
+            "xArm's gripper) and the arm keeps it centred (the xArm: and at its distance); "
+            "Esc, any motion input, Space or a click outside the picture stops it"
         )
         self.snapshot_button = _named(QPushButton("Snapshot"), "snapshot_button")
         self.snapshot_button.setToolTip("Save the selected camera's picture as PNG")
@@ -126,7 +128,8 @@ class VideoControls(QWidget):
         top.addWidget(self.single_button)
         top.addWidget(self.grid_button)
         top.addWidget(self.camera_box)
-        top.addWidget(QLabel("Bit-rate"))
+        bitrate_label = QLabel("Bit-rate")
+        top.addWidget(bitrate_label)
         top.addWidget(self.bitrate_box)
         top.addStretch(1)
         top.addWidget(self.track_button)
@@ -159,9 +162,18 @@ class VideoControls(QWidget):
         second.addWidget(self.colour_box)
         second.addWidget(self.undistort_box)
         second.addSpacing(12)
-        second.addWidget(QLabel("Stream"))
+        stream_label = QLabel("Stream")
+        second.addWidget(stream_label)
         second.addWidget(self.size_box)
         second.addWidget(self.fps_box)
+        # A robot that streams no camera of its own (an arm with --camera): nothing of its
+        # video is asked for, so its controls are not shown.
+        self.robot_widgets = (
+            bitrate_label, self.bitrate_box, stream_label, self.size_box, self.fps_box
+        )  # fmt: skip
+        if not model.profile.link.camera_names:
+            for widget in self.robot_widgets:
+                widget.hide()
         second.addStretch(1)
 
         metrics = self.fontMetrics()
@@ -195,7 +207,8 @@ class VideoControls(QWidget):
         if not 0 <= camera < len(self.camera_names):
             return
         self._show_selected(camera)
-        if self.model.camera != camera:
+        # A local camera is only shown: the robot is asked for none of its own.
+        if self.model.camera != camera and not is_local(self.model.profile, camera):
             self.model.select_camera(camera)
         self.sync()
 
@@ -265,6 +278,7 @@ class VideoControls(QWidget):
         extension = self.model.robot.extension_active
         # A replay sends nothing: what would go to the robot (bit-rate, stream) is disabled.
         commands = link is not None and not link.read_only
+        robot_camera = not is_local(self.model.profile, camera)
         self.colour_box.setEnabled(link is not None)
         self.undistort_box.setEnabled(link is not None)
         self.bitrate_box.setEnabled(commands)
@@ -299,8 +313,8 @@ class VideoControls(QWidget):
             self.size_box.setCurrentIndex(size_index)
             self.fps_box.setValue(request.fps)
         stream_tip = "" if extension else " (needs the protocol extension)"
-        self.size_box.setEnabled(commands and extension)
-        self.fps_box.setEnabled(commands and extension)
+        self.size_box.setEnabled(commands and extension and robot_camera)
+        self.fps_box.setEnabled(commands and extension and robot_camera)
         self.size_box.setToolTip(f"Resolution asked of the robot{stream_tip}")
         for widget in widgets:
             widget.blockSignals(False)
@@ -323,8 +337,10 @@ class VideoPanel(QWidget):
         self.setObjectName("video_panel")
         self.model = model
         self.profile = model.profile
-        self.camera_names = self.profile.link.camera_names
+        self.camera_names = video_names(self.profile)
         self.link: QtLink | None = None
+        # Cameras of this machine (--camera), fed to the link's decoder (ocu.video.capture).
+        self.captures: list[CameraCapture] = []
         self.snapshot_dir = snapshot_dir or default_snapshot_dir()
 
         self.view = VideoView(self.camera_names, self.profile.video.no_signal_after_s, self)
@@ -360,6 +376,10 @@ class VideoPanel(QWidget):
         layout.addLayout(status)
         layout.addWidget(self.counters_label)
         layout.addWidget(self.message_label)
+        if not self.profile.link.camera_names:
+            # Only local cameras: the robot reports nothing of its video, light or attitude.
+            for widget in (self.protocol_label, self.headlight, self.attitude):
+                widget.hide()
 
         robot = model.robot.events
         robot.status_changed.connect(self._show_status)
@@ -466,6 +486,8 @@ class VideoPanel(QWidget):
         """Show the video of a (new) link; None shows nothing."""
         if self.link is not None:
             self.link.video_frame_ready.disconnect(self.view.on_frame_ready)
+        for capture in self.captures:
+            capture.set_sink(link.decoder.submit if link is not None else None)
         self.link = link
         self.controls.link = link
         self.view.set_source(link.take_video_frame if link is not None else None)
@@ -498,14 +520,25 @@ class VideoPanel(QWidget):
         self.headlight.show_status(status)
         self.attitude.show_status(status)
 
+    def add_capture(self, capture: CameraCapture) -> None:
+        """A camera of this machine, in its slot (`capture.slot`), fed to the link's decoder."""
+        if not is_local(self.profile, capture.slot):
+            raise ValueError(f"slot {capture.slot} is not a local camera of the profile")
+        self.captures.append(capture)
+        capture.set_sink(self.link.decoder.submit if self.link is not None else None)
+        self._update_live()
+
     def _update_live(self) -> None:
+        local = frozenset(capture.slot for capture in self.captures)
         if self.model.robot.extension_active:
             live = frozenset(r.camera for r in self.model.stream_request if r.fps > 0)
-            self.view.set_live(live, "switched off (stream at 0 fps)")
+            self.view.set_live(live | local, "switched off (stream at 0 fps)")
         else:
             camera = self.model.camera
             streamed = self.view.selected if camera is None else camera
-            self.view.set_live(frozenset({streamed}), "vendor protocol: one camera at a time")
+            self.view.set_live(
+                frozenset({streamed}) | local, "vendor protocol: one camera at a time"
+            )
 
     # ---- snapshots and counters -----------------------------------------------------------
 
@@ -565,6 +598,17 @@ class VideoPanel(QWidget):
             if decoded.corrupt:
                 parts.append(f"corrupt {decoded.corrupt}")
             self.view.extra_lines[camera] = " · ".join(parts)
+        for capture in self.captures:
+            # A local camera says what its own thread saw: why it delivers nothing, if so.
+            status = capture.status().describe(
+                self.view.clock(), self.profile.video.no_signal_after_s
+            )
+            self.view.extra_lines[capture.slot] += f" · {status}"
+        if not self.camera_names[: len(self.profile.link.camera_names)]:
+            # No camera of the robot's own (an arm): only the local cameras' counters.
+            self.counters_label.setText("")
+            self.view.update()
+            return
         video = link.link.video_stats()
         if self.model.robot.extension_active or video.fragments:
             # Short beside the attitude (the dock may be narrow): the rare counters only when
