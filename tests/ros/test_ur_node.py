@@ -520,7 +520,9 @@ def test_ur_controller_with_robot_moves_and_stops_with_stopj(
         controller_status(node, "NORMAL", DiagnosticStatus.OK)
         # Moving again when the signal comes: stopj is the last thing the controller hears.
         goals.publish(JointState(name=["elbow_joint"], position=[start + 1.0]))
-        assert wait_for(lambda: abs(controller.snapshot().qd[2]) > 0.2, 10.0)
+        assert wait_for(lambda: abs(controller.snapshot().qd[2]) > 0.2, 10.0), (
+            f"{controller.snapshot()}\n{node.output()}"
+        )
         code = node.stop()
     finally:
         goals.unregister()
