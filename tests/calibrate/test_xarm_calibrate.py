@@ -1,0 +1,261 @@
+"""`ocu calibrate --profile xarm1s` against the xArm simulator on a pseudo-terminal, mounted
+"wrong" (a hidden offset per servo, a reversed elbow): the calibration finds the truth and
+writes it; a goal with the written profile arrives at the true angle; a stop mid-move leaves
+every servo with its stop move; a silent servo and an unreadable --out are refused.
+
+Before this, `ocu calibrate --profile xarm1s` failed to load the xArm profile as an Engineer's
+(exit 2), and the simulator had no mounting to calibrate against.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
+
+import pytest
+
+from ocu.calibrate.cli import calibrate_main
+from ocu.calibrate.guard import HeldFlag, StopSignal
+from ocu.calibrate.operator import AnswersOperator
+from ocu.calibrate.xarm import PROBE_S, XarmCalibrator, calibrated_xarm_text, raw_arm
+from ocu.link.xarm import XarmLink
+from ocu.profile.xarm import XarmProfile, load_xarm_profile
+from ocu.records import Command, LinkState
+from ocu.sim.xarm import Mounting, XarmSimulator
+
+DEADLINE_S = 20.0
+#: The hidden truth: servo -> mounting (the elbow, servo 4, reversed).
+TRUTH = {6: Mounting(25), 5: Mounting(-40), 4: Mounting(60, reversed=True), 3: Mounting(-10)}
+ALL_POSITIVE = {"base": True, "shoulder": True, "wrist_pitch": True, "wrist_roll": True}
+#: What an operator watching the truth answers: the elbow went the negative way.
+ANSWERS = {"zero_pose": True, "directions": {**ALL_POSITIVE, "elbow": False, "gripper": True}}
+
+
+@pytest.fixture
+def arm() -> XarmProfile:
+    return load_xarm_profile("xarm1s")
+
+
+def simulator(arm: XarmProfile, **options: object) -> Iterator[XarmSimulator]:
+    sim = XarmSimulator(arm, **options)  # type: ignore[arg-type]
+    sim.start()
+    try:
+        yield sim
+    finally:
+        sim.stop()
+
+
+@pytest.fixture
+def mounted(arm: XarmProfile) -> Iterator[XarmSimulator]:
+    yield from simulator(arm, mounting=TRUTH)
+
+
+def answers_file(tmp_path: Path, xarm: Mapping[str, object]) -> Path:
+    directions = ", ".join(
+        f"{joint} = {str(v).lower() if isinstance(v, bool) else repr(v).replace(chr(39), chr(34))}"
+        for joint, v in xarm["directions"].items()  # type: ignore[attr-defined]
+    )
+    path = tmp_path / "answers.toml"
+    path.write_text(
+        f"[xarm]\nzero_pose = {str(xarm['zero_pose']).lower()}\ndirections = {{ {directions} }}\n",
+        encoding="utf-8",
+    )
+    return path
+
+
+def calibrate(sim: XarmSimulator, out: Path, answers: Path) -> tuple[int, str]:
+    stdout = io.StringIO()
+    status = calibrate_main(
+        [
+            "--profile",
+            "xarm1s",
+            "--robot",
+            sim.path,
+            "--out",
+            str(out),
+            "--answers",
+            str(answers),
+            "--on-stand",
+        ],
+        stdout=stdout,
+    )
+    return status, stdout.getvalue()
+
+
+def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = DEADLINE_S) -> None:
+    """Poll a condition of the simulator's state until it holds (a deadline, no fixed wait)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, f"{what} never happened"
+        time.sleep(0.01)
+
+
+def test_offsets_and_a_reversed_joint_found_and_written(
+    mounted: XarmSimulator, arm: XarmProfile, tmp_path: Path
+) -> None:
+    out = tmp_path / "my_xarm.toml"
+    status, text = calibrate(mounted, out, answers_file(tmp_path, ANSWERS))
+    assert status == 0, text
+    written = load_xarm_profile(out)
+    for joint in written.joints:
+        truth = TRUTH.get(joint.servo, Mounting())
+        assert abs(joint.offset_units - truth.offset_units) <= 1, (joint, text)
+        assert joint.sign == (-1 if truth.reversed else 1), (joint, text)
+    # Every other line kept, comments too.
+    base = Path(arm.source).read_text(encoding="utf-8").splitlines()
+    kept = [line for line in base if not line.startswith(("sign =", "offset ="))]
+    assert all(line in out.read_text(encoding="utf-8").splitlines() for line in kept)
+    assert "battery: 7400 mV" in text
+    # Each joint moved and came back: every servo at its zero again.
+    snapshot = mounted.snapshot()
+    for servo, position in snapshot.positions.items():
+        assert abs(position - 500 - TRUTH.get(servo, Mounting()).offset_units) < 3
+
+
+def test_the_written_profile_makes_a_goal_arrive_at_the_true_angle(
+    mounted: XarmSimulator, tmp_path: Path
+) -> None:
+    out = tmp_path / "my_xarm.toml"
+    status, text = calibrate(mounted, out, answers_file(tmp_path, ANSWERS))
+    assert status == 0, text
+    calibrated = load_xarm_profile(out)
+    goals = {"shoulder": 0.3, "elbow": 0.4, "base": -0.2}
+    link = XarmLink(calibrated, mounted.path, gui_alive_timeout_s=None)
+    link.start()
+    try:
+        wait_for(lambda: link.state is LinkState.CONNECTED, "the link")
+        wait_for(lambda: len(link.setpoints()) == 6, "every servo read")
+        end = time.monotonic() + 1.5
+        link.heartbeat()
+        link.set_command(
+            Command(
+                velocities={name: goal / 1.5 for name, goal in goals.items()},
+                goals=goals,
+                until=dict.fromkeys(goals, end),
+            )
+        )
+
+        def settled() -> bool:
+            truth = mounted.board.true_angles_rad()
+            return all(
+                abs(truth[calibrated.joint(n).servo] - g) < math.radians(0.5)
+                for n, g in goals.items()
+            ) and all(abs(v) < 1.0 for v in mounted.snapshot().velocities.values())
+
+        wait_for(settled, "the goals reached at their true angles")
+    finally:
+        link.shutdown()
+    truth = mounted.board.true_angles_rad()
+    # The uncalibrated profile would have put the elbow at -0.4 - 60 units off.
+    assert abs(truth[4] - 0.4) < math.radians(0.5)
+
+
+def test_a_stop_mid_move_leaves_every_servo_with_its_stop_move(
+    mounted: XarmSimulator, arm: XarmProfile
+) -> None:
+    stop = StopSignal()
+    link = XarmLink(raw_arm(arm), mounted.path)
+    operator = AnswersOperator({"xarm": ANSWERS})
+    calibrator = XarmCalibrator(link, arm, operator, deadman=HeldFlag(True), stop=stop)
+    shoulder = 5
+    zero = 500 + TRUTH[shoulder].offset_units
+
+    def ctrl_c_when_the_shoulder_moves() -> None:
+        deadline = time.monotonic() + DEADLINE_S
+        while time.monotonic() < deadline and not stop.stopped:
+            if abs(mounted.snapshot().setpoints[shoulder] - zero) > 4:
+                stop.stop("SIGINT")
+                return
+            time.sleep(0.005)
+
+    watcher = threading.Thread(target=ctrl_c_when_the_shoulder_moves)
+    watcher.start()
+    try:
+        result = calibrator.run()
+    finally:
+        link.shutdown()
+        watcher.join(DEADLINE_S)
+    assert result.aborted == "SIGINT"
+    assert stop.at is not None
+    moves = mounted.board.moves_since(0.0)
+    stops = [(t, move) for t, move in moves if move.duration_ms == 0]
+    assert stops, "no stop move"
+    first_stop = stops[0][0]
+    stopped = {servo for t, move in stops for servo, _ in move.positions}
+    assert stopped == {j.servo for j in arm.joints}
+    # Nothing after the first stop move moves anything (every later move is a stop move)...
+    assert all(move.duration_ms == 0 for t, move in moves if t >= first_stop)
+    # ... and the shoulder was stopped short of its 5° move.
+    snapshot = mounted.snapshot()
+    assert snapshot.setpoints[shoulder] == snapshot.targets[shoulder]
+    assert abs(snapshot.targets[shoulder] - zero) < arm.units_per_rad * math.radians(5.0) - 1
+    assert PROBE_S > 0.5  # the move was slow enough to be stopped half way
+
+
+def test_the_operator_answering_stop_stops_and_writes_nothing(
+    mounted: XarmSimulator, tmp_path: Path
+) -> None:
+    out = tmp_path / "my_xarm.toml"
+    answers = {"zero_pose": True, "directions": {"base": True, "shoulder": "stop"}}
+    status, text = calibrate(mounted, out, answers_file(tmp_path, answers))
+    assert status == 1
+    assert "stopped: operator: stop" in text
+    assert "nothing written" in text
+    assert not out.exists()
+    last = mounted.snapshot().last_move
+    assert last is not None
+    assert last.duration_ms == 0
+    assert {servo for servo, _ in last.positions} == set(mounted.snapshot().positions)
+
+
+def test_a_servo_that_does_not_answer_is_refused_by_name(arm: XarmProfile, tmp_path: Path) -> None:
+    for sim in simulator(arm, absent=[4]):
+        out = tmp_path / "my_xarm.toml"
+        status, text = calibrate(sim, out, answers_file(tmp_path, ANSWERS))
+        assert status == 1
+        assert "servo 4 (elbow) did not answer" in text
+        assert not out.exists()
+        assert sim.snapshot().moves == 0 or all(
+            move.duration_ms == 0 for _, move in sim.board.moves_since(0.0)
+        )
+
+
+def test_an_offset_out_of_range_is_refused_with_the_reason(
+    arm: XarmProfile, tmp_path: Path
+) -> None:
+    for sim in simulator(arm, mounting={5: Mounting(230)}):
+        out = tmp_path / "my_xarm.toml"
+        status, text = calibrate(sim, out, answers_file(tmp_path, ANSWERS))
+        assert status == 1
+        assert "the shoulder reads 730 in the zero pose, +230 units" in text
+        assert not out.exists()
+
+
+def test_an_unreadable_out_file_is_not_overwritten(
+    mounted: XarmSimulator, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "my_xarm.toml"
+    garbage = b"\xff\xfe not a profile [[["
+    out.write_bytes(garbage)
+    status, _ = calibrate(mounted, out, answers_file(tmp_path, ANSWERS))
+    assert status == 2
+    assert "not overwritten" in capsys.readouterr().err
+    assert out.read_bytes() == garbage
+    assert mounted.snapshot().moves == 0  # refused before anything moved
+
+
+def test_the_text_keeps_every_line_but_sign_and_offset(arm: XarmProfile) -> None:
+    from ocu.calibrate.xarm import XarmCalibrationResult
+
+    result = XarmCalibrationResult(zero={"elbow": 560}, offsets={"elbow": 60}, signs={"elbow": -1})
+    base = Path(arm.source).read_text(encoding="utf-8")
+    text = calibrated_xarm_text(base, result, robot="/dev/pts/9", base_name="xarm1s")
+    changed = [line for line in text.splitlines() if line not in base.splitlines()]
+    assert changed[2:] == [
+        "sign = -1  # measured: a 5° move seen",
+        "offset = 60  # measured: read 560 in the zero pose",
+    ]
