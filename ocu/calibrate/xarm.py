@@ -46,8 +46,9 @@ POSITIVE = {
 }
 #: The zero pose (docs/xarm.md): what the operator is asked to set up.
 ZERO_POSE = (
-    "the arm standing straight up (shoulder, elbow and wrist in one vertical line), the "
-    "gripper's jaws across the arm's front, the base facing forward, the gripper half open"
+    "the arm standing upright (shoulder, elbow and wrist in one vertical line), the base "
+    "facing forward, the gripper's jaws opening to the arm's left and right, the gripper half "
+    "open"
 )
 #: A zero reading further than this from 500 (36°) is not a mounting error but a pose.
 MAX_OFFSET_UNITS = 150

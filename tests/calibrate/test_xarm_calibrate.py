@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import io
 import math
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -25,7 +28,8 @@ from ocu.calibrate.xarm import PROBE_S, XarmCalibrator, calibrated_xarm_text, ra
 from ocu.link.xarm import XarmLink
 from ocu.profile.xarm import XarmProfile, load_xarm_profile
 from ocu.records import Command, LinkState
-from ocu.sim.xarm import Mounting, XarmSimulator
+from ocu.sim.xarm import Mounting, XarmSimulator, parse_mounting
+from ocu.sim.xarm import main as sim_main
 
 DEADLINE_S = 20.0
 #: The hidden truth: servo -> mounting (the elbow, servo 4, reversed).
@@ -259,3 +263,57 @@ def test_the_text_keeps_every_line_but_sign_and_offset(arm: XarmProfile) -> None
         "sign = -1  # measured: a 5° move seen",
         "offset = 60  # measured: read 560 in the zero pose",
     ]
+
+
+def test_ctrl_c_to_ocu_calibrate_mid_move_stops_every_servo(
+    mounted: XarmSimulator, tmp_path: Path
+) -> None:
+    out = tmp_path / "my_xarm.toml"
+    command = [sys.executable, "-m", "ocu", "calibrate", "--profile", "xarm1s"]
+    options = ["--robot", mounted.path, "--out", str(out), "--on-stand"]
+    answers = answers_file(tmp_path, ANSWERS)
+    elbow, zero = 4, 500 + TRUTH[4].offset_units
+    with subprocess.Popen(
+        [*command, *options, "--answers", str(answers)],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    ) as process:
+        try:
+            wait_for(
+                lambda: abs(mounted.snapshot().setpoints[elbow] - zero) > 4,
+                "the elbow's move",
+                timeout_s=60.0,
+            )
+            process.send_signal(signal.SIGINT)
+            stdout, stderr = process.communicate(timeout=DEADLINE_S)
+        finally:
+            if process.poll() is None:
+                process.kill()
+                process.wait(DEADLINE_S)
+    assert process.returncode == 1, stdout + stderr
+    assert "Traceback" not in stderr
+    assert "stopped: SIGINT; nothing written" in stdout
+    assert not out.exists()
+    moves = mounted.board.moves_since(0.0)
+    first_stop = next(t for t, move in moves if move.duration_ms == 0)
+    after = [move for t, move in moves if t >= first_stop]
+    assert all(move.duration_ms == 0 for move in after)
+    assert {servo for move in after for servo, _ in move.positions} == set(TRUTH) | {1, 2}
+    snapshot = mounted.snapshot()
+    assert abs(snapshot.targets[elbow] - zero) < arm_units(5.0)
+
+
+def arm_units(degrees: float) -> float:
+    return load_xarm_profile("xarm1s").units_per_rad * math.radians(degrees)
+
+
+def test_ocu_sim_mount_options() -> None:
+    assert parse_mounting("4:-40:reversed") == (4, Mounting(-40, reversed=True))
+    assert parse_mounting("5:12") == (5, Mounting(12))
+    for bad in ("4", "4:x", "4:10:backwards"):
+        with pytest.raises(ValueError, match="bad mounting"):
+            parse_mounting(bad)
+    with pytest.raises(SystemExit):
+        sim_main(["--profile", "xarm1s", "--mount", "9:10"])  # no servo 9
