@@ -336,6 +336,7 @@ class XarmCalibrator:
 
 _JOINTS_HEADER = re.compile(r"^\s*\[\[\s*joints\s*\]\]\s*(#.*)?$")
 _TABLE_HEADER = re.compile(r"^\s*\[")
+HEADER_START = "# xArm profile written by `ocu calibrate`"
 _NAME = re.compile(r'^\s*name\s*=\s*"([^"]*)"')
 _KEY = re.compile(r"^(\s*)(sign|offset)(\s*=\s*)([^#\s]+)(\s*#.*)?$")
 
@@ -347,11 +348,14 @@ def calibrated_xarm_text(
     comment saying how it was measured); every other line kept as it is."""
     stamp = result.started_at.replace(microsecond=0).isoformat()
     lines = [
-        f"# xArm profile written by `ocu calibrate` for {robot} on {stamp} from {base_name}:",
+        f"{HEADER_START} for {robot} on {stamp} from {base_name}:",
         "# each joint's `sign` and `offset` were measured (docs/calibration.md, An xArm 1S).",
     ]
     joint: str | None = None
-    for original in base_text.splitlines():
+    base_lines = base_text.splitlines()
+    if base_lines[:1] and base_lines[0].startswith(HEADER_START):
+        base_lines = base_lines[2:]  # a calibrated profile calibrated again: one header
+    for original in base_lines:
         line = original
         if _JOINTS_HEADER.match(line):
             joint = ""

@@ -317,3 +317,59 @@ def test_ocu_sim_mount_options() -> None:
             parse_mounting(bad)
     with pytest.raises(SystemExit):
         sim_main(["--profile", "xarm1s", "--mount", "9:10"])  # no servo 9
+
+
+def test_the_deadman_let_go_mid_move_stops_it_and_held_again_finishes(
+    mounted: XarmSimulator, arm: XarmProfile
+) -> None:
+    deadman = HeldFlag(True)
+    stop = StopSignal()
+    link = XarmLink(raw_arm(arm), mounted.path)
+    operator = AnswersOperator({"xarm": ANSWERS})
+    calibrator = XarmCalibrator(link, arm, operator, deadman=deadman, stop=stop)
+    base, zero = 6, 500 + TRUTH[6].offset_units
+    seen: dict[str, float] = {}
+
+    def let_go_and_hold_again() -> None:
+        deadline = time.monotonic() + DEADLINE_S
+        while time.monotonic() < deadline:
+            if abs(mounted.snapshot().setpoints[base] - zero) > 4:
+                seen["released_at"] = mounted.board.clock()
+                deadman.set(False)
+                break
+            time.sleep(0.005)
+        while time.monotonic() < deadline:
+            stops = [
+                m for _, m in mounted.board.moves_since(seen["released_at"]) if m.duration_ms == 0
+            ]
+            if stops:
+                seen["held_at"] = mounted.board.clock()
+                seen["stopped_at_units"] = mounted.snapshot().targets[base]
+                deadman.set(True)
+                return
+            time.sleep(0.005)
+
+    watcher = threading.Thread(target=let_go_and_hold_again)
+    watcher.start()
+    try:
+        result = calibrator.run()
+    finally:
+        link.shutdown()
+        watcher.join(DEADLINE_S)
+    assert result.aborted is None
+    assert "held_at" in seen, "no stop move after the deadman was let go"
+    # Stopped short of the 5° move, then finished: the base's sign and offset found.
+    assert abs(seen["stopped_at_units"] - zero) < arm_units(5.0) - 1
+    assert result.offsets["base"] == TRUTH[6].offset_units
+    assert result.signs == {j.name: (-1 if j.name == "elbow" else 1) for j in arm.joints}
+
+
+def test_a_calibrated_profile_calibrated_again_keeps_one_header(arm: XarmProfile) -> None:
+    from ocu.calibrate.xarm import XarmCalibrationResult
+
+    result = XarmCalibrationResult(zero={"base": 510}, offsets={"base": 10}, signs={"base": 1})
+    base = Path(arm.source).read_text(encoding="utf-8")
+    once = calibrated_xarm_text(base, result, robot="/dev/pts/9", base_name="xarm1s")
+    twice = calibrated_xarm_text(once, result, robot="/dev/pts/9", base_name="my.toml")
+    assert twice.count("written by `ocu calibrate`") == 1
+    assert len(twice.splitlines()) == len(once.splitlines())
