@@ -18,6 +18,7 @@ import dataclasses
 import datetime as dt
 import math
 import re
+import statistics
 import threading
 import time
 import tomllib
@@ -62,6 +63,8 @@ SETTLE_S = 3.0
 #: A move's end is read within this of its target (units); the joint moved if by half.
 ARRIVED_UNITS = 3
 POLL_S = 0.02
+#: Readings of the zero pose whose median is taken.
+ZERO_READINGS = 5
 
 
 class XarmOperator(Protocol):
@@ -188,7 +191,11 @@ class XarmCalibrator:
         silent = [j for j in self.arm.joints if j.servo not in positions]
         if silent:
             names = ", ".join(f"servo {j.servo} ({j.name})" for j in silent)
-            why = "no reply at all" if replies == 0 else f"absent from {replies} replies"
+            why = (
+                f"no reply at all: is it the board, at {self.arm.baud} baud?"
+                if replies == 0
+                else f"absent from {replies} replies"
+            )
             raise CalibrationAbortedError(
                 f"{names} did not answer in {self.listen_s:g} s ({why}): check its cable and ID"
             )
@@ -199,7 +206,12 @@ class XarmCalibrator:
         if not self.operator.zero_pose_ready(f"Put the arm in its zero pose: {ZERO_POSE}."):
             raise CalibrationAbortedError("the arm was not put in its zero pose")
         self._check_stop()
-        positions = self._fresh_positions()
+        # The median of a few readings: one noisy reading would be the offset for good.
+        samples = [self._fresh_positions() for _ in range(ZERO_READINGS)]
+        positions = {
+            servo: round(statistics.median(sample[servo] for sample in samples))
+            for servo in samples[0]
+        }
         problems = []
         for joint in self.arm.joints:
             raw = positions[joint.servo]

@@ -373,3 +373,14 @@ def test_a_calibrated_profile_calibrated_again_keeps_one_header(arm: XarmProfile
     twice = calibrated_xarm_text(once, result, robot="/dev/pts/9", base_name="my.toml")
     assert twice.count("written by `ocu calibrate`") == 1
     assert len(twice.splitlines()) == len(once.splitlines())
+
+
+def test_noisy_readings_give_offsets_within_two_units(arm: XarmProfile, tmp_path: Path) -> None:
+    for sim in simulator(arm, mounting=TRUTH, noise_units=1.0, seed=5):
+        out = tmp_path / "my_xarm.toml"
+        status, text = calibrate(sim, out, answers_file(tmp_path, ANSWERS))
+        assert status == 0, text
+        for joint in load_xarm_profile(out).joints:
+            truth = TRUTH.get(joint.servo, Mounting())
+            assert abs(joint.offset_units - truth.offset_units) <= 2, (joint, text)
+            assert joint.sign == (-1 if truth.reversed else 1)
