@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tomllib
 from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
@@ -29,21 +28,18 @@ from ocu.calibrate.xarm import (
 )
 from ocu.link.xarm import XarmLink
 from ocu.profile.keys import ProfileError
-from ocu.profile.xarm import XarmProfile, load_xarm_profile, shipped_xarm_profiles
+from ocu.profile.xarm import (
+    XarmProfile,
+    is_xarm_file,
+    load_xarm_profile,
+    shipped_xarm_profiles,
+)
 
 
 def is_xarm_profile_arg(profile: str | None) -> bool:
-    """Whether `--profile` names an xArm profile: a shipped name, or a file with
-    `[[joints]]` tables (the Engineer's profile has none)."""
-    if profile is None:
-        return False
-    if profile in shipped_xarm_profiles():
-        return True
-    try:
-        data = tomllib.loads(Path(profile).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-        return False  # the Engineer's loader names what is wrong
-    return isinstance(data.get("joints"), list)
+    """Whether `--profile` names an xArm profile: a shipped name, or a file in the xArm
+    format (one this wrote, too)."""
+    return profile is not None and (profile in shipped_xarm_profiles() or is_xarm_file(profile))
 
 
 def calibrate_xarm(

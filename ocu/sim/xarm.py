@@ -48,7 +48,13 @@ from dataclasses import dataclass
 from types import FrameType
 
 from ocu.profile.keys import ProfileError
-from ocu.profile.xarm import CENTRE_UNITS, XarmProfile, load_xarm_profile, shipped_xarm_profiles
+from ocu.profile.xarm import (
+    CENTRE_UNITS,
+    XarmProfile,
+    is_xarm_file,
+    load_xarm_profile,
+    shipped_xarm_profiles,
+)
 from ocu.protocol.xarm import (
     Cmd,
     Direction,
@@ -502,14 +508,18 @@ def phase_margin_deg(profile: XarmProfile, delay_s: float = 0.0) -> float:
 
 
 def is_xarm_profile(argv: Sequence[str]) -> bool:
-    """Whether a command line's --profile names a shipped xArm profile (ocu-sim dispatches)."""
-    names = shipped_xarm_profiles()
+    """Whether a command line's --profile names an xArm profile, shipped or a file in the
+    xArm format (ocu-sim dispatches)."""
     for index, arg in enumerate(argv):
         if arg == "--profile" and index + 1 < len(argv):
-            return argv[index + 1] in names
+            return _is_xarm(argv[index + 1])
         if arg.startswith("--profile="):
-            return arg.split("=", 1)[1] in names
+            return _is_xarm(arg.split("=", 1)[1])
     return False
+
+
+def _is_xarm(name: str) -> bool:
+    return name in shipped_xarm_profiles() or is_xarm_file(name)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -384,3 +384,27 @@ def test_noisy_readings_give_offsets_within_two_units(arm: XarmProfile, tmp_path
             truth = TRUTH.get(joint.servo, Mounting())
             assert abs(joint.offset_units - truth.offset_units) <= 2, (joint, text)
             assert joint.sign == (-1 if truth.reversed else 1)
+
+
+def test_the_written_file_is_an_xarm_profile_for_ocu_and_ocu_sim(
+    arm: XarmProfile, tmp_path: Path
+) -> None:
+    from ocu.calibrate.xarm import XarmCalibrationResult, write_xarm_profile
+    from ocu.calibrate.xarm_cli import is_xarm_profile_arg
+    from ocu.profile import default_profile_path
+    from ocu.profile.xarm import load_xarm_arm
+    from ocu.sim.xarm import is_xarm_profile
+
+    out = tmp_path / "my_xarm.toml"
+    result = XarmCalibrationResult(zero={"elbow": 560}, offsets={"elbow": 60}, signs={"elbow": -1})
+    write_xarm_profile(out, arm, result, robot="/dev/pts/9")
+    loaded = load_xarm_arm(str(out))  # what `ocu --profile` and `ocu-ros` call
+    assert loaded is not None
+    assert (loaded.joint("elbow").sign, loaded.joint("elbow").offset_units) == (-1, 60)
+    assert is_xarm_profile(["--profile", str(out)])
+    assert is_xarm_profile_arg(str(out))
+    # The Engineer's profile by its path stays the Engineer's.
+    engineer = str(default_profile_path())
+    assert load_xarm_arm(engineer) is None
+    assert not is_xarm_profile_arg(engineer)
+    assert not is_xarm_profile(["--profile", engineer])
