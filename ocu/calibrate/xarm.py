@@ -313,7 +313,9 @@ class XarmCalibrator:
                     break
                 now = time.monotonic()
                 raw = self._position_after(joint.servo, now)
-                if now >= end and raw is not None and abs(raw - target) <= ARRIVED_UNITS:
+                # The link's move ends up to 1 ms after `end` (whole milliseconds): clearing
+                # the command before it ended would send a stop move of this joint.
+                if now >= end + POLL_S and raw is not None and abs(raw - target) <= ARRIVED_UNITS:
                     self.link.set_command(Command())
                     return raw
                 if now > deadline:

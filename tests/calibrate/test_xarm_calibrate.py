@@ -98,6 +98,21 @@ def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = DEADLI
         time.sleep(0.01)
 
 
+def wait_for_the_last_stop_move(sim: XarmSimulator) -> None:
+    """Wait until the board has run a stop move of every servo, the link's last frame (the
+    simulator's thread may run behind the link's writes on a loaded machine)."""
+
+    def ran() -> bool:
+        last = sim.snapshot().last_move
+        return (
+            last is not None
+            and last.duration_ms == 0
+            and {servo for servo, _ in last.positions} == set(sim.board.servos)
+        )
+
+    wait_for(ran, "a stop move of every servo")
+
+
 def test_offsets_and_a_reversed_joint_found_and_written(
     mounted: XarmSimulator, arm: XarmProfile, tmp_path: Path
 ) -> None:
@@ -114,6 +129,12 @@ def test_offsets_and_a_reversed_joint_found_and_written(
     kept = [line for line in base if not line.startswith(("sign =", "offset ="))]
     assert all(line in out.read_text(encoding="utf-8").splitlines() for line in kept)
     assert "battery: 7400 mV" in text
+    # Two timed moves per joint (out and back) and no stop move before the link's shutdown.
+    wait_for_the_last_stop_move(mounted)
+    moves = [move for _, move in mounted.board.moves_since(0.0)]
+    timed = [move for move in moves if move.duration_ms > 0]
+    assert len(timed) == 12
+    assert moves[: len(timed)] == timed
     # Each joint moved and came back: every servo at its zero again.
     snapshot = mounted.snapshot()
     for servo, position in snapshot.positions.items():
@@ -185,6 +206,7 @@ def test_a_stop_mid_move_leaves_every_servo_with_its_stop_move(
         watcher.join(DEADLINE_S)
     assert result.aborted == "SIGINT"
     assert stop.at is not None
+    wait_for_the_last_stop_move(mounted)
     moves = mounted.board.moves_since(0.0)
     stops = [(t, move) for t, move in moves if move.duration_ms == 0]
     assert stops, "no stop move"
@@ -210,10 +232,10 @@ def test_the_operator_answering_stop_stops_and_writes_nothing(
     assert "stopped: operator: stop" in text
     assert "nothing written" in text
     assert not out.exists()
-    last = mounted.snapshot().last_move
-    assert last is not None
-    assert last.duration_ms == 0
-    assert {servo for servo, _ in last.positions} == set(mounted.snapshot().positions)
+    wait_for_the_last_stop_move(mounted)
+    # Nothing but stop moves after the operator's answer (the shoulder is held where it is).
+    snapshot = mounted.snapshot()
+    assert snapshot.setpoints == snapshot.targets
 
 
 def test_a_servo_that_does_not_answer_is_refused_by_name(arm: XarmProfile, tmp_path: Path) -> None:
@@ -296,6 +318,7 @@ def test_ctrl_c_to_ocu_calibrate_mid_move_stops_every_servo(
     assert "Traceback" not in stderr
     assert "stopped: SIGINT; nothing written" in stdout
     assert not out.exists()
+    wait_for_the_last_stop_move(mounted)
     moves = mounted.board.moves_since(0.0)
     first_stop = next(t for t, move in moves if move.duration_ms == 0)
     after = [move for t, move in moves if t >= first_stop]
