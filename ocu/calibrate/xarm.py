@@ -33,7 +33,7 @@ from ocu.link.xarm import XarmLink
 from ocu.link.xarm_wire import XarmStatus, XarmTelemetry
 from ocu.profile.keys import ProfileError
 from ocu.profile.xarm import CENTRE_UNITS, XarmJoint, XarmProfile, parse_xarm_profile
-from ocu.records import Command, LinkEvent, StatusFrame, TelemetryFrame
+from ocu.records import Command, LinkEvent, SafetyEvent, StatusFrame, TelemetryFrame
 
 #: What each joint's positive direction is (docs/xarm.md "The URDF and the IK"; the wrist
 #: roll's and the gripper's are this project's convention).
@@ -110,6 +110,7 @@ class _Readings:
         self.positions: dict[int, tuple[int, float]] = {}  # servo -> (units, when)
         self.battery_mv: int | None = None
         self.replies = 0
+        self.safety: list[str] = []  # the link's safety events (its watchdogs' stops)
 
     def __call__(self, event: LinkEvent) -> None:
         if isinstance(event, TelemetryFrame) and isinstance(event.packet, XarmTelemetry):
@@ -118,6 +119,9 @@ class _Readings:
                     self.positions[motor.device_id] = (motor.position, event.received_at)
                 self.replies += 1
                 self.changed.notify_all()
+        elif isinstance(event, SafetyEvent):
+            with self.changed:
+                self.safety.append(event.message)
         elif isinstance(event, StatusFrame) and isinstance(event.packet, XarmStatus):
             with self.changed:
                 self.battery_mv = event.packet.voltage_mv
@@ -291,6 +295,8 @@ class XarmCalibrator:
         while True:
             self._wait_for_deadman(joint)
             here = self.link.setpoints().get(joint.servo, float(target))
+            with self.readings.changed:
+                safety_seen = len(self.readings.safety)
             end = time.monotonic() + self.probe_s
             # The goal's velocity is the move's mean speed (a goal is a motion command).
             speed = (target - here) / self.arm.units_per_rad / self.probe_s
@@ -320,9 +326,12 @@ class XarmCalibrator:
                     return raw
                 if now > deadline:
                     self.link.emergency_stop("move not completed")
+                    with self.readings.changed:
+                        why = "; ".join(self.readings.safety[safety_seen:])
                     raise CalibrationAbortedError(
                         f"the {joint.name} did not reach {target} within "
                         f"{self.probe_s + SETTLE_S:g} s (read {raw})"
+                        + (f": the link stopped it ({why})" if why else "")
                     )
                 self.stop.wait(POLL_S)
 
