@@ -37,6 +37,7 @@ from ocu.calibrate.probe import DEFAULT_LISTEN_S, run_probe
 from ocu.calibrate.raw import raw_profile
 from ocu.calibrate.session import CalibrationConfig, Calibrator
 from ocu.calibrate.writer import write_calibrated_profile
+from ocu.calibrate.xarm_cli import calibrate_xarm, is_xarm_profile_arg
 from ocu.link.base import LinkError
 from ocu.link.live import UdpLink
 from ocu.profile import ProfileError, default_profile_path, load_profile_data, parse_profile
@@ -163,6 +164,8 @@ def _calibrate(
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     out = stdout or sys.stdout
+    if is_xarm_profile_arg(args.profile):
+        return calibrate_xarm(parser, args, stdin, out, stop)
     if args.yes and args.answers:
         parser.error("--yes asks nothing: --answers does not apply")
     if args.telemetry_hz is not None and not (

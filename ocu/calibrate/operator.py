@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, TextIO
 
+from ocu.calibrate.guard import CalibrationAbortedError
 from ocu.profile import did_you_mean
 
 LINEAR = "linear"
@@ -132,8 +133,18 @@ class AutoOperator:
         """Not asked."""
         return None
 
+    def zero_pose_ready(self, text: str) -> bool:
+        """An xArm's zero pose needs a person: not confirmed."""
+        self.say(f"{text} Nobody to confirm it.")
+        return False
 
-ANSWER_KEYS = ("skip", "joints", "angles", "limits", "drive")
+    def moved_positive(self, joint: str, positive: str) -> bool:
+        """An xArm's direction needs a person."""
+        raise CalibrationAbortedError(f"nobody to say whether the {joint} moved")
+
+
+ANSWER_KEYS = ("skip", "joints", "angles", "limits", "drive", "xarm")
+XARM_KEYS = ("zero_pose", "directions")
 DRIVE_KEYS = ("distance", "speeds", "times_s")
 
 
@@ -151,6 +162,15 @@ class AnswersOperator(AutoOperator):
     distance = 1.15
     speeds = [0.25, 0.3, 0.35]
     times_s = [4.6, 3.8, 3.3]
+    ```
+
+    An xArm's (docs/calibration.md, "An xArm 1S"): whether the arm is in its zero pose, and
+    per joint whether it moved the positive way (true, false, or "stop": the operator stops):
+
+    ```toml
+    [xarm]
+    zero_pose = true
+    directions = { base = true, elbow = false, shoulder = "stop" }
     ```
     """
 
@@ -189,6 +209,7 @@ class AnswersOperator(AutoOperator):
             if kind not in DRIVE_KINDS or not isinstance(table, dict):
                 raise AnswersError(f"answers.drive.{kind}: {did_you_mean(kind, DRIVE_KINDS)}")
             self.drive[kind] = _drive_plan(kind, table)
+        self.zero_pose, self.directions = _xarm_answers(answers.get("xarm", {}))
 
     @classmethod
     def from_file(
@@ -235,6 +256,40 @@ class AnswersOperator(AutoOperator):
         if plan is None or plan.stop_after_s is None:
             return None
         return plan.stop_after_s[index]
+
+    def zero_pose_ready(self, text: str) -> bool:
+        """The file's `xarm.zero_pose`."""
+        self.say(f"{text} (answers: {'ready' if self.zero_pose else 'not ready'})")
+        return self.zero_pose
+
+    def moved_positive(self, joint: str, positive: str) -> bool:
+        """The file's `xarm.directions` entry for the joint; "stop" stops."""
+        answer = self.directions.get(joint)
+        if answer is None:
+            raise CalibrationAbortedError(f"answers.xarm.directions: no answer for the {joint}")
+        if answer == "stop":
+            raise CalibrationAbortedError(f"operator: stop (asked whether the {joint} moved)")
+        return bool(answer)
+
+
+def _xarm_answers(table: object) -> tuple[bool, dict[str, bool | str]]:
+    where = "answers.xarm"
+    if not isinstance(table, dict):
+        raise AnswersError(f"{where}: a table with zero_pose and directions")
+    unknown = [key for key in table if key not in XARM_KEYS]
+    if unknown:
+        raise AnswersError(
+            f"{where}.{unknown[0]}: unknown key; {did_you_mean(unknown[0], XARM_KEYS)}"
+        )
+    zero_pose = table.get("zero_pose", False)
+    directions = table.get("directions", {})
+    if not isinstance(zero_pose, bool):
+        raise AnswersError(f"{where}.zero_pose: true or false")
+    if not isinstance(directions, dict) or not all(
+        isinstance(v, bool) or v == "stop" for v in directions.values()
+    ):
+        raise AnswersError(f'{where}.directions: a table of joint = true, false or "stop"')
+    return zero_pose, dict(directions)
 
 
 def _strings(value: object, key: str) -> list[str]:
@@ -350,6 +405,23 @@ class TerminalOperator(AutoOperator):
             self._print(f"not a distance: {answer!r}; skipped")
             return None
         return DrivePlan(kind, distance, DEFAULT_DRIVE_SPEEDS[kind])
+
+    def zero_pose_ready(self, text: str) -> bool:
+        """Enter when the arm is in its zero pose; "stop" (or "n") ends the calibration."""
+        answer = self._ask(f"{text} Press Enter when it is [or type stop]").lower()
+        return answer not in ("stop", "n", "no")
+
+    def moved_positive(self, joint: str, positive: str) -> bool:
+        """Did the joint move the positive way? y/n; "stop" stops."""
+        while True:
+            answer = self._ask(f"Did the {joint} {positive}? [y/n/stop]").lower()
+            if answer in ("y", "yes"):
+                return True
+            if answer in ("n", "no"):
+                return False
+            if answer == "stop":
+                raise CalibrationAbortedError(f"operator: stop (asked whether the {joint} moved)")
+            self._print(f"answer y, n or stop, not {answer!r}")
 
     def drive_time(self, kind: str, index: int, commanded_s: float) -> float | None:
         """The stopwatch time of the run (Enter: drop it)."""

@@ -123,11 +123,27 @@ def shipped_xarm_profiles() -> tuple[str, ...]:
     )
 
 
+def is_xarm_file(path: str | Path) -> bool:
+    """Whether `path` is a TOML file in the xArm format (it has `baud` and `range_deg`, as
+    one `ocu calibrate` wrote does); False for anything else, readable or not."""
+    path = Path(path)
+    if path.suffix != ".toml" or not path.is_file():
+        return False
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return False  # the Engineer's loader says what is wrong with it
+    return "baud" in data and "range_deg" in data
+
+
 def load_xarm_arm(name: str | None) -> XarmProfile | None:
-    """The xArm `--profile` names (a shipped name), else None; ProfileError for a bad one."""
-    if name is None or name not in shipped_xarm_profiles():
+    """The xArm `--profile` names (a shipped name, or a file in the xArm format), else None;
+    ProfileError for a bad one."""
+    if name is None:
         return None
-    return load_xarm_profile(name)
+    if name in shipped_xarm_profiles() or is_xarm_file(name):
+        return load_xarm_profile(name)
+    return None
 
 
 def load_xarm_profile(name_or_path: str | Path) -> XarmProfile:

@@ -19,6 +19,12 @@ figures: docs/xarm.md). Faults like the other simulators': `latency_ms` delays e
 each way, `garbage_rate` puts random bytes before a reply with that probability,
 `noise_units` adds Gaussian noise to the positions read, `mute` answers nothing (moves are
 still obeyed).
+
+A hidden mounting truth to calibrate against (`ocu calibrate`, docs/calibration.md "An xArm
+1S"): `mounting` gives a servo the offset (units) at which its joint is truly at 0 rad and
+whether its horn is mounted reversed; `absent` servos are not on the bus (never answer). The
+arm starts in its true zero pose; `true_angles_rad` is the ground truth the profile's angles
+are checked against.
 """
 
 from __future__ import annotations
@@ -37,12 +43,18 @@ import sys
 import threading
 import time
 import tty
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from types import FrameType
 
 from ocu.profile.keys import ProfileError
-from ocu.profile.xarm import CENTRE_UNITS, XarmProfile, load_xarm_profile, shipped_xarm_profiles
+from ocu.profile.xarm import (
+    CENTRE_UNITS,
+    XarmProfile,
+    is_xarm_file,
+    load_xarm_profile,
+    shipped_xarm_profiles,
+)
 from ocu.protocol.xarm import (
     Cmd,
     Direction,
@@ -133,6 +145,32 @@ class Servo:
 
 
 @dataclass(frozen=True)
+class Mounting:
+    """How a servo truly sits in the arm: the joint is at 0 rad at 500 + `offset_units`, and
+    a rising position turns it the negative way when `reversed`."""
+
+    offset_units: int = 0
+    reversed: bool = False
+
+    def angle_rad(self, position: float, units_per_rad: float) -> float:
+        """The joint's true angle at this servo position."""
+        sign = -1.0 if self.reversed else 1.0
+        return sign * (position - CENTRE_UNITS - self.offset_units) / units_per_rad
+
+
+def parse_mounting(text: str) -> tuple[int, Mounting]:
+    """`SERVO:OFFSET[:reversed]` (ocu-sim --mount) as (servo, Mounting); ValueError if bad."""
+    parts = text.split(":")
+    if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] != "reversed"):
+        raise ValueError(f"bad mounting {text!r}: use SERVO:OFFSET[:reversed], e.g. 4:-40:reversed")
+    try:
+        servo, offset = int(parts[0]), int(parts[1])
+    except ValueError as err:
+        raise ValueError(f"bad mounting {text!r}: SERVO and OFFSET are integers") from err
+    return servo, Mounting(offset, len(parts) == 3)
+
+
+@dataclass(frozen=True)
 class XarmSnapshot:
     """The simulated arm at one time (servo id -> value, in servo units)."""
 
@@ -164,9 +202,13 @@ class XarmBoard:
         battery_mv: int = DEFAULT_BATTERY_MV,
         initial: Mapping[int, float] | None = None,
         seed: int | None = None,
+        mounting: Mapping[int, Mounting] | None = None,
+        absent: Collection[int] = (),
     ) -> None:
         self.profile = profile
         self.clock = clock
+        self.mounting = {joint.servo: Mounting() for joint in profile.joints} | dict(mounting or {})
+        self.absent = frozenset(absent)
         self.latency_s = latency_ms / 1000.0
         self.garbage_rate = garbage_rate
         self.noise_units = noise_units
@@ -178,7 +220,9 @@ class XarmBoard:
         max_speed = profile.servo.max_speed_rad_s * profile.units_per_rad
         self.servos: dict[int, Servo] = {
             joint.servo: Servo(
-                (initial or {}).get(joint.servo, CENTRE_UNITS),
+                (initial or {}).get(
+                    joint.servo, CENTRE_UNITS + self.mounting[joint.servo].offset_units
+                ),
                 damping_ratio=profile.servo.damping_ratio,
                 natural_frequency_rad_s=profile.servo.natural_frequency_rad_s,
                 max_speed_units_s=max_speed,
@@ -238,7 +282,7 @@ class XarmBoard:
                 move = decode_servo_move(frame.parameters)
                 for servo_id, position in move.positions:
                     servo = self.servos.get(servo_id)
-                    if servo is not None:
+                    if servo is not None and servo_id not in self.absent:
                         servo.move(position, move.duration_ms / 1000.0, start)
                 self._bus_free_at = start + SERVO_WRITE_S * len(move.positions)
                 self._moves.append((start, move))
@@ -250,7 +294,7 @@ class XarmBoard:
                 readings = {}
                 for servo_id in wanted:
                     servo = self.servos.get(servo_id)
-                    if servo is None:
+                    if servo is None or servo_id in self.absent:
                         continue  # no reply from a servo not on the bus
                     servo.advance(done)
                     noise = self._random.gauss(0.0, self.noise_units) if self.noise_units else 0.0
@@ -295,6 +339,14 @@ class XarmBoard:
                 last_move_at=last[0] if last else None,
             )
 
+    def true_angles_rad(self) -> dict[int, float]:
+        """Ground truth: each servo's joint angle now by its mounting (rad)."""
+        snapshot = self.snapshot()
+        return {
+            servo: self.mounting[servo].angle_rad(position, self.profile.units_per_rad)
+            for servo, position in snapshot.positions.items()
+        }
+
     def moves_since(self, since: float) -> list[tuple[float, ServoMove]]:
         """The moves run at or after `since` (time, move), oldest first."""
         with self._lock:
@@ -314,6 +366,8 @@ class XarmSimulator:
         battery_mv: int = DEFAULT_BATTERY_MV,
         initial: Mapping[int, float] | None = None,
         seed: int | None = None,
+        mounting: Mapping[int, Mounting] | None = None,
+        absent: Collection[int] = (),
     ) -> None:
         self.board = XarmBoard(
             profile,
@@ -323,6 +377,8 @@ class XarmSimulator:
             battery_mv=battery_mv,
             initial=initial,
             seed=seed,
+            mounting=mounting,
+            absent=absent,
         )
         self.profile = profile
         self.path = ""
@@ -452,14 +508,18 @@ def phase_margin_deg(profile: XarmProfile, delay_s: float = 0.0) -> float:
 
 
 def is_xarm_profile(argv: Sequence[str]) -> bool:
-    """Whether a command line's --profile names a shipped xArm profile (ocu-sim dispatches)."""
-    names = shipped_xarm_profiles()
+    """Whether a command line's --profile names an xArm profile, shipped or a file in the
+    xArm format (ocu-sim dispatches)."""
     for index, arg in enumerate(argv):
         if arg == "--profile" and index + 1 < len(argv):
-            return argv[index + 1] in names
+            return _is_xarm(argv[index + 1])
         if arg.startswith("--profile="):
-            return arg.split("=", 1)[1] in names
+            return _is_xarm(arg.split("=", 1)[1])
     return False
+
+
+def _is_xarm(name: str) -> bool:
+    return name in shipped_xarm_profiles() or is_xarm_file(name)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -476,6 +536,22 @@ def build_parser() -> argparse.ArgumentParser:
         "--noise", type=float, default=0.0, metavar="UNITS", help="position noise (σ, units)"
     )
     parser.add_argument("--battery-mv", type=int, default=DEFAULT_BATTERY_MV)
+    parser.add_argument(
+        "--mount",
+        action="append",
+        default=[],
+        metavar="SERVO:OFFSET[:reversed]",
+        help="a hidden mounting truth: the servo's joint is at 0 rad at 500 + OFFSET (the arm "
+        "starts there), reversed if said (repeatable)",
+    )
+    parser.add_argument(
+        "--absent",
+        action="append",
+        type=int,
+        default=[],
+        metavar="SERVO",
+        help="a servo not on the bus: it never answers (repeatable)",
+    )
     parser.add_argument(
         "--exit-with-parent", action="store_true", help="stop when standard input ends"
     )
@@ -495,6 +571,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(str(err))
     if not 0.0 <= args.garbage <= 1.0 or args.latency_ms < 0 or args.noise < 0:
         parser.error("--garbage must be 0-1; --latency-ms and --noise must be >= 0")
+    try:
+        mounting = dict(parse_mounting(text) for text in args.mount)
+    except ValueError as err:
+        parser.error(str(err))
+    servos = {joint.servo for joint in profile.joints}
+    unknown = sorted((mounting.keys() | set(args.absent)) - servos)
+    if unknown:
+        parser.error(f"--mount/--absent: no servo {unknown} in the profile ({sorted(servos)})")
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
@@ -504,6 +588,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         garbage_rate=args.garbage,
         noise_units=args.noise,
         battery_mv=args.battery_mv,
+        mounting=mounting,
+        absent=args.absent,
     )
     stop = threading.Event()
 
