@@ -479,7 +479,10 @@ class XarmLink(Link):
     def _on_positions(self, positions: dict[int, int]) -> None:
         now, wall = self.clock(), time.time()
         with self._lock:
-            self._read_sent_at = None
+            # The board read its servos when the request came, with every move sent before
+            # it: the request-to-reply time is the reading's round trip (TelemetryFrame).
+            asked, self._read_sent_at = self._read_sent_at, None
+            delay_s = None if asked is None else max(now - asked, 0.0)
             self._telemetry_rate.add(now)
             for joint in self.arm.joints:
                 raw = positions.get(joint.servo)
@@ -490,7 +493,9 @@ class XarmLink(Link):
             )
             tick = self._replies + 1
         self._on_reply()
-        self.emit(TelemetryFrame(XarmTelemetry(tick=tick, motors=motors), readings, now, wall))
+        self.emit(
+            TelemetryFrame(XarmTelemetry(tick=tick, motors=motors), readings, now, wall, delay_s)
+        )
 
     def _lost(self, reason: str) -> None:
         with self._lock:

@@ -394,6 +394,27 @@ def test_jog_under_latency_garbage_and_noise(arm: XarmProfile) -> None:
         simulator.stop()
 
 
+def test_each_reading_carries_its_round_trip(arm: XarmProfile) -> None:
+    """The request-to-reply time of each position read is the reading's delay (what the
+    Engineer's link measures from its sequence numbers): 40 ms each way shows as 80 ms and
+    more, none at all as a few ms (the frames at 115200 baud)."""
+    for latency_ms, low, high in ((0.0, 0.0, 0.040), (40.0, 0.080, 0.300)):
+        simulator, link, events = start(arm, latency_ms=latency_ms)
+        try:
+            count = len(events.of(TelemetryFrame))
+
+            def five_more(seen: Events = events, n: int = count) -> bool:
+                return len(seen.of(TelemetryFrame)) >= n + 5
+
+            wait_for(five_more, "five readings")
+            frames = [f for f in events.of(TelemetryFrame) if isinstance(f, TelemetryFrame)]
+            delays = [f.delay_s for f in frames[-5:]]
+            assert all(d is not None and low <= d <= high for d in delays), (latency_ms, delays)
+        finally:
+            link.shutdown()
+            simulator.stop()
+
+
 def test_shutdown_sends_the_stop_move_last(arm: XarmProfile) -> None:
     simulator, link, _ = start(arm)
     link.set_command(Command({"gripper": 0.4}))
