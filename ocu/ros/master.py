@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -14,6 +15,11 @@ from ocu.ros.environment import master_online
 START_TIMEOUT_S = 30.0
 STOP_TIMEOUT_S = 10.0
 POLL_S = 0.05
+# roscore gives up (exit 1) when its rosmaster does not answer within 10 s, or when the port
+# was taken between `free_port()` and its bind; a start is tried this many times, each on a
+# fresh port unless one was given, and the error quotes every attempt's log.
+START_ATTEMPTS = 3
+LOG_TAIL_LINES = 15
 
 
 class RosMasterError(RuntimeError):
@@ -31,10 +37,33 @@ class RosMaster:
     """`roscore -p PORT` as a child process; `env` holds what a ROS process needs to use it."""
 
     def __init__(
-        self, work_dir: Path, start_timeout_s: float = START_TIMEOUT_S, *, port: int | None = None
+        self,
+        work_dir: Path,
+        start_timeout_s: float = START_TIMEOUT_S,
+        *,
+        port: int | None = None,
+        attempts: int = START_ATTEMPTS,
     ) -> None:
         """`port`: a given one (a master restarted where the old one was), else a free one."""
-        self.port = free_port() if port is None else port
+        failures: list[str] = []
+        for attempt in range(1, attempts + 1):
+            self._spawn(work_dir, attempt, free_port() if port is None else port)
+            try:
+                self._wait_online(start_timeout_s)
+                return
+            except RosMasterError as error:
+                self.stop()
+                self._kill_leftovers()
+                failures.append(f"attempt {attempt}: {error}\n{self._log_tail()}")
+            except BaseException:
+                self.stop()
+                raise
+        raise RosMasterError(
+            f"roscore did not start in {attempts} attempt(s):\n" + "\n".join(failures)
+        )
+
+    def _spawn(self, work_dir: Path, attempt: int, port: int) -> None:
+        self.port = port
         self.uri = f"http://127.0.0.1:{self.port}"
         home = work_dir / "ros_home"
         logs = work_dir / "ros_log"
@@ -46,7 +75,8 @@ class RosMaster:
             "ROS_LOG_DIR": str(logs),
             "ROS_HOSTNAME": "127.0.0.1",
         }
-        self.log_path = work_dir / "roscore.log"
+        name = "roscore.log" if attempt == 1 else f"roscore-{attempt}.log"
+        self.log_path = work_dir / name
         self._log = self.log_path.open("wb")
         environment = {k: v for k, v in os.environ.items() if k != "ROS_IP"}
         environment.update(self.env)
@@ -58,11 +88,16 @@ class RosMaster:
             env=environment,
             start_new_session=True,
         )
+
+    def _log_tail(self) -> str:
+        """The last lines roscore printed, so that a CI log shows why it stopped."""
         try:
-            self._wait_online(start_timeout_s)
-        except BaseException:
-            self.stop()
-            raise
+            lines = self.log_path.read_text(errors="replace").splitlines()
+        except OSError as error:
+            return f"  (roscore's log unreadable: {error})"
+        if not lines:
+            return "  (roscore printed nothing)"
+        return "\n".join("  | " + line for line in lines[-LOG_TAIL_LINES:])
 
     def _wait_online(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
@@ -86,6 +121,11 @@ class RosMaster:
                 os.killpg(self.process.pid, signal.SIGKILL)
                 self.process.wait()
         self._log.close()
+
+    def _kill_leftovers(self) -> None:
+        """A roscore that gave up may leave its rosmaster or rosout behind in its group."""
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(self.process.pid, signal.SIGKILL)
 
     def __enter__(self) -> RosMaster:
         return self
