@@ -10,7 +10,7 @@ import subprocess
 import time
 from pathlib import Path
 
-from ocu.ros.environment import master_online
+from ocu.ros.environment import master_pid
 
 START_TIMEOUT_S = 30.0
 STOP_TIMEOUT_S = 10.0
@@ -63,6 +63,7 @@ class RosMaster:
         )
 
     def _spawn(self, work_dir: Path, attempt: int, port: int) -> None:
+        self.master_pid: int | None = None  # rosmaster's, once it answers
         self.port = port
         self.uri = f"http://127.0.0.1:{self.port}"
         home = work_dir / "ros_home"
@@ -106,7 +107,9 @@ class RosMaster:
                 raise RosMasterError(
                     f"roscore exited with code {self.process.returncode}; see {self.log_path}"
                 )
-            if master_online(self.uri, timeout_s=1.0):
+            pid = master_pid(self.uri, timeout_s=1.0)
+            if pid is not None:
+                self.master_pid = pid
                 return
             time.sleep(POLL_S)
         raise RosMasterError(f"roscore not online within {timeout_s:.0f} s; see {self.log_path}")
@@ -121,6 +124,11 @@ class RosMaster:
                 os.killpg(self.process.pid, signal.SIGKILL)
                 self.process.wait()
         self._log.close()
+        # A rosmaster that outlived its roscore (tests once found some) would hold its port.
+        pid, self.master_pid = self.master_pid, None
+        if pid is not None:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, signal.SIGKILL)
 
     def _kill_leftovers(self) -> None:
         """A roscore that gave up may leave its rosmaster or rosout behind in its group."""
