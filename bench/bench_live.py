@@ -39,7 +39,9 @@ three, each console started afresh, as the machine's other load comes and goes.
 the model, the link) onto the simulator (in this process, telemetry 50 Hz), N presses each
 without a live server, with one and no client, with 20 npm clients subscribed to every
 channel, and with the same 20 niced to 19 (clients on other machines, their own decoding out
-of the console's way); p50/p99 of press -> the RCP the simulator read.
+of the console's way); p50/p99 of press -> the datagram leaving the link (its DatagramSent
+time: key -> datagram, the issue's figure) and of press -> the RCP the simulator read (the
+simulator is a thread of this process, so this one also waits for its GIL).
 """
 
 from __future__ import annotations

@@ -133,6 +133,7 @@ def console_cpu(profile: RobotProfile, clients_n: int, phase_s: float, rounds: i
 
 def keys(profile: RobotProfile, presses: int, clients_n: int = 20) -> None:
     """bench_keys's W presses: no server, a server and no client, a server and 20 clients."""
+    from bench_core import WireProbe
     from bench_keys import WAIT_S, first_rcp_after, pump
     from PySide6.QtCore import QSettings, Qt
     from PySide6.QtTest import QTest
@@ -164,8 +165,14 @@ def keys(profile: RobotProfile, presses: int, clients_n: int = 20) -> None:
                 server.start()
             settings = QSettings(os.path.join(config, "ocu.ini"), QSettings.Format.IniFormat)
 
-            def make_link(address: tuple[str, int] = sim.address) -> UdpLink:
-                return UdpLink(profile, address, send_on_change=True)
+            probe = WireProbe(profile)
+
+            def make_link(
+                address: tuple[str, int] = sim.address, probe: WireProbe = probe
+            ) -> UdpLink:
+                link = UdpLink(profile, address, send_on_change=True)
+                link.subscribe(probe.on_event)
+                return link
 
             window = MainWindow(profile, serving(server, make_link), "simulator", settings)
             window.show()
@@ -185,15 +192,19 @@ def keys(profile: RobotProfile, presses: int, clients_n: int = 20) -> None:
                     while not client.wait(count(s.JOINT_STATES, 10), 0.05):
                         pump(app, 0.05)
                 latencies: list[float] = []
+                wire: list[float] = []
                 missed = 0
                 for k in range(presses):
                     pump(app, 0.005 + 0.015 * ((k * 7919) % 100) / 100.0)
                     sent = len(sim.received_commands())
-                    pressed_at = time.monotonic()
+                    pressed_at = probe.arm("moving")
                     QTest.keyPress(window, Qt.Key.Key_W)
                     try:
                         rcp = first_rcp_after(sim, profile, sent, moving=True)
                         latencies.append((rcp.time_s - pressed_at) * 1000.0)
+                        with probe.lock:
+                            if probe.found is not None:
+                                wire.append((probe.found - pressed_at) * 1000.0)
                     except RuntimeError:  # the console stopped motion: a stalled cycle
                         missed += 1
                     sent = len(sim.received_commands())
@@ -211,6 +222,10 @@ def keys(profile: RobotProfile, presses: int, clients_n: int = 20) -> None:
                 if server is not None:
                     server.stop()
         seen = f", each client got >= {min(got)} /joint_states" if got else ""
+        print(
+            f"W key -> datagram sent, {label:17s}: p50 {percentile(wire, 50):.2f} ms  "
+            f"p99 {percentile(wire, 99):.2f} ms  max {max(wire):.2f} ms ({len(wire)} presses)"
+        )
         print(
             f"W key -> RCP, {label:17s}: p50 {percentile(latencies, 50):.2f} ms  "
             f"p99 {percentile(latencies, 99):.2f} ms  max {max(latencies):.2f} ms "
