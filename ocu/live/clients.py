@@ -1,5 +1,5 @@
 """The live server's clients: each one's subscriptions, counters and bounded outbox (the
-server's loop thread only; `stats()` is read from any thread)."""
+relay process's loop only, ocu.live.relay)."""
 
 from __future__ import annotations
 
@@ -100,6 +100,15 @@ class Client:
         self.asset_bytes += len(frame)
         self.wake.set()
         return True
+
+    def unqueued(self, size: int, kind: int) -> None:
+        """A frame of `size` bytes left the outbox for the socket."""
+        if kind == CONTROL:
+            self.control_bytes -= size
+        elif kind == ASSET:
+            self.asset_bytes -= size
+        else:
+            self.data_bytes -= size
 
     def stats(self) -> ClientStats:
         return ClientStats(

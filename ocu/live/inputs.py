@@ -1,5 +1,5 @@
 """What live clients send that commands the robot: client publish (`--live-control`) on the
-server's loop thread (docs/live.md).
+server's loop thread in the console (docs/live.md); the relay process forwards it.
 
 A client advertises the topics it will publish on; each must be one of ocu.live.messages's,
 in one of its types, in json or cdr, and one this robot takes (a chassis for /cmd_vel, an arm
@@ -11,14 +11,28 @@ reason (not once per message at 20 Hz); a message that cannot be decoded counts 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass, field
 
 from ocu.live import wire
-from ocu.live.clients import Client
 from ocu.live.control import LiveControl
 from ocu.live.messages import CMD_VEL, ENCODINGS, INPUTS, InputError, decode, schemas_of
 
 PUBLISH_OFF = "client publish is off (ocu --live-control)"
 STARTING = "not taken: the console is starting"
+
+
+@dataclass
+class RemoteClient:
+    """The console's record of one client of the relay: what it advertised, its refusals."""
+
+    id: int
+    address: str
+    published: dict[int, wire.ClientChannel] = field(default_factory=dict)
+    refused: int = 0
+    last_warning: str = ""
+
+
+Client = RemoteClient
 
 
 class ClientInputs:

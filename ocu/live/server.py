@@ -9,53 +9,48 @@ holds) plus the robot's /tf, /tf_static, /robot_description, /scan and /diagnost
 (ocu.live.robot) and the navigator's /odom and /map (ocu.live.navigation); a message is
 encoded only when some client subscribed to its channel.
 
-Each client has its own outbox bounded in bytes: a message that does not fit is dropped for
-that client alone and counted, so a slow client loses frames, never grows the server's
-memory and never delays another client or the operator. A client whose frames the server
-refuses (not JSON, unknown operations, bad ids) gets a status message per frame and is
-closed after MAX_REFUSED of them.
+The WebSocket side runs in a process of its own, the relay (ocu.live.relay, over a socket
+pair: ocu.live.pipe): each message is encoded here once and handed to it whole, and it fans
+it out to the clients subscribed. Each client there has its own outbox bounded in bytes: a
+message that does not fit is dropped for that client alone and counted, so a slow client
+loses frames, never grows the server's memory and never delays another client or the
+operator; and no client costs this interpreter anything (the operator's key path shares its
+GIL). A client whose frames are refused (not JSON, unknown operations, bad ids) gets a status
+message per frame and is closed after MAX_REFUSED of them. What clients publish and the
+services they call come back here, where the robot is.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import hmac
 import logging
+import socket
+import subprocess
+import sys
 import threading
 import time
 import uuid
 from collections import deque
 from collections.abc import Callable
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
-from http import HTTPStatus
-from pathlib import Path
 from typing import Any, Final
-from urllib.parse import parse_qs, urlsplit
-
-from websockets.asyncio.server import Server, ServerConnection, serve
-from websockets.exceptions import ConnectionClosed
-from websockets.http11 import Request, Response
 
 from ocu.link.base import Link
 from ocu.link.diagnostics import link_report
 from ocu.live import navigation as nv
+from ocu.live import pipe, wire
 from ocu.live import robot as rb
 from ocu.live import scene as sc
-from ocu.live import wire
-from ocu.live.clients import (
-    ASSET,
-    CONTROL,
-    DEFAULT_CLIENT_BUFFER_BYTES,
-    Client,
-    LiveStats,
-)
+from ocu.live.clients import DEFAULT_CLIENT_BUFFER_BYTES, LiveStats
 from ocu.live.control import Core, LiveControl
 from ocu.live.goals import GoalCore, LiveGoals
-from ocu.live.inputs import ClientInputs
+from ocu.live.inputs import ClientInputs, RemoteClient
 from ocu.live.messages import ENCODINGS
 from ocu.live.options import DEFAULT_HOST, LiveError
 from ocu.live.services import Services
+from ocu.priority import reset_for_child
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.convert import (
@@ -83,12 +78,12 @@ log = logging.getLogger("ocu.live")
 DEFAULT_PORT: Final = 8765
 # Items waiting between the link's threads and the server's loop.
 DEFAULT_MAX_QUEUE_BYTES: Final = 16 * 1024 * 1024
-# Refused frames before a client is closed.
-MAX_REFUSED: Final = 10
-# A client only subscribes: no frame of its needs more.
-MAX_CLIENT_FRAME_BYTES: Final = 64 * 1024
-# The socket's own write buffer (websockets' high-water mark).
-WRITE_LIMIT_BYTES: Final = 64 * 1024
+# Messages on their way to the relay: a relay that cannot keep up loses data, never control
+# messages, and never holds this process up.
+MAX_RELAY_BUFFER_BYTES: Final = 16 * 1024 * 1024
+# How often the relay's counters are fetched for the console's indicator.
+STATS_PERIOD_S: Final = 0.5
+STATS_TIMEOUT_S: Final = 2.0
 # Clients at once: with their outboxes, the memory the server may take (64 x 4 MB).
 DEFAULT_MAX_CLIENTS: Final = 64
 START_TIMEOUT_S: Final = 10.0
@@ -96,8 +91,6 @@ START_TIMEOUT_S: Final = 10.0
 CONTROL_PERIOD_S: Final = 0.02
 STOP_TIMEOUT_S: Final = 5.0
 ITEM_OVERHEAD_BYTES: Final = 200
-TOKEN_PARAMETER: Final = "token"
-CLOSE_POLICY: Final = 1008
 _SCAN: Final = -1  # the queue kind of a range scan (the recorder keeps only its datagram)
 
 
@@ -147,20 +140,22 @@ class LiveServer:
         self._pump_scheduled = False
         self._queue_dropped = 0
         self._client_count = 0
-        self._clients: set[Client] = set()
-        self._connections = 0
-        self._unauthorized = 0
-        self._closed_for_refused = 0
+        self._remote: dict[int, RemoteClient] = {}
+        self._subscribed_ids: frozenset[int] = frozenset()
+        self._relay: subprocess.Popen[bytes] | None = None
+        self._writer: asyncio.StreamWriter | None = None
+        self._relay_dropped = 0
+        self._stats = LiveStats((), 0, 0, 0, 0, 0)
+        self._stats_asked: dict[int, asyncio.Future[LiveStats]] = {}
+        self._stats_ids = 0
         self._channels: dict[str, _Channel] = {}
         self._by_id: dict[int, _Channel] = {}
-        self._closing: set[asyncio.Future[None]] = set()
         self._navigator: nv.NavigationSource | None = None
         self._scene: sc.SceneSource | None = None
         self._link_state = LinkState.CONNECTING
         # --live-control: clients may publish /cmd_vel (ocu.live.control) once a core is served.
         self.allow_control = control
         self.max_clients = max_clients
-        self._crowded = 0
         self._inputs = ClientInputs(control, self._control)
         self._services = Services()
         self._converter = MessageConverter(profile, self.wall_ns, self._publish)
@@ -307,7 +302,7 @@ class LiveServer:
         )
 
     def _subscribed(self, channel_id: int) -> bool:
-        return any(channel_id in client.by_channel for client in self._clients)
+        return channel_id in self._subscribed_ids
 
     def _publish(
         self, mono: float, topic: str, message: dict[str, Any], publish_ns: int | None = None
@@ -315,18 +310,30 @@ class LiveServer:
         channel = self._channels.get(topic)
         if channel is None:
             channel = self._channel(topic, topic_type(topic))
-            self._broadcast(wire.advertise([channel.info]))
+            self._tell(pipe.ADVERTISE, [channel.info], {})
         if not channel.keeps_last and not self._subscribed(channel.info.id):
             return
         self._fan_out(channel, self.wall_ns(mono), channel.encoder(message))
 
     def _fan_out(self, channel: _Channel, log_ns: int, payload: bytes) -> None:
+        # To the relay, once, whatever the number of clients (it fans out).
         if channel.keeps_last:
             channel.latched = (log_ns, payload)
-        channel_id = channel.info.id
-        for client in self._clients:
-            for subscription in client.by_channel.get(channel_id, ()):
-                client.queue_data(wire.message_data(subscription, log_ns, payload))
+        elif not self._subscribed(channel.info.id):
+            return
+        writer = self._writer
+        if writer is None:
+            return
+        if writer.transport.get_write_buffer_size() > MAX_RELAY_BUFFER_BYTES:
+            self._relay_dropped += 1
+            return
+        writer.write(pipe.pack((pipe.DATA, channel.info.id, log_ns, payload, channel.keeps_last)))
+
+    def _tell(self, *message: Any) -> None:
+        """A control message to the relay (the loop thread; never dropped)."""
+        writer = self._writer
+        if writer is not None:
+            writer.write(pipe.pack(message))
 
     def serve_navigation(self, navigator: nv.NavigationSource) -> None:
         """Serve this navigator's odometry (/odom, odom -> base_link on /tf) and grid (/map)."""
@@ -385,41 +392,11 @@ class LiveServer:
                 log.exception("live: cannot serve the scene")
                 await asyncio.sleep(nv.MAP_PERIOD_S)
 
-    def _broadcast(self, text: str) -> None:
-        for client in list(self._clients):
-            self._control(client, text)
+    def _control(self, client: RemoteClient, text: str | bytes) -> None:
+        self._tell(pipe.TO, client.id, text)
 
-    def _control(self, client: Client, text: str | bytes) -> None:
-        if not client.queue_control(text) and not client.closing:
-            client.closing = True
-            task = asyncio.ensure_future(client.connection.close(CLOSE_POLICY, "not reading"))
-            self._closing.add(task)
-            task.add_done_callback(self._closing.discard)
-
-    def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
-        if len(self._clients) >= self.max_clients:  # each costs up to its outbox
-            self._crowded += 1
-            text = f"{self.max_clients} clients are watching already\n"
-            return connection.respond(HTTPStatus.SERVICE_UNAVAILABLE, text)
-        if self.token is None:
-            return None
-        query = parse_qs(urlsplit(request.path).query)
-        given = query.get(TOKEN_PARAMETER, [""])[0]
-        header = request.headers.get("Authorization", "")
-        if header.startswith("Bearer "):
-            given = given or header[len("Bearer ") :]
-        if given and hmac.compare_digest(given.encode(), self.token.encode()):
-            return None
-        self._unauthorized += 1
-        log.warning("live: refused %s: no valid token", connection.remote_address)
-        return connection.respond(HTTPStatus.UNAUTHORIZED, "a valid token is needed\n")
-
-    async def _handle(self, connection: ServerConnection) -> None:
-        client = Client(connection, self.client_buffer_bytes)
-        self._clients.add(client)
-        self._client_count = len(self._clients)
-        self._connections += 1
-        log.info("live: %s connected (%s)", client.address, connection.subprotocol)
+    def _hello(self) -> tuple[str, str, str | None]:
+        """What each new client gets first: serverInfo, and the services if any."""
         metadata = {"profile": self.profile.name}
         capabilities = ["assets"] if self.frames is not None and self.frames.assets else []
         services = self._services.advertisement()
@@ -428,66 +405,49 @@ class LiveServer:
         encodings = list(ENCODINGS) if self.allow_control or services is not None else []
         name = f"ocu {self.profile.name}"
         info = wire.server_info(name, self.session_id, metadata, capabilities, encodings)
-        self._control(client, info)
-        self._control(client, wire.advertise([c.info for c in self._channels.values()]))
-        if services is not None:
-            self._control(client, services)
-        sender = asyncio.create_task(self._send_loop(client), name="ocu-live-send")
-        try:
-            async for frame in connection:
-                self._on_frame(client, frame)
-                if client.refused >= MAX_REFUSED and not client.closing:
-                    client.closing = True
-                    self._closed_for_refused += 1
-                    # The reasons queued for it go out before the close, within a second.
-                    client.flushed.clear()
-                    client.wake.set()
-                    with contextlib.suppress(TimeoutError):
-                        await asyncio.wait_for(client.flushed.wait(), 1.0)
-                    await connection.close(CLOSE_POLICY, "too many refused messages")
-                    break
-        except ConnectionClosed:
-            pass
-        finally:
-            self._clients.discard(client)
-            self._client_count = len(self._clients)
-            sender.cancel()
-            self._inputs.left(client)
-            log.info(
-                "live: %s left (%d sent, %d dropped, %d refused)",
-                client.address,
-                client.sent,
-                client.dropped,
-                client.refused,
-            )
+        return pipe.HELLO, info, services
 
-    def _on_frame(self, client: Client, frame: str | bytes) -> None:
-        try:
-            message = wire.parse_client_message(frame)
-        except wire.ClientMessageError as err:
-            client.refused += 1
-            self._control(client, wire.status(wire.StatusLevel.ERROR, str(err)))
-            return
-        if isinstance(message, wire.Subscribe):
-            for subscription, channel_id in message.subscriptions:
-                self._subscribe(client, subscription, channel_id)
-        elif isinstance(message, wire.FetchAsset):
-            self._fetch_asset(client, message)
-        elif isinstance(message, wire.ServiceCallRequest):
-            self._control(client, self._services.call(client.address, message))
-        elif isinstance(
-            message, wire.ClientAdvertise | wire.ClientUnadvertise | wire.ClientPublish
-        ):
-            self._inputs.on_message(client, message)
+    def _on_relay(self, message: tuple[Any, ...]) -> None:
+        """One message from the relay (the loop thread)."""
+        kind = message[0]
+        if kind == pipe.INPUT:
+            client = self._remote.get(message[1])
+            if client is not None:
+                refused = client.refused
+                self._inputs.on_message(client, message[2])
+                if client.refused > refused:
+                    self._tell(pipe.REFUSED, client.id, client.refused - refused)
+        elif kind == pipe.CALL:
+            client = self._remote.get(message[1])
+            if client is not None:
+                self._control(client, self._services.call(client.address, message[2]))
+        elif kind == pipe.SUBSCRIBED:
+            self._subscribed_ids = message[1]
+        elif kind == pipe.JOINED:
+            _, client_id, address, subprotocol = message
+            self._remote[client_id] = RemoteClient(client_id, address)
+            self._client_count = len(self._remote)
+            log.info("live: %s connected (%s)", address, subprotocol)
+        elif kind == pipe.LEFT:
+            _, client_id, sent, dropped, refused = message
+            gone = self._remote.pop(client_id, None)
+            self._client_count = len(self._remote)
+            if gone is not None:
+                self._inputs.left(gone)
+                log.info(
+                    "live: %s left (%d sent, %d dropped, %d refused)",
+                    gone.address,
+                    sent,
+                    dropped,
+                    refused,
+                )
+        elif kind == pipe.STATS:
+            asked = self._stats_asked.pop(message[1], None)
+            self._stats = message[2]
+            if asked is not None and not asked.done():
+                asked.set_result(message[2])
         else:
-            for subscription in message.subscription_ids:
-                taken = client.subscriptions.pop(subscription, None)
-                if taken is None:
-                    continue
-                ids = client.by_channel.get(taken, set())
-                ids.discard(subscription)
-                if not ids:
-                    client.by_channel.pop(taken, None)
+            log.error("live: unknown message from the relay: %r", kind)
 
     @property
     def control(self) -> LiveControl | None:
@@ -501,6 +461,10 @@ class LiveServer:
             arm = LiveGoals(core, goals) if goals is not None else None
             self._inputs.teleop = LiveControl(core, self.clock, arm)
         self._services.serve(core, self._inputs.teleop)
+        loop = self._loop
+        if loop is not None:  # the clients that come from now on are told of the services
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(lambda: self._tell(*self._hello()))
 
     async def _control_loop(self) -> None:
         while True:
@@ -512,69 +476,6 @@ class LiveServer:
                 except Exception:
                     log.exception("live: cannot step the remote drive")
 
-    def _fetch_asset(self, client: Client, request: wire.FetchAsset) -> None:
-        assets = self.frames.assets if self.frames is not None else {}
-        file = assets.get(request.uri)
-        if file is None:
-            client.refused += 1  # only the URDF's own meshes are served: a probe is a fault
-            answer = wire.fetch_asset_response(
-                request.request_id, None, f"{request.uri[:200]}: not a mesh of this robot"
-            )
-            if not client.queue_asset(answer):
-                self._control(client, wire.status(wire.StatusLevel.ERROR, "fetchAsset: busy"))
-            return
-        task = asyncio.ensure_future(self._send_asset(client, request.request_id, file))
-        self._closing.add(task)
-        task.add_done_callback(self._closing.discard)
-
-    async def _send_asset(self, client: Client, request_id: int, file: Path) -> None:
-        try:
-            data: bytes | None = await asyncio.to_thread(file.read_bytes)
-            error = ""
-        except OSError as err:
-            data, error = None, f"cannot read the mesh: {err.strerror or err}"
-        if not client.queue_asset(wire.fetch_asset_response(request_id, data, error)):
-            busy = "busy: too many meshes on their way, ask again"
-            client.queue_asset(wire.fetch_asset_response(request_id, None, busy))
-
-    def _subscribe(self, client: Client, subscription: int, channel_id: int) -> None:
-        channel = self._by_id.get(channel_id)
-        problem = None
-        if channel is None:
-            problem = f"no channel {channel_id}"
-        elif subscription in client.subscriptions:
-            problem = f"subscription {subscription} is taken"
-        elif len(client.subscriptions) >= wire.MAX_SUBSCRIPTIONS:
-            problem = f"more than {wire.MAX_SUBSCRIPTIONS} subscriptions"
-        if problem is not None or channel is None:
-            client.refused += 1
-            self._control(client, wire.status(wire.StatusLevel.ERROR, f"subscribe: {problem}"))
-            return
-        client.subscriptions[subscription] = channel_id
-        client.by_channel.setdefault(channel_id, set()).add(subscription)
-        if channel.latched is not None:
-            log_ns, payload = channel.latched
-            client.queue_data(wire.message_data(subscription, log_ns, payload))
-
-    async def _send_loop(self, client: Client) -> None:
-        try:
-            while True:
-                await client.wake.wait()
-                client.wake.clear()
-                while client.outbox:
-                    frame, size, kind = client.outbox.popleft()
-                    if kind == CONTROL:
-                        client.control_bytes -= size
-                    elif kind == ASSET:
-                        client.asset_bytes -= size
-                    else:
-                        client.data_bytes -= size
-                    await client.connection.send(frame)
-                    client.sent += 1
-                client.flushed.set()
-        except ConnectionClosed:
-            pass
-
     # ---- start and stop --------------------------------------------------------------------
 
     @property
@@ -583,84 +484,175 @@ class LiveServer:
         return self.host, self._bound_port if self._bound_port is not None else self.port
 
     def start(self) -> None:
-        """Bind and serve on the thread "ocu-live"; LiveError with the reason if it cannot."""
+        """Start the relay process and the thread "ocu-live"; LiveError with the reason if the
+        relay cannot bind."""
         if self._thread is not None:
             return
-        self._thread = threading.Thread(target=self._run, name="ocu-live", daemon=True)
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        command = reset_for_child([sys.executable, "-m", "ocu.live.relay", str(theirs.fileno())])
+        try:
+            # The relay serves observers: at the default priority, behind the console's.
+            self._relay = subprocess.Popen(
+                command, pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL
+            )
+        except OSError as err:
+            ours.close()
+            raise LiveError(f"cannot start the live relay: {err}") from err
+        finally:
+            theirs.close()
+        self._thread = threading.Thread(
+            target=self._run, args=(ours,), name="ocu-live", daemon=True
+        )
         self._thread.start()
         if not self._ready.wait(START_TIMEOUT_S):
+            self._relay.kill()  # its pipe closes: the thread's wait for it ends
+            self.stop()
             raise LiveError(f"live server did not start within {START_TIMEOUT_S:.0f} s")
         if self._start_error is not None:
-            self._thread.join(STOP_TIMEOUT_S)
-            self._thread = None
+            self.stop()
             raise LiveError(self._start_error)
         log.info("live: serving on ws://%s:%d", *self.address)
 
-    def _run(self) -> None:
-        asyncio.run(self._main())
+    def _run(self, sock: socket.socket) -> None:
+        asyncio.run(self._main(sock))
 
-    async def _main(self) -> None:
-        self._loop = asyncio.get_running_loop()
+    async def _main(self, sock: socket.socket) -> None:
         self._stop_event = asyncio.Event()
-        try:
-            server: Server = await serve(
-                self._handle,
-                self.host,
-                self.port,
-                subprotocols=[wire.SUBPROTOCOLS[0], wire.SUBPROTOCOLS[1]],  # type: ignore[list-item]
-                process_request=self._process_request,
-                compression=None,
-                max_size=MAX_CLIENT_FRAME_BYTES,
-                write_limit=WRITE_LIMIT_BYTES,
-            )
-        except OSError as err:
-            self._start_error = (
-                f"cannot serve live on {self.host}:{self.port}: {err.strerror or err}"
-            )
+        self._loop = asyncio.get_running_loop()
+        reader, writer = await asyncio.open_unix_connection(sock=sock)
+        writer.transport.set_write_buffer_limits(high=MAX_RELAY_BUFFER_BYTES)
+        self._writer = writer
+        self._tell(*self._hello())
+        channels = list(self._channels.values())
+        latched = {c.info.id: c.latched for c in channels if c.latched is not None}
+        self._tell(pipe.ADVERTISE, [c.info for c in channels], latched)
+        assets = self.frames.assets if self.frames is not None else {}
+        listen = pipe.Listen(
+            self.host,
+            self.port,
+            self.token,
+            self.client_buffer_bytes,
+            self.max_clients,
+            {uri: str(file) for uri, file in assets.items()},
+        )
+        self._tell(pipe.LISTEN, listen)
+        first = await pipe.receive(reader)
+        if first is None or first[0] != pipe.READY:
+            self._start_error = first[1] if first is not None else "the live relay ended"
             self._loop = None
+            self._writer = None
+            writer.close()
             self._ready.set()
             return
-        self._bound_port = int(server.sockets[0].getsockname()[1])
-        navigation = asyncio.create_task(self._navigation_loop(), name="ocu-live-navigation")
-        teleop = asyncio.create_task(self._control_loop(), name="ocu-live-control")
-        scene = asyncio.create_task(self._scene_loop(), name="ocu-live-scene")
+        self._bound_port = int(first[1])
+        tasks = [
+            asyncio.create_task(self._navigation_loop(), name="ocu-live-navigation"),
+            asyncio.create_task(self._control_loop(), name="ocu-live-control"),
+            asyncio.create_task(self._scene_loop(), name="ocu-live-scene"),
+            asyncio.create_task(self._stats_loop(), name="ocu-live-stats"),
+        ]
+        relay = asyncio.create_task(self._relay_loop(reader), name="ocu-live-relay")
         self._ready.set()
-        await self._stop_event.wait()
+        stopped = asyncio.create_task(self._stop_event.wait())
+        await asyncio.wait((stopped, relay), return_when=asyncio.FIRST_COMPLETED)
         self._loop = None
-        for task in (navigation, teleop, scene):
+        for task in (*tasks, stopped):
             task.cancel()
+        self._all_left("the live server stopped")
+        self._tell(pipe.STOP)
+        with contextlib.suppress(ConnectionError):
+            await writer.drain()
+        self._writer = None
+        writer.close()
+        with contextlib.suppress(TimeoutError, asyncio.CancelledError):
+            await asyncio.wait_for(relay, STOP_TIMEOUT_S)
+
+    async def _relay_loop(self, reader: asyncio.StreamReader) -> None:
+        while True:
+            message = await pipe.receive(reader)
+            if message is None:
+                if self._stop_event is not None and not self._stop_event.is_set():
+                    log.error("live: the relay process ended; nobody is served any more")
+                self._all_left("the live relay ended")
+                return
+            try:
+                self._on_relay(message)
+            except Exception:  # one message must not end the serving of the rest
+                log.exception("live: cannot take the relay's %s message", message[0])
+
+    def _all_left(self, reason: str) -> None:
+        """Every client counts as gone: what a remote client drove stops, for `reason`."""
         remote = self._inputs.teleop
         if remote is not None:
             owner = remote.owner
             if owner is not None:
-                remote.release(owner, "the live server stopped")
-        server.close(close_connections=True)
-        await server.wait_closed()
+                remote.release(owner, reason)
+        for client in list(self._remote.values()):
+            self._inputs.left(client)
+        self._remote.clear()
+        self._client_count = 0
+        self._subscribed_ids = frozenset()
+
+    async def _stats_loop(self) -> None:
+        while True:
+            await asyncio.sleep(STATS_PERIOD_S)
+            self._ask_stats()
+
+    def _ask_stats(self) -> asyncio.Future[LiveStats]:
+        self._stats_ids += 1
+        asked: asyncio.Future[LiveStats] = asyncio.get_running_loop().create_future()
+        self._stats_asked[self._stats_ids] = asked
+        self._tell(pipe.STATS, self._stats_ids)
+        return asked
+
+    @property
+    def relay_pid(self) -> int | None:
+        """The relay process's id while it runs (ocu.live.relay)."""
+        relay = self._relay
+        return relay.pid if relay is not None and relay.poll() is None else None
 
     def stop(self) -> None:
-        """Close every client and the server; idempotent."""
+        """Close every client, the relay and the thread; idempotent."""
         thread = self._thread
-        loop, stop_event = self._loop, self._stop_event
-        if thread is None:
-            return
-        if loop is not None and stop_event is not None:
-            with contextlib.suppress(RuntimeError):  # the loop has ended already
-                loop.call_soon_threadsafe(stop_event.set)
-        thread.join(STOP_TIMEOUT_S)
-        if thread.is_alive():
-            log.error("live server did not stop within %.1f s", STOP_TIMEOUT_S)
-        self._thread = None
+        stop_event = self._stop_event
+        if thread is not None:
+            loop = self._loop
+            if loop is not None and stop_event is not None:
+                with contextlib.suppress(RuntimeError):  # the loop has ended already
+                    loop.call_soon_threadsafe(stop_event.set)
+            thread.join(STOP_TIMEOUT_S)
+            if thread.is_alive():
+                log.error("live server did not stop within %.1f s", STOP_TIMEOUT_S)
+            self._thread = None
+        relay, self._relay = self._relay, None
+        if relay is not None:
+            try:
+                relay.wait(STOP_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                log.error("the live relay did not stop within %.1f s: killed", STOP_TIMEOUT_S)
+                relay.kill()
+                relay.wait()
 
-    def stats(self) -> LiveStats:
-        """Counters now (any thread; the client list is a snapshot)."""
-        clients = tuple(client.stats() for client in list(self._clients))
+    def stats(self, *, fresh: bool = True) -> LiveStats:
+        """Counters (any thread). `fresh`: asked of the relay now (waits for its answer, up
+        to STATS_TIMEOUT_S); else the last ones fetched (every STATS_PERIOD_S; never waits:
+        the GUI's indicator)."""
+        stats = self._stats
+        loop = self._loop
+        if fresh and loop is not None and threading.current_thread() is not self._thread:
+
+            async def ask() -> LiveStats:
+                return await self._ask_stats()
+
+            with contextlib.suppress(FutureTimeout, RuntimeError):
+                stats = asyncio.run_coroutine_threadsafe(ask(), loop).result(STATS_TIMEOUT_S)
         with self._lock:
             dropped = self._queue_dropped
         return LiveStats(
-            clients,
-            self._connections,
-            self._unauthorized,
-            self._closed_for_refused,
-            dropped,
-            self._crowded,
+            stats.clients,
+            stats.connections,
+            stats.unauthorized,
+            stats.closed_for_refused,
+            dropped + self._relay_dropped,
+            stats.crowded,
         )

@@ -37,7 +37,7 @@ class LiveIndicator(QLabel):
 
     def refresh(self) -> None:
         """Read the server's state now."""
-        stats = self.server.stats()
+        stats = self.server.stats(fresh=False)  # never waits for the relay: the GUI thread
         host, port = self.server.address
         text = f"LIVE {len(stats.clients)}"
         style = WATCHED
