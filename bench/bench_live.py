@@ -30,8 +30,9 @@ carrying that speed, p50/p99 (the robot in motion, as a panel at a usable rate d
 --console N: the real console (`ocu --sim-arg=--extended`: its built-in simulator in its own
 process, four cameras), first without --live, then with --live and no client, then with N
 npm clients subscribed to the four cameras, /joint_states and /tf; the console process's CPU
-(its own, not the simulator's) per phase from /proc, in % of one core; three rounds of the
-three, each console started afresh, as the machine's other load comes and goes.
+with its live relay's (ocu.live.relay; not the simulator's) per phase from /proc, in % of one
+core; three rounds of the three, each console started afresh, as the machine's other load
+comes and goes.
 
     .venv/bin/python bench/bench_live.py --keys 300       # key -> datagram, 20 clients
 

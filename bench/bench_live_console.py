@@ -51,10 +51,28 @@ def served_port(process: subprocess.Popen[str]) -> int:
     raise RuntimeError("the console ended before serving")
 
 
+def relay_pids(pid: int) -> list[int]:
+    """The console's live relay process (ocu.live.relay), if it runs one."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            parent = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            command = (entry / "cmdline").read_bytes()
+        except (OSError, IndexError, ValueError):
+            continue
+        if parent == pid and b"ocu.live.relay" in command:
+            found.append(int(entry.name))
+    return found
+
+
 def cpu_percent(pid: int, phase_s: float) -> float:
-    start = process_cpu_s(pid)
+    """The console's CPU with its live relay's (the serving it does for the console)."""
+    pids = [pid, *relay_pids(pid)]
+    start = sum(process_cpu_s(p) for p in pids)
     time.sleep(phase_s)  # the measurement's phase, not synchronisation
-    return (process_cpu_s(pid) - start) / phase_s * 100.0
+    return (sum(process_cpu_s(p) for p in pids) - start) / phase_s * 100.0
 
 
 def stop(process: subprocess.Popen[str]) -> None:
@@ -67,8 +85,9 @@ def stop(process: subprocess.Popen[str]) -> None:
 
 
 def console_cpu(profile: RobotProfile, clients_n: int, phase_s: float, rounds: int = 3) -> None:
-    """The console's CPU: --live off, --live with no client, --live with N camera clients;
-    `rounds` times in turn, as the machine's other load comes and goes."""
+    """The console's CPU (with its live relay's): --live off, --live with no client, --live
+    with N camera clients; `rounds` times in turn, as the machine's other load comes and
+    goes."""
     cameras = [s.camera_topic(name) for name in profile.link.camera_names]
     topics = [s.JOINT_STATES, "/tf", *cameras]
     results: dict[str, list[float]] = {"off": [], "idle": [], "clients": []}
@@ -183,7 +202,9 @@ def keys(profile: RobotProfile, presses: int, clients_n: int = 20) -> None:
             clients = []
             if server is not None:
                 url = f"ws://127.0.0.1:{server.address[1]}"
-                clients = [NodeClient(url, topics=["*"], brief=True) for _ in range(n)]
+                # quiet: the clients' events are not read here per message (their reader
+                # threads would share this process's GIL with the window).
+                clients = [NodeClient(url, topics=["*"], brief=True, quiet=True) for _ in range(n)]
                 for client in clients:
                     if nice:
                         os.setpriority(os.PRIO_PROCESS, client.process.pid, nice)
@@ -213,10 +234,13 @@ def keys(profile: RobotProfile, presses: int, clients_n: int = 20) -> None:
                         first_rcp_after(sim, profile, sent, moving=False)
                     except RuntimeError:
                         pump(app, 0.5)
-                got = [len(c.messages(s.JOINT_STATES)) for c in clients]
             finally:
                 for client in clients:
                     client.close()
+                got = [
+                    max((e["counts"].get(s.JOINT_STATES, 0) for e in c.of("counts")), default=0)
+                    for c in clients
+                ]
                 window.close()
                 app.processEvents()
                 if server is not None:

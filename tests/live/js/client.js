@@ -7,6 +7,9 @@
 // Options (one JSON argument): url; topics to subscribe to (all advertised when "*");
 // garbage: frames of junk sent right after serverInfo; paused: stop reading the socket once
 // subscribed (a slow client); brief: print only topic, sizes and times of each message;
+// quiet (with brief): print only the first 10 messages of each topic, and the count of each
+// topic's messages when the connection closes (a benchmark's clients that must not cost the
+// process reading them anything per message);
 // fetch: URIs to fetch (fetchAsset) once connected; fetchMeshes: fetch every mesh the
 // /robot_description it receives names (as Foxglove's 3D panel does); publish: {topic,
 // encoding ("json" or "cdr"), schemaName, rateHz, count, linear, angular}: advertise and
@@ -127,6 +130,8 @@ client.on("advertise", (advertised) => {
   }
 });
 
+const counts = {};
+
 client.on("message", ({ subscriptionId, timestamp, data }) => {
   const localMs = performance.timeOrigin + performance.now();
   const entry = subscriptions.get(subscriptionId);
@@ -134,6 +139,9 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
     print({ event: "error", message: `message on unknown subscription ${subscriptionId}` });
     return;
   }
+  const topic = entry.channel.topic;
+  counts[topic] = (counts[topic] || 0) + 1;
+  if (options.quiet && counts[topic] > 10) return;
   const out = {
     event: "message",
     topic: entry.channel.topic,
@@ -203,6 +211,7 @@ client.on("serviceCallFailure", (failure) => print({ event: "serviceFailure", ca
 client.on("status", (status) => print({ event: "status", level: status.level, message: status.message }));
 client.on("error", (error) => print({ event: "error", message: String(error && error.message) }));
 client.on("close", (event) => {
+  if (options.quiet) print({ event: "counts", counts });
   print({ event: "close", code: event.code, reason: String(event.reason || "") });
   process.exit(0);
 });
