@@ -6,12 +6,14 @@ pair), so pickle carries nothing from outside: the relay parses what clients sen
 (ocu.live.wire) and forwards the checked dataclasses.
 
 Console -> relay:
-- (LISTEN, Listen): bind and serve (what comes before it is applied first);
+- (LISTEN, Listen): the robot, then bind and serve (what comes before it is applied first);
 - (HELLO, server_info, services): the serverInfo text each new client gets, and the
   advertiseServices text (or None);
-- (ADVERTISE, [ChannelInfo], {channel id: (log ns, payload)}): channels and what each keeps
-  for a late subscriber;
-- (DATA, channel id, log ns, payload, keeps last): one message, encoded once;
+- (ITEMS, [Item], dropped): the link's items (ocu.record.convert), encoded in the relay
+  (ocu.live.encoding); `dropped`: items the console's queue lost so far;
+- (PUBLISH, mono, topic, message dict): one of the console's own messages (odometry, the
+  scene), encoded in the relay;
+- (ENCODED, topic, log ns, payload): one message encoded already (the map);
 - (TO, client id, text): a control message for one client (0: every client);
 - (REFUSED, client id, count): frames the console refused (the relay closes the client at
   MAX_REFUSED);
@@ -21,7 +23,7 @@ Console -> relay:
 Relay -> console:
 - (READY, port) or (FAILED, reason) once, after the bind;
 - (JOINED, client id, address, subprotocol), (LEFT, client id, sent, dropped, refused);
-- (SUBSCRIBED, frozenset of channel ids): the channels someone subscribes to, on change;
+- (SUBSCRIBED, frozenset of topics): the topics someone subscribes to, on change;
 - (INPUT, client id, message): a ClientAdvertise, ClientUnadvertise or ClientPublish;
 - (CALL, client id, ServiceCallRequest);
 - (STATS, request id, LiveStats) (its queue_dropped the relay's own drops).
@@ -33,12 +35,17 @@ import asyncio
 import pickle
 import struct
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
+
+if TYPE_CHECKING:
+    from ocu.live.robot import RobotFrames
+    from ocu.profile import RobotProfile
 
 LISTEN: Final = "listen"
 HELLO: Final = "hello"
-ADVERTISE: Final = "advertise"
-DATA: Final = "data"
+ITEMS: Final = "items"
+PUBLISH: Final = "publish"
+ENCODED: Final = "encoded"
 TO: Final = "to"
 REFUSED: Final = "refused"
 STATS: Final = "stats"
@@ -59,8 +66,14 @@ MAX_MESSAGE_BYTES: Final = 64 * 1024 * 1024
 
 @dataclass(frozen=True)
 class Listen:
-    """Where and how the relay serves."""
+    """The robot, and where and how the relay serves."""
 
+    profile: RobotProfile
+    frames: RobotFrames | None
+    # The console's mapping of its monotonic clock to the wall clock, and its clock now.
+    mono0: float
+    wall0_ns: int
+    now: float
     host: str
     port: int
     token: str | None

@@ -1,15 +1,17 @@
 """The live server's relay: the WebSocket side, in a process of its own (docs/live.md).
 
-`python -m ocu.live.relay FD ...` is started by the console's LiveServer on one end of a
-socket pair (ocu.live.pipe). It binds the address, checks tokens, holds every client's
-subscriptions and bounded outbox, answers fetchAsset from the robot's own meshes, and fans
-each message the console encoded once out to the clients subscribed to its channel. What a
-client publishes and the services it calls go to the console, which owns the robot.
+`python -m ocu.live.relay FD` is started by the console's LiveServer on one end of a socket
+pair (ocu.live.pipe). It binds the address, checks tokens, holds every client's subscriptions
+and bounded outbox, answers fetchAsset from the robot's own meshes, encodes what the console
+hands it (the link's items, the console's message dicts: ocu.live.encoding) once per message
+and fans each out to the clients subscribed to its channel. What a client publishes and the
+services it calls go to the console, which owns the robot.
 
-Why a process: the per-client work (framing, the socket writes, a client's frames parsed) is
-Python; in the console's interpreter it took the GIL from the operator's key path, so 20
-clients moved the key -> datagram p99 (bench/bench_live.py --keys). Here it costs the console
-nothing per client, and the relay runs at the default priority, behind the console's.
+Why a process: the encoding (CDR, the URDF tree's transforms at the telemetry rate) and the
+per-client work (framing, the socket writes, a client's frames parsed) are Python; in the
+console's interpreter they took the GIL from the operator's key path (bench/bench_live.py
+--keys). Here the console only pickles the items, and the relay runs at the default
+priority, behind the console's.
 
 The relay ends when the console says STOP or when the pipe closes (the console has gone):
 an orphan must not keep serving a robot nobody drives.
@@ -36,6 +38,7 @@ from websockets.http11 import Request, Response
 
 from ocu.live import pipe, wire
 from ocu.live.clients import Client, LiveStats
+from ocu.live.encoding import Channel, Encoding
 
 log = logging.getLogger("ocu.live.relay")
 
@@ -60,8 +63,6 @@ class Relay:
         self.assets = {uri: Path(file) for uri, file in listen.assets.items()}
         self.info = ""
         self.services: str | None = None
-        self.channels: dict[int, wire.ChannelInfo] = {}
-        self.latched: dict[int, tuple[int, bytes]] = {}
         self.clients: dict[int, Client] = {}
         self._ids: dict[Client, int] = {}
         self._next_id = 1
@@ -71,6 +72,16 @@ class Relay:
         self.unauthorized = 0
         self.closed_for_refused = 0
         self.crowded = 0
+        mono0, wall0_ns = listen.mono0, listen.wall0_ns
+        self.encoding = Encoding(
+            listen.profile,
+            listen.frames,
+            lambda mono: wall0_ns + round((mono - mono0) * 1e9),
+            listen.now,
+            fan_out=self.fan_out,
+            subscribed=lambda channel_id: channel_id in self._subscribed,
+            advertise=self._advertise,
+        )
 
     def tell(self, *message: Any) -> None:
         """A message to the console (never waits: the pipe's buffer takes it)."""
@@ -80,9 +91,16 @@ class Relay:
 
     def on_console(self, message: tuple[Any, ...]) -> None:
         kind = message[0]
-        if kind == pipe.DATA:
-            _, channel_id, log_ns, payload, keeps_last = message
-            self.fan_out(channel_id, log_ns, payload, keeps_last)
+        if kind == pipe.ITEMS:
+            self.encoding.serve(message[1], message[2])
+        elif kind == pipe.PUBLISH:
+            _, mono, topic, body = message
+            self.encoding.publish(mono, topic, body)
+        elif kind == pipe.ENCODED:
+            _, topic, log_ns, payload = message
+            channel = self.encoding.channels.get(topic)
+            if channel is not None:
+                self.encoding.encoded(channel, log_ns, payload)
         elif kind == pipe.TO:
             _, client_id, text = message
             if client_id == pipe.EVERYONE:
@@ -98,16 +116,6 @@ class Relay:
             if refusing is not None:
                 refusing.refused += count
                 self._close_if_refused(refusing)
-        elif kind == pipe.ADVERTISE:
-            _, infos, latched = message
-            new = [info for info in infos if info.id not in self.channels]
-            for info in infos:
-                self.channels[info.id] = info
-            self.latched.update(latched)
-            if new and self.clients:
-                text = wire.advertise(new)
-                for client in list(self.clients.values()):
-                    self.control(client, text)
         elif kind == pipe.HELLO:
             _, self.info, self.services = message
         elif kind == pipe.STATS:
@@ -115,12 +123,16 @@ class Relay:
         else:
             log.error("relay: unknown message from the console: %r", kind)
 
-    def fan_out(self, channel_id: int, log_ns: int, payload: bytes, keeps_last: bool) -> None:
-        if keeps_last:
-            self.latched[channel_id] = (log_ns, payload)
+    def fan_out(self, channel: Channel, log_ns: int, payload: bytes) -> None:
+        channel_id = channel.info.id
         for client in self.clients.values():
             for subscription in client.by_channel.get(channel_id, ()):
                 client.queue_data(wire.message_data(subscription, log_ns, payload))
+
+    def _advertise(self, info: wire.ChannelInfo) -> None:
+        text = wire.advertise([info])
+        for client in list(self.clients.values()):
+            self.control(client, text)
 
     def stats(self) -> LiveStats:
         return LiveStats(
@@ -184,7 +196,8 @@ class Relay:
         self.connections += 1
         self.tell(pipe.JOINED, client_id, client.address, connection.subprotocol)
         self.control(client, self.info)
-        self.control(client, wire.advertise(list(self.channels.values())))
+        channels = self.encoding.channels.values()
+        self.control(client, wire.advertise([channel.info for channel in channels]))
         if self.services is not None:
             self.control(client, self.services)
         sender = asyncio.create_task(self._send_loop(client), name="ocu-live-send")
@@ -255,23 +268,25 @@ class Relay:
         )
         if subscribed != self._subscribed:
             self._subscribed = subscribed
-            self.tell(pipe.SUBSCRIBED, subscribed)
+            by_id = self.encoding.by_id
+            self.tell(pipe.SUBSCRIBED, frozenset(by_id[i].info.topic for i in subscribed))
 
     def _subscribe(self, client: Client, subscription: int, channel_id: int) -> None:
         problem = None
-        if channel_id not in self.channels:
+        channel = self.encoding.by_id.get(channel_id)
+        if channel is None:
             problem = f"no channel {channel_id}"
         elif subscription in client.subscriptions:
             problem = f"subscription {subscription} is taken"
         elif len(client.subscriptions) >= wire.MAX_SUBSCRIPTIONS:
             problem = f"more than {wire.MAX_SUBSCRIPTIONS} subscriptions"
-        if problem is not None:
+        if problem is not None or channel is None:
             client.refused += 1
             self.control(client, wire.status(wire.StatusLevel.ERROR, f"subscribe: {problem}"))
             return
         client.subscriptions[subscription] = channel_id
         client.by_channel.setdefault(channel_id, set()).add(subscription)
-        latched = self.latched.get(channel_id)
+        latched = channel.latched
         if latched is not None:
             log_ns, payload = latched
             client.queue_data(wire.message_data(subscription, log_ns, payload))

@@ -3,21 +3,20 @@
 The server is one more subscriber of a Link (attach()). Its callback runs on the link's
 threads and only appends a small item to a bounded queue (dropped and counted when full; the
 link never waits, and with no client connected it keeps only the link's state changes).
-Everything else runs on the server's own thread, "ocu-live", in one asyncio loop: the items
-become the recorder's ROS 2 messages (ocu.record.convert, the same CDR bytes a recording
-holds) plus the robot's /tf, /tf_static, /robot_description, /scan and /diagnostics
-(ocu.live.robot) and the navigator's /odom and /map (ocu.live.navigation); a message is
-encoded only when some client subscribed to its channel.
+The rest of the console's part runs on the server's own thread, "ocu-live", in one asyncio
+loop: it hands the items, as they are, to the relay; polls the navigator (/odom, /map) and
+the scene; and takes what clients publish and the services they call (the robot is here).
 
-The WebSocket side runs in a process of its own, the relay (ocu.live.relay, over a socket
-pair: ocu.live.pipe): each message is encoded here once and handed to it whole, and it fans
-it out to the clients subscribed. Each client there has its own outbox bounded in bytes: a
-message that does not fit is dropped for that client alone and counted, so a slow client
-loses frames, never grows the server's memory and never delays another client or the
-operator; and no client costs this interpreter anything (the operator's key path shares its
-GIL). A client whose frames are refused (not JSON, unknown operations, bad ids) gets a status
-message per frame and is closed after MAX_REFUSED of them. What clients publish and the
-services they call come back here, where the robot is.
+Serving is a process of its own, the relay (ocu.live.relay, over a socket pair:
+ocu.live.pipe): it encodes the items into the recorder's ROS 2 messages plus the robot's
+/tf, /tf_static, /robot_description, /scan and /diagnostics (ocu.live.encoding), once per
+message and only for channels someone subscribed to, and fans each out to its subscribers.
+Each client there has its own outbox bounded in bytes: a message that does not fit is
+dropped for that client alone and counted, so a slow client loses frames, never grows the
+server's memory and never delays another client or the operator. Neither the encoding nor
+any client costs this interpreter anything but the items' pickling: the operator's key path
+shares its GIL. A client whose frames are refused (not JSON, unknown operations, bad ids)
+gets a status message per frame and is closed after MAX_REFUSED of them.
 """
 
 from __future__ import annotations
@@ -34,17 +33,16 @@ import uuid
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import TimeoutError as FutureTimeout
-from dataclasses import dataclass
 from typing import Any, Final
 
 from ocu.link.base import Link
-from ocu.link.diagnostics import link_report
 from ocu.live import navigation as nv
 from ocu.live import pipe, wire
 from ocu.live import robot as rb
 from ocu.live import scene as sc
 from ocu.live.clients import DEFAULT_CLIENT_BUFFER_BYTES, LiveStats
 from ocu.live.control import Core, LiveControl
+from ocu.live.encoding import SCAN
 from ocu.live.goals import GoalCore, LiveGoals
 from ocu.live.inputs import ClientInputs, RemoteClient
 from ocu.live.messages import ENCODINGS
@@ -54,23 +52,15 @@ from ocu.priority import reset_for_child
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.convert import (
-    DECODED_TOPICS,
-    EVENT,
-    STATS,
-    TELEMETRY,
     Item,
-    MessageConverter,
     item_of,
-    topic_type,
 )
 from ocu.record.session import clock_pair
 from ocu.records import (
     ExtensionChanged,
     LinkEvent,
-    LinkState,
     LinkStateChanged,
     ScanFrame,
-    TelemetryFrame,
 )
 
 log = logging.getLogger("ocu.live")
@@ -91,15 +81,6 @@ START_TIMEOUT_S: Final = 10.0
 CONTROL_PERIOD_S: Final = 0.02
 STOP_TIMEOUT_S: Final = 5.0
 ITEM_OVERHEAD_BYTES: Final = 200
-_SCAN: Final = -1  # the queue kind of a range scan (the recorder keeps only its datagram)
-
-
-@dataclass
-class _Channel:
-    info: wire.ChannelInfo
-    encoder: s.Encoder
-    latched: tuple[int, bytes] | None = None
-    keeps_last: bool = False
 
 
 class LiveServer:
@@ -141,78 +122,27 @@ class LiveServer:
         self._queue_dropped = 0
         self._client_count = 0
         self._remote: dict[int, RemoteClient] = {}
-        self._subscribed_ids: frozenset[int] = frozenset()
+        self._subscribed_topics: frozenset[str] = frozenset()
         self._relay: subprocess.Popen[bytes] | None = None
         self._writer: asyncio.StreamWriter | None = None
         self._relay_dropped = 0
         self._stats = LiveStats((), 0, 0, 0, 0, 0)
         self._stats_asked: dict[int, asyncio.Future[LiveStats]] = {}
         self._stats_ids = 0
-        self._channels: dict[str, _Channel] = {}
-        self._by_id: dict[int, _Channel] = {}
         self._navigator: nv.NavigationSource | None = None
         self._scene: sc.SceneSource | None = None
-        self._link_state = LinkState.CONNECTING
         # --live-control: clients may publish /cmd_vel (ocu.live.control) once a core is served.
         self.allow_control = control
         self.max_clients = max_clients
         self._inputs = ClientInputs(control, self._control)
         self._services = Services()
-        self._converter = MessageConverter(profile, self.wall_ns, self._publish)
+        self._grid_encoder = s.make_encoder(nv.OCCUPANCY_GRID)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_event: asyncio.Event | None = None
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._start_error: str | None = None
         self._bound_port: int | None = None
-        self._declare_channels()
-
-    # ---- channels (the loop thread's once started) -----------------------------------------
-
-    def _declare_channels(self) -> None:
-        for topic in s.RAW_TOPICS:
-            self._channel(topic, s.RAW_PACKET)
-        for topic, message_type in DECODED_TOPICS:
-            self._channel(topic, message_type)
-        for name in self.profile.link.camera_names:
-            self._channel(s.camera_topic(name), s.COMPRESSED_IMAGE)
-        self._channel(rb.SCAN, rb.LASER_SCAN)
-        self._channel(rb.DIAGNOSTICS, rb.DIAGNOSTIC_ARRAY)
-        if self.profile.drive_channels is not None:  # a chassis: odometry and a map
-            self._channel(nv.ODOM, nv.ODOMETRY)
-            self._channel(nv.MAP, nv.OCCUPANCY_GRID)
-            self._channel(nv.PLAN, nv.PATH)
-            footprint = self.profile.navigation.footprint
-            if footprint is not None:
-                outline = self._channel(nv.FOOTPRINT, nv.POLYGON_STAMPED, keeps_last=True)
-                now = self.wall_ns(self.clock())
-                message = nv.footprint_message(footprint.corners_m, s.stamp(now))
-                outline.latched = (now, outline.encoder(message))
-        for topic in sc.topics_of(self.profile):
-            self._channel(topic, sc.SCENE_UPDATE, keeps_last=True)
-        self._channel(rb.TF, rb.TF_MESSAGE)
-        frames = self.frames
-        if frames is not None:
-            static = self._channel(rb.TF_STATIC, rb.TF_MESSAGE, keeps_last=True)
-            description = self._channel(rb.ROBOT_DESCRIPTION, rb.STRING, keeps_last=True)
-            now = self.wall_ns(self.clock())
-            stamp = s.stamp(now)
-            static.latched = (now, static.encoder(frames.static_message(stamp)))
-            description.latched = (now, description.encoder(frames.description_message()))
-
-    def _channel(
-        self, topic: str, message_type: s.MessageType, *, keeps_last: bool = False
-    ) -> _Channel:
-        channel_id = len(self._by_id) + 1
-        info = wire.ChannelInfo(channel_id, topic, message_type.name, message_type.definition)
-        channel = _Channel(info, s.make_encoder(message_type), keeps_last=keeps_last)
-        self._channels[topic] = channel
-        self._by_id[channel_id] = channel
-        return channel
-
-    def topics(self) -> list[str]:
-        """The topics advertised now."""
-        return list(self._channels)
 
     def wall_ns(self, mono: float) -> int:
         """Wall-clock nanoseconds of a monotonic time (the recorder's mapping)."""
@@ -234,7 +164,7 @@ class LiveServer:
             return  # nobody watching: the states the statistics carry are kept, nothing else
         if isinstance(event, ScanFrame):
             kept: tuple[Item, int] | None = (
-                (_SCAN, event.received_at, event),
+                (SCAN, event.received_at, event),
                 8 * len(event.ranges_m),
             )
         else:
@@ -260,74 +190,31 @@ class LiveServer:
 
     def _pump(self) -> None:
         with self._lock:
-            items = self._queue
+            items = list(self._queue)
             self._queue = deque()
             self._queued_bytes = 0
             self._pump_scheduled = False
             dropped = self._queue_dropped
-        for item in items:
-            try:
-                self._serve_item(item, dropped)
-            except Exception:
-                # One item the conversion cannot take must not end the server for the rest.
-                log.exception("live: cannot serve a %s item", item[0])
+        # To the relay as they are, in one message: it encodes them (ocu.live.encoding).
+        self._send_data((pipe.ITEMS, items, dropped))
 
-    def _serve_item(self, item: Item, dropped: int) -> None:
-        kind, mono = item[0], item[1]
-        if kind == _SCAN:
-            self._publish(mono, rb.SCAN, rb.scan_message(item[2], s.stamp(self.wall_ns(mono))))
-            return
-        self._converter.convert(item, dropped)
-        if kind == TELEMETRY and self.frames is not None:
-            self._publish_tf(mono, item[2])
-        elif kind == EVENT and item[2] == s.EVENT_LINK_STATE:
-            self._link_state = LinkState(item[3])
-        elif kind == STATS:
-            report = link_report(self._link_state, item[2], self.profile.name)
-            message = rb.diagnostics_message(report, s.stamp(self.wall_ns(mono)))
-            self._publish(mono, rb.DIAGNOSTICS, message)
+    def _subscribed(self, topic: str) -> bool:
+        return topic in self._subscribed_topics
 
-    def _publish_tf(self, mono: float, frame: TelemetryFrame) -> None:
-        channel = self._channels[rb.TF]
-        if not self._subscribed(channel.info.id):
-            return
-        assert self.frames is not None
-        positions = {
-            name: reading.angle_rad
-            for name, reading in frame.readings.items()
-            if reading.angle_rad is not None
-        }
-        self._publish(
-            mono, rb.TF, self.frames.moving_message(positions, s.stamp(self.wall_ns(mono)))
-        )
-
-    def _subscribed(self, channel_id: int) -> bool:
-        return channel_id in self._subscribed_ids
-
-    def _publish(
-        self, mono: float, topic: str, message: dict[str, Any], publish_ns: int | None = None
-    ) -> None:
-        channel = self._channels.get(topic)
-        if channel is None:
-            channel = self._channel(topic, topic_type(topic))
-            self._tell(pipe.ADVERTISE, [channel.info], {})
-        if not channel.keeps_last and not self._subscribed(channel.info.id):
-            return
-        self._fan_out(channel, self.wall_ns(mono), channel.encoder(message))
-
-    def _fan_out(self, channel: _Channel, log_ns: int, payload: bytes) -> None:
-        # To the relay, once, whatever the number of clients (it fans out).
-        if channel.keeps_last:
-            channel.latched = (log_ns, payload)
-        elif not self._subscribed(channel.info.id):
-            return
+    def _send_data(self, message: tuple[Any, ...]) -> None:
+        """Data for the relay (the loop thread): dropped and counted when the relay cannot
+        keep up, so that it never holds this process up nor grows its memory."""
         writer = self._writer
         if writer is None:
             return
         if writer.transport.get_write_buffer_size() > MAX_RELAY_BUFFER_BYTES:
             self._relay_dropped += 1
             return
-        writer.write(pipe.pack((pipe.DATA, channel.info.id, log_ns, payload, channel.keeps_last)))
+        writer.write(pipe.pack(message))
+
+    def _publish(self, mono: float, topic: str, message: dict[str, Any]) -> None:
+        """One of the console's own messages, encoded in the relay."""
+        self._send_data((pipe.PUBLISH, mono, topic, message))
 
     def _tell(self, *message: Any) -> None:
         """A control message to the relay (the loop thread; never dropped)."""
@@ -340,9 +227,8 @@ class LiveServer:
         self._navigator = navigator
 
     async def _navigation_loop(self) -> None:
-        if nv.ODOM not in self._channels:
+        if self.profile.drive_channels is None:  # no chassis: no odometry, no map
             return
-        odom, tf, grid, plan = (self._channels[t] for t in (nv.ODOM, rb.TF, nv.MAP, nv.PLAN))
         next_map = 0.0
         while True:
             await asyncio.sleep(nv.ODOM_PERIOD_S)
@@ -353,21 +239,22 @@ class LiveServer:
                 now = self.clock()
                 log_ns = self.wall_ns(now)
                 stamp = s.stamp(log_ns)
-                if self._subscribed(odom.info.id) or self._subscribed(tf.info.id):
+                if self._subscribed(nv.ODOM) or self._subscribed(rb.TF):
                     estimate = navigator.estimate(now)
-                    message = nv.odometry_message(estimate, stamp)
-                    self._fan_out(odom, log_ns, odom.encoder(message))
-                    transform = nv.odometry_transform(estimate, stamp)
-                    self._fan_out(tf, log_ns, tf.encoder(transform))
+                    self._publish(now, nv.ODOM, nv.odometry_message(estimate, stamp))
+                    self._publish(now, rb.TF, nv.odometry_transform(estimate, stamp))
                 if now < next_map:
                     continue
                 next_map = now + nv.MAP_PERIOD_S
-                if self._subscribed(plan.info.id):
+                if self._subscribed(nv.PLAN):
                     path = nv.path_message(navigator.planned_path(), stamp)
-                    self._fan_out(plan, log_ns, plan.encoder(path))
+                    self._publish(now, nv.PLAN, path)
                 occupancy = navigator.grid
-                if occupancy is not None and self._subscribed(grid.info.id):
-                    self._fan_out(grid, log_ns, nv.encode_grid(grid.encoder, occupancy, stamp))
+                if occupancy is not None and self._subscribed(nv.MAP):
+                    # Encoded here, by the grid's own fast path: its cells are a copy taken
+                    # now (scans go on meanwhile), smaller than the model's array.
+                    payload = nv.encode_grid(self._grid_encoder, occupancy, stamp)
+                    self._send_data((pipe.ENCODED, nv.MAP, log_ns, payload))
             except Exception:
                 log.exception("live: cannot serve the navigator's state")
                 await asyncio.sleep(nv.MAP_PERIOD_S)
@@ -383,11 +270,9 @@ class LiveServer:
             if source is None:
                 continue
             try:
-                log_ns = self.wall_ns(self.clock())
-                for topic, message in source.changed(s.stamp(log_ns)):
-                    channel = self._channels.get(topic)
-                    if channel is not None:
-                        self._fan_out(channel, log_ns, channel.encoder(message))
+                now = self.clock()
+                for topic, message in source.changed(s.stamp(self.wall_ns(now))):
+                    self._tell(pipe.PUBLISH, now, topic, message)  # kept for late subscribers
             except Exception:
                 log.exception("live: cannot serve the scene")
                 await asyncio.sleep(nv.MAP_PERIOD_S)
@@ -422,7 +307,7 @@ class LiveServer:
             if client is not None:
                 self._control(client, self._services.call(client.address, message[2]))
         elif kind == pipe.SUBSCRIBED:
-            self._subscribed_ids = message[1]
+            self._subscribed_topics = message[1]
         elif kind == pipe.JOINED:
             _, client_id, address, subprotocol = message
             self._remote[client_id] = RemoteClient(client_id, address)
@@ -523,11 +408,13 @@ class LiveServer:
         writer.transport.set_write_buffer_limits(high=MAX_RELAY_BUFFER_BYTES)
         self._writer = writer
         self._tell(*self._hello())
-        channels = list(self._channels.values())
-        latched = {c.info.id: c.latched for c in channels if c.latched is not None}
-        self._tell(pipe.ADVERTISE, [c.info for c in channels], latched)
         assets = self.frames.assets if self.frames is not None else {}
         listen = pipe.Listen(
+            self.profile,
+            self.frames,
+            self.mono0,
+            self.wall0_ns,
+            self.clock(),
             self.host,
             self.port,
             self.token,
@@ -591,7 +478,7 @@ class LiveServer:
             self._inputs.left(client)
         self._remote.clear()
         self._client_count = 0
-        self._subscribed_ids = frozenset()
+        self._subscribed_topics = frozenset()
 
     async def _stats_loop(self) -> None:
         while True:
