@@ -9,8 +9,8 @@ LiveServer, as the console does. Each client is the npm FoxgloveClient (tests/li
 Node.js) subscribed to /joint_states, /tf and every camera; it stamps each message's arrival
 with its wall clock. Latency: that arrival less the message's receive time (the wall clock
 when the link got the telemetry datagram), p50/p99 over the phase. CPU: this process (link,
-server, no GUI) per phase, in % of one core, with a phase of no clients first as the
-baseline.
+the server's console side, no GUI) with the server's relay process, per phase, in % of one
+core, with a phase of no clients first as the baseline.
 
     .venv/bin/python bench/bench_live.py --teleop 20      # client Twist -> datagram
 
@@ -76,9 +76,16 @@ from ocu.sim.simulator import RobotSimulator
 from tests.live.node_client import NodeClient, count
 
 
-def cpu_s() -> float:
+def cpu_s(server: LiveServer | None = None) -> float:
+    """This process's CPU seconds, with the live relay's (the server's own process)."""
     usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
+    total = usage.ru_utime + usage.ru_stime
+    pid = getattr(server, "relay_pid", None)  # an older tree serves in this process
+    if pid is not None:
+        from bench_live_console import process_cpu_s
+
+        total += process_cpu_s(pid)
+    return total
 
 
 class SendGaps:
@@ -225,9 +232,9 @@ def main() -> int:
         url = f"ws://127.0.0.1:{server.address[1]}"
         try:
             time.sleep(2.0)  # a benchmark's settling time, not synchronisation
-            start = cpu_s()
+            start = cpu_s(server)
             time.sleep(args.phase_s)
-            base = (cpu_s() - start) / args.phase_s * 100.0
+            base = (cpu_s(server) - start) / args.phase_s * 100.0
             print(f"no client: CPU {base:.0f} % of a core, {gaps.take()}")
             for n in args.clients:
                 clients = [NodeClient(url, topics=topics, brief=True) for _ in range(n)]
@@ -236,9 +243,9 @@ def main() -> int:
                         assert client.wait(count(s.JOINT_STATES, 10), 60.0)
                     marks = [len(c.events) for c in clients]
                     gaps.take()
-                    start = cpu_s()
+                    start = cpu_s(server)
                     time.sleep(args.phase_s)
-                    cpu = (cpu_s() - start) / args.phase_s * 100.0
+                    cpu = (cpu_s(server) - start) / args.phase_s * 100.0
                     latencies_ms = []
                     frames = 0
                     for client, mark in zip(clients, marks, strict=True):

@@ -67,12 +67,17 @@ def relay_pids(pid: int) -> list[int]:
     return found
 
 
-def cpu_percent(pid: int, phase_s: float) -> float:
-    """The console's CPU with its live relay's (the serving it does for the console)."""
-    pids = [pid, *relay_pids(pid)]
-    start = sum(process_cpu_s(p) for p in pids)
+def cpu_percent(pid: int, phase_s: float, relay_share: list[float] | None = None) -> float:
+    """The console's CPU with its live relay's (the serving it does for the console); the
+    relay's alone appended to `relay_share`."""
+    relays = relay_pids(pid)
+    start = process_cpu_s(pid), sum(process_cpu_s(p) for p in relays)
     time.sleep(phase_s)  # the measurement's phase, not synchronisation
-    return (sum(process_cpu_s(p) for p in pids) - start) / phase_s * 100.0
+    own = (process_cpu_s(pid) - start[0]) / phase_s * 100.0
+    relay = (sum(process_cpu_s(p) for p in relays) - start[1]) / phase_s * 100.0
+    if relay_share is not None:
+        relay_share.append(relay)
+    return own + relay
 
 
 def stop(process: subprocess.Popen[str]) -> None:
@@ -91,6 +96,7 @@ def console_cpu(profile: RobotProfile, clients_n: int, phase_s: float, rounds: i
     cameras = [s.camera_topic(name) for name in profile.link.camera_names]
     topics = [s.JOINT_STATES, "/tf", *cameras]
     results: dict[str, list[float]] = {"off": [], "idle": [], "clients": []}
+    relay: dict[str, list[float]] = {"off": [], "idle": [], "clients": []}
     rates: list[float] = []
     with tempfile.TemporaryDirectory() as config:
         for _ in range(rounds):
@@ -111,14 +117,14 @@ def console_cpu(profile: RobotProfile, clients_n: int, phase_s: float, rounds: i
             drain = subprocess.Popen(["cat"], stdin=on.stderr, stdout=subprocess.DEVNULL)
             try:
                 time.sleep(SETTLE_S)
-                results["idle"].append(cpu_percent(on.pid, phase_s))
+                results["idle"].append(cpu_percent(on.pid, phase_s, relay["idle"]))
                 url = f"ws://127.0.0.1:{port}"
                 clients = [NodeClient(url, topics=topics, brief=True) for _ in range(clients_n)]
                 try:
                     for client in clients:
                         assert client.wait(count(s.JOINT_STATES, 10), 60.0)
                     marks = [len(c.events) for c in clients]
-                    results["clients"].append(cpu_percent(on.pid, phase_s))
+                    results["clients"].append(cpu_percent(on.pid, phase_s, relay["clients"]))
                     frames = sum(
                         1
                         for client, mark in zip(clients, marks, strict=True)
@@ -143,9 +149,11 @@ def console_cpu(profile: RobotProfile, clients_n: int, phase_s: float, rounds: i
         (f"--live, {clients_n} clients", "clients"),
     ):
         mean = sum(results[key]) / rounds
+        share = f", of which the relay {sum(relay[key]) / rounds:.1f} %" if relay[key] else ""
         print(
             f"console, {label:18s}: CPU {mean:5.1f} % of a core (mean of {rounds}, "
-            f"{min(results[key]):.1f}-{max(results[key]):.1f}; {mean - off_mean:+.1f} against off)"
+            f"{min(results[key]):.1f}-{max(results[key]):.1f}; {mean - off_mean:+.1f} against "
+            f"off{share})"
         )
     print(f"camera frames/s per client: {sum(rates) / len(rates):.1f} ({len(cameras)} cameras)")
 
