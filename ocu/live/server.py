@@ -52,6 +52,14 @@ from ocu.priority import reset_for_child
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.convert import (
+    COMMAND,
+    RECEIVED,
+    RECEIVED_TOPICS,
+    SENT,
+    SENT_TOPICS,
+    STATUS,
+    TELEMETRY,
+    VIDEO,
     Item,
     item_of,
 )
@@ -137,6 +145,7 @@ class LiveServer:
         self._inputs = ClientInputs(control, self._control)
         self._services = Services()
         self._grid_encoder = s.make_encoder(nv.OCCUPANCY_GRID)
+        self._camera_topics = frozenset(s.camera_topic(n) for n in profile.link.camera_names)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_event: asyncio.Event | None = None
         self._thread: threading.Thread | None = None
@@ -173,6 +182,8 @@ class LiveServer:
         if kept is None or loop is None:
             return
         item, size = kept
+        if not self._wanted(item):
+            return
         cost = size + ITEM_OVERHEAD_BYTES
         with self._lock:
             if self._queued_bytes + cost > self.max_queue_bytes:
@@ -185,6 +196,28 @@ class LiveServer:
             self._pump_scheduled = True
         with contextlib.suppress(RuntimeError):  # the loop has closed: the server is stopping
             loop.call_soon_threadsafe(self._pump)
+
+    def _wanted(self, item: Item) -> bool:
+        """Whether anyone subscribes to what the relay makes of this item: nothing else is
+        handed over (a raw video fragment nobody watches costs a pickle and a copy each).
+        The link's threads; the loop thread swaps the set of topics whole."""
+        topics = self._subscribed_topics
+        kind = item[0]
+        if kind == SENT:
+            return SENT_TOPICS.get(item[2].kind, s.RAW_OTHER) in topics
+        if kind == RECEIVED:
+            return RECEIVED_TOPICS.get(item[2].kind, s.RAW_OTHER) in topics
+        if kind == TELEMETRY:
+            return s.JOINT_STATES in topics or rb.TF in topics
+        if kind == VIDEO:
+            return not topics.isdisjoint(self._camera_topics)
+        if kind == COMMAND:
+            return s.CMD_VEL in topics or s.CMD_JOINTS in topics
+        if kind == STATUS:
+            return s.ROBOT_STATUS in topics
+        if kind == SCAN:
+            return rb.SCAN in topics
+        return True  # the statistics and the events: the state /diagnostics carries
 
     # ---- the loop thread -------------------------------------------------------------------
 
