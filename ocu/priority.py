@@ -115,3 +115,14 @@ def reset_for_child(argv: list[str]) -> list[str]:
     if now >= 0:
         return argv
     return ["nice", "-n", str(-now), *argv]
+
+
+def behind(argv: list[str], steps: int) -> list[str]:
+    """`argv` run `steps` nice values behind this process (never ahead of it).
+
+    For a helper of the console's own whose work is not the operator's (the live relay
+    serving observers): ahead of batch jobs when the console is raised, behind the console.
+    """
+    if steps <= 0:
+        return argv
+    return ["nice", "-n", str(steps), *argv]

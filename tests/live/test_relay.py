@@ -18,7 +18,8 @@ from ocu.console.model import ConsoleModel
 from ocu.hardware.registry import HARDWARE
 from ocu.headless import HeadlessConsole
 from ocu.live.options import serve_console
-from ocu.live.server import LiveServer
+from ocu.live.server import RELAY_NICE_STEPS, LiveServer
+from ocu.priority import current_nice
 from ocu.profile import RobotProfile
 from ocu.sim.simulator import RobotSimulator, SimState
 from tests.live.node_client import NodeClient, require_node
@@ -133,3 +134,19 @@ def test_a_relay_that_dies_stops_the_remote_drive_at_once(driven: Driven) -> Non
         assert driven.server.stats().clients == ()
     finally:
         client.close()
+
+
+def test_the_relay_runs_behind_the_console(profile: RobotProfile) -> None:
+    """Observers come after the operator: at the default priority and at least 5 nice values
+    behind the console (which raises its own to -10 where it may)."""
+    server = LiveServer(profile, "127.0.0.1", 0)
+    server.start()
+    try:
+        pid = server.relay_pid
+        assert pid is not None
+        nice = int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])
+        console = current_nice()
+        assert nice == min(19, console + max(RELAY_NICE_STEPS, -console))
+        assert nice >= 0
+    finally:
+        server.stop()
