@@ -23,6 +23,7 @@ from ocu.live import navigation as nv
 from ocu.live import robot as rb
 from ocu.live import scene as sc
 from ocu.live import wire
+from ocu.live.messages import ARM_TWIST, TWIST_STAMPED
 from ocu.profile import RobotProfile
 from ocu.record import schemas as s
 from ocu.record.convert import (
@@ -105,6 +106,11 @@ class Encoding:
                 outline.latched = (log_ns, outline.encoder(message))
         for topic in sc.topics_of(self.profile):
             self._channel(topic, sc.SCENE_UPDATE, keeps_last=True)
+        if self.profile.arm is not None:
+            # The arm twists the live source took. Advertised for its definition too: a
+            # client learns TwistStamped only from a channel of the server's (Foxglove's
+            # Publish panel then publishes /arm/twist_cmd in cdr).
+            self._channel(ARM_TWIST, TWIST_STAMPED)
         self._channel(rb.TF, rb.TF_MESSAGE)
         frames = self.frames
         if frames is not None:

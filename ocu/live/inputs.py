@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from ocu.live import wire
 from ocu.live.control import LiveControl
@@ -42,6 +43,8 @@ class ClientInputs:
         self.allow = allow
         self.send = send
         self.teleop: LiveControl | None = None
+        # Told of each message the live source took (topic, decoded): the server's echo.
+        self.taken: Callable[[str, Any], None] | None = None
 
     def warn(self, client: Client, text: str) -> None:
         """A warning status, once per reason in a row."""
@@ -111,6 +114,8 @@ class ClientInputs:
             self.warn(client, f"{topic} not taken: {refusal}")
         else:
             client.last_warning = ""
+            if self.taken is not None:
+                self.taken(topic, decoded)
 
     def left(self, client: Client) -> None:
         """The client has gone: what it drove stops at once."""

@@ -45,7 +45,7 @@ from ocu.live.control import Core, LiveControl
 from ocu.live.encoding import SCAN
 from ocu.live.goals import GoalCore, LiveGoals
 from ocu.live.inputs import ClientInputs, RemoteClient
-from ocu.live.messages import ENCODINGS
+from ocu.live.messages import ARM_TWIST, ENCODINGS
 from ocu.live.options import DEFAULT_HOST, LiveError
 from ocu.live.services import Services
 from ocu.priority import behind, current_nice
@@ -147,6 +147,7 @@ class LiveServer:
         self.allow_control = control
         self.max_clients = max_clients
         self._inputs = ClientInputs(control, self._control)
+        self._inputs.taken = self._taken
         self._services = Services()
         self._grid_encoder = s.make_encoder(nv.OCCUPANCY_GRID)
         self._camera_topics = frozenset(s.camera_topic(n) for n in profile.link.camera_names)
@@ -313,6 +314,18 @@ class LiveServer:
             except Exception:
                 log.exception("live: cannot serve the scene")
                 await asyncio.sleep(nv.MAP_PERIOD_S)
+
+    def _taken(self, topic: str, decoded: Any) -> None:
+        """A client's arm twist the live source took, on /arm/twist_cmd for every viewer."""
+        if topic != ARM_TWIST or not self._subscribed(ARM_TWIST):
+            return
+        now = self.clock()
+        header = {"stamp": s.stamp(self.wall_ns(now)), "frame_id": decoded.frame_id}
+        twist = {
+            "linear": dict(zip("xyz", decoded.linear, strict=True)),
+            "angular": dict(zip("xyz", decoded.angular, strict=True)),
+        }
+        self._publish(now, ARM_TWIST, {"header": header, "twist": twist})
 
     def _control(self, client: RemoteClient, text: str | bytes) -> None:
         self._tell(pipe.TO, client.id, text)

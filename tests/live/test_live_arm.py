@@ -335,3 +335,42 @@ def test_a_client_moves_the_ur_to_a_joint_goal(ur: tuple[SimulatedUr, Served]) -
         assert sim.snapshot().last_command in ("speedj", "stopj")
     finally:
         goal.close()
+
+
+def test_a_client_learns_twist_stamped_from_the_server_and_viewers_see_the_jog(
+    ur: tuple[SimulatedUr, Served],
+) -> None:
+    """Foxglove's Publish panel encodes cdr only with a definition the server advertised:
+    /arm/twist_cmd is a channel of the server's (the twists the live source took), so the
+    client takes TwistStamped's definition from it, and a viewer sees the jog."""
+    hardware, served = ur
+    sim = hardware.simulator
+    assert until(lambda: served.model.robot.frame is not None)
+    watcher = NodeClient(served.url, topics=["/arm/twist_cmd"])
+    header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "base_link"}
+    twist = {"linear": {"x": 0.0, "y": 0.0, "z": 0.04}, "angular": {"x": 0, "y": 0, "z": 0}}
+    client = None
+    try:
+        assert watcher.wait(lambda events: any(e["event"] == "advertise" for e in events))
+        client = publish(
+            served.url,
+            "/arm/twist_cmd",
+            ARM_TWIST,
+            {"header": header, "twist": twist},
+            count=10,
+            encoding="cdr",
+            definition="advertised",
+        )
+        assert client.wait(lambda events: any(e["event"] == "definition" for e in events))
+        assert until(lambda: max(abs(v) for v in sim.snapshot().qd) > 0.0)
+        assert watcher.wait(lambda events: len(watcher.messages("/arm/twist_cmd")) >= 3)
+        seen = watcher.messages("/arm/twist_cmd")[0]["decoded"]
+        assert seen["header"]["frame_id"] == "base_link"
+        assert seen["twist"]["linear"] == {"x": 0.0, "y": 0.0, "z": 0.04}
+        assert seen["header"]["stamp"]["sec"] > 0  # stamped by the console when taken
+    finally:
+        watcher.close()
+        if client is not None:
+            client.close()
+    channels = [t for e in watcher.of("advertise") for t in e["topics"]]
+    assert ["/arm/twist_cmd", ARM_TWIST, "cdr"] in channels

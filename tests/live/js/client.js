@@ -15,7 +15,9 @@
 // encoding ("json" or "cdr"), schemaName, rateHz, count, linear, angular}: advertise and
 // publish a Twist `count` times at `rateHz` (as Foxglove's Teleop panel does), once the
 // server declares clientPublish; with `message` (an object) and `definition` (its ros2msg
-// text, for cdr) any other message instead; `publishes`: a list of such specs.
+// text, for cdr) any other message instead; `definition: "advertised"`: the definition of
+// the server's channel of the same schemaName, waited for (as Foxglove's Publish panel learns
+// a datatype only from what the server advertises); `publishes`: a list of such specs.
 // calls: [{service, encoding, request, delayMs}]: call each advertised service by name
 // (as Foxglove's Call Service panel does), the request in json or cdr (from the service's
 // request schema), the response decoded likewise.
@@ -69,7 +71,12 @@ client.on("serverInfo", (info) => {
   print({ event: "serverInfo", name: info.name, capabilities: info.capabilities, protocol: ws.protocol });
   for (const uri of options.fetch || []) fetchAsset(uri);
   if (info.capabilities.includes("clientPublish")) {
-    for (const spec of [options.publish, ...(options.publishes || [])]) if (spec) publish(spec);
+    for (const spec of [options.publish, ...(options.publishes || [])]) {
+      if (!spec) continue;
+      if (spec.definition === "advertised") pending.push(spec);
+      else publish(spec);
+    }
+    publishPending();
   }
   for (let i = 0; i < (options.garbage || 0); i++) {
     ws.send(i % 2 === 0 ? `not json ${i}` : Buffer.from([0xff, 0x00, i & 0xff]));
@@ -107,7 +114,23 @@ function publish(spec) {
   send();
 }
 
+const pending = [];
+const advertisedSchemas = new Map();
+
+function publishPending() {
+  for (let i = pending.length - 1; i >= 0; i--) {
+    const schema = advertisedSchemas.get(pending[i].schemaName);
+    if (schema === undefined) continue;
+    const spec = { ...pending[i], definition: schema };
+    pending.splice(i, 1);
+    print({ event: "definition", schemaName: spec.schemaName });
+    publish(spec);
+  }
+}
+
 client.on("advertise", (advertised) => {
+  for (const channel of advertised) advertisedSchemas.set(channel.schemaName, channel.schema);
+  publishPending();
   for (const channel of advertised) {
     let reader = null;
     try {
