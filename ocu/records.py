@@ -444,9 +444,14 @@ class ExtensionChanged:
 
 @dataclass(frozen=True)
 class SafetyEvent:
-    """The link stopped the robot by itself or on request (e-stop, watchdogs, link lost)."""
+    """The link stopped the robot by itself or on request (e-stop, watchdogs, link lost).
+
+    `stopped` False: news of the robot's own safety that stopped nothing (a controller that
+    takes motion again after its stop): shown, and the model halts nothing for it.
+    """
 
     message: str
+    stopped: bool = True
 
 
 @dataclass(frozen=True)

@@ -118,5 +118,10 @@ def feed(model: ConsoleModel, event: LinkEvent) -> None:
             # controller takes motion again (ocu/control/mux.md).
             model.halt(f"robot controller: {event.text}", lock="robot stop")
     elif isinstance(event, SafetyEvent):
-        # The link zeroed the command by itself: the model agrees, nothing resumes.
-        model.halt(event.message)
+        if event.stopped:
+            # The link zeroed the command by itself: the model agrees, nothing resumes.
+            model.halt(event.message)
+        else:
+            # Nothing was stopped. Halting here would cancel a goal sent as soon as the
+            # robot said it was ready again (ROS saw the mode before this event came).
+            model.events.message.emit(event.message)

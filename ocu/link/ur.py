@@ -563,7 +563,9 @@ class UrLink(Link):
                 self._send_current()
             self._notify_safety(f"UR controller: {status.describe()}: motion stopped")
         else:
-            self._notify_safety(f"UR controller: {status.describe()}: ready, nothing resumed")
+            message = f"UR controller: {status.describe()}: ready, nothing resumed"
+            log.warning("%s", message)
+            self.emit(SafetyEvent(message, stopped=False))
 
     def _lose(self, reason: str) -> None:
         """The connection is gone (loop thread): close it, zero, LOST, reconnect later."""

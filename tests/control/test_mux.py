@@ -243,3 +243,30 @@ def test_the_robots_own_stop_is_a_lock_every_source_obeys(profile: RobotProfile)
     feed(model, RobotModeReport("RUNNING", "NORMAL", True))
     model.update()
     assert model.velocities() == {}  # nothing resumed
+
+
+def test_a_goal_sent_once_the_robot_is_ready_again_survives_the_ready_news(
+    profile: RobotProfile,
+) -> None:
+    """The UR link reports the controller taking motion again (RobotModeReport, which ROS
+    shows on /diagnostics at once), then says so in a SafetyEvent that stopped nothing. A
+    goal that came between the two used to be cancelled by a halt for that news: seen as
+    `test_ur_controller_with_robot_moves_and_stops_with_stopj` failing under load."""
+    from ocu.core.feed import feed
+    from ocu.records import RobotModeReport, SafetyEvent
+
+    model = ConsoleModel(profile)
+    messages: list[str] = []
+    model.events.message.connect(messages.append)
+    feed(model, RobotModeReport("RUNNING", "ROBOT_EMERGENCY_STOP", False, ("emergency stop",)))
+    feed(model, SafetyEvent("UR controller: emergency stop: motion stopped"))
+    feed(model, RobotModeReport("RUNNING", "NORMAL", True))
+    model.set_target("shoulder", 0.5)  # the goal, sent on seeing NORMAL
+    feed(model, SafetyEvent("UR controller: robot RUNNING: ready, nothing resumed", stopped=False))
+    model.update()
+    assert "shoulder" in model.targets  # still the position controller's to reach
+    assert any("ready, nothing resumed" in m for m in messages)
+    # A SafetyEvent that did stop something still halts everything.
+    feed(model, SafetyEvent("link lost: motion commands zeroed"))
+    assert not model.targets
+    assert model.velocities() == {}
