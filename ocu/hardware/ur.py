@@ -105,7 +105,10 @@ class SimulatedUr(HardwareComponent):
         idle = threading.Event()
         snapshot = self.simulator.snapshot()
         while time.monotonic() < deadline:
-            if snapshot.last_command == "stopj" and snapshot.program is None:
+            # The program ends with the stop's last step; the speeds read zero a cycle later
+            # (a run beside two CPU hogs logged "moving (0.000 rad/s)").
+            at_rest = max(abs(v) for v in snapshot.qd) == 0.0
+            if snapshot.last_command == "stopj" and snapshot.program is None and at_rest:
                 break
             idle.wait(STOPJ_POLL_S)  # the simulator's thread has no event to wait on
             snapshot = self.simulator.snapshot()
