@@ -131,9 +131,21 @@ class RosMaster:
                 os.kill(pid, signal.SIGKILL)
 
     def _kill_leftovers(self) -> None:
-        """A roscore that gave up may leave its rosmaster or rosout behind in its group."""
+        """A roscore that gave up may leave its rosmaster behind, in its group or (started
+        just before roscore was stopped, under load) on its own: found by its port."""
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.killpg(self.process.pid, signal.SIGKILL)
+        wanted = f"rosmaster\0--core\0-p\0{self.port}\0".encode()
+        for entry in Path("/proc").iterdir():
+            if not entry.name.isdigit():
+                continue
+            try:
+                command = (entry / "cmdline").read_bytes()
+            except OSError:
+                continue
+            if wanted in command:
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.kill(int(entry.name), signal.SIGKILL)
 
     def __enter__(self) -> RosMaster:
         return self
