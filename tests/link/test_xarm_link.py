@@ -189,6 +189,39 @@ def test_a_goal_goes_as_one_move_of_several_servos(
     assert dict(stop.positions)[BASE] < 600  # the goal was 500 + 0.5 rad = 619
 
 
+def test_the_end_of_a_timed_move_sends_no_stop_move(arm: XarmProfile) -> None:
+    """A timed move's duration is rounded up to whole milliseconds, so its setpoint may still
+    be on its way when the controller's next command (no goal: the move's time is over)
+    comes. A stop there would hold the servos where the move ends anyway: none is sent (the
+    CI run where the xArm node's pose goal went as two moves). One mid-move still is."""
+    from ocu.link.xarm_moves import XarmMoves
+    from ocu.protocol.xarm import decode_servo_move
+
+    moves = XarmMoves(arm)
+    for servo in (3, 4, 5, 6):
+        moves.first_reading(servo, 500, 0.0)
+    goals = {"shoulder": 0.3, "elbow": -0.4}
+    end = 0.8004  # 801 ms on the wire
+    command = Command(
+        velocities=dict.fromkeys(goals, 0.4), until=dict.fromkeys(goals, end), goals=goals
+    )
+    frames, _ = moves.frames(command, 0.0)
+    assert [decode_servo_move(f[4:]).duration_ms for f in frames] == [801]
+    assert moves.moving(end + 0.0003)  # the setpoints' last 0.7 ms
+    frames, _ = moves.frames(Command(), end + 0.0003)
+    assert frames == []
+    # Mid-move, the same is a stop at where the setpoints are.
+    back = {"shoulder": 0.0, "elbow": 0.0}
+    command = Command(
+        velocities=dict.fromkeys(back, 0.4), until=dict.fromkeys(back, 2.0), goals=back
+    )
+    frames, _ = moves.frames(command, 1.0)
+    assert len(frames) == 1
+    assert moves.moving(1.2)
+    frames, _ = moves.frames(Command(), 1.2)
+    assert [decode_servo_move(f[4:]).duration_ms for f in frames] == [0]
+
+
 def test_a_late_goal_is_never_run_faster_than_the_joints_top_speed(
     rig: tuple[XarmSimulator, XarmLink, Events],
 ) -> None:
