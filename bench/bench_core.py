@@ -46,6 +46,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from bench_console_video import WINDOW_SIZE, cpu_s, wait
 from common import percentile
+from key_floor import FloorProbe
 from PySide6.QtCore import QCoreApplication, QEvent, QObject, QSettings, Qt, QTimer
 from PySide6.QtGui import QKeyEvent
 from PySide6.QtWidgets import QApplication
@@ -150,6 +151,10 @@ class Phase:
     stick_release_ms: list[float] = field(default_factory=list)
     # Of every trial: the key posted -> the GUI thread dispatching it.
     dispatch_ms: list[float] = field(default_factory=list)
+    # --floor: the same X events -> a datagram from a process of their own (key_floor.py).
+    floor_press_ms: list[float] = field(default_factory=list)
+    floor_release_ms: list[float] = field(default_factory=list)
+    floor_space_ms: list[float] = field(default_factory=list)
     cpu_percent: float = 0.0
     control: str = ""
     model_fps: float = 0.0
@@ -233,14 +238,19 @@ def run_phase(
     seed: int,
     x11: XTestKeys | None = None,
     pad: VirtualPad | None = None,
+    floor: FloorProbe | None = None,
 ) -> Phase:
     """`trials` key trials; through the X server with `x11`, else posted to Qt's queue."""
 
-    def post_key(window: MainWindow, key: Qt.Key, press: bool, text: str = "") -> None:
+    def post_key(
+        window: MainWindow, key: Qt.Key, press: bool, text: str = "", label: str = "other"
+    ) -> None:
         if x11 is None:
             post_qt_key(window, key, press, text)
         else:
-            x11.send(key, press)
+            sent_at = x11.send(key, press)
+            if floor is not None:
+                floor.expect(label, X_KEYCODES[key], press, sent_at)
 
     phase = Phase(label)
     rng = random.Random(seed)
@@ -252,14 +262,14 @@ def run_phase(
     for trial in range(trials):
         wait(app, rng.uniform(0.005, 0.15))
         pressed = probe.arm("moving")
-        post_key(window, Qt.Key.Key_W, True, "w")
+        post_key(window, Qt.Key.Key_W, True, "w", "press")
         at = until(app, probe, phase)
         if at is not None:
             phase.press_ms.append(1000 * (at - pressed))
         wait(app, rng.uniform(0.03, 0.12))
         if trial % 4 == 3:
             stopped = probe.arm("all zero")
-            post_key(window, Qt.Key.Key_Space, True, " ")
+            post_key(window, Qt.Key.Key_Space, True, " ", "space")
             at = until(app, probe, phase)
             if at is not None:
                 phase.space_ms.append(1000 * (at - stopped))
@@ -276,7 +286,7 @@ def run_phase(
                     wait(app, 0.01)
             continue
         released = probe.arm("drive zero")
-        post_key(window, Qt.Key.Key_W, False, "w")
+        post_key(window, Qt.Key.Key_W, False, "w", "release")
         at = until(app, probe, phase)
         if at is not None:
             phase.release_ms.append(1000 * (at - released))
@@ -294,6 +304,11 @@ def run_phase(
             if at is not None:
                 phase.stick_release_ms.append(1000 * (at - rested))
     elapsed = time.monotonic() - t0
+    if floor is not None:
+        heard = floor.take()
+        phase.floor_press_ms = heard.get("press", [])
+        phase.floor_release_ms = heard.get("release", [])
+        phase.floor_space_ms = heard.get("space", [])
     phase.cpu_percent = 100 * (cpu_s() - cpu0) / elapsed
     phase.model_fps = (window.model_view.frames_rendered - renders0) / elapsed
     core = getattr(window, "core", None)
@@ -531,6 +546,7 @@ def measure(args: argparse.Namespace) -> list[Phase]:
         redraw.start()
         wait(app, args.warmup)
         x11 = XTestKeys() if args.x11 else None
+        floor = FloorProbe() if x11 is not None and args.floor else None
         if x11 is not None:
             # The keyboard to the console: the X server's focus on its main window.
             window.raise_()
@@ -540,7 +556,17 @@ def measure(args: argparse.Namespace) -> list[Phase]:
             print(f"X key reader: {window.key_filter.x_reader is not None}")  # type: ignore[union-attr]
         sampler = GuiSampler() if args.sample_gui else None
         phases.append(
-            run_phase(app, window, probe, "idle", trials=args.trials, seed=1, x11=x11, pad=pad)
+            run_phase(
+                app,
+                window,
+                probe,
+                "idle",
+                trials=args.trials,
+                seed=1,
+                x11=x11,
+                pad=pad,
+                floor=floor,
+            )
         )
         procs = hogs(args.hogs)
         try:
@@ -555,6 +581,7 @@ def measure(args: argparse.Namespace) -> list[Phase]:
                     seed=2,
                     x11=x11,
                     pad=pad,
+                    floor=floor,
                 )
             )
         finally:
@@ -563,6 +590,8 @@ def measure(args: argparse.Namespace) -> list[Phase]:
                 proc.wait()
         if x11 is not None:
             x11.close()
+        if floor is not None:
+            floor.close()
         redraw.stop()
         if sampler is not None:
             sampler.report()
@@ -587,6 +616,11 @@ def report(title: str, phases: list[Phase]) -> None:
         print(phase.line("stick -> RCP", phase.stick_ms))
         print(phase.line("stick rest -> zero", phase.stick_release_ms))
         print(phase.line("(of which queued)", phase.dispatch_ms))
+        if phase.floor_press_ms:
+            print("  the same X events -> a datagram from a process of their own (the floor):")
+            print(phase.line("  W press", phase.floor_press_ms))
+            print(phase.line("  release", phase.floor_release_ms))
+            print(phase.line("  Space", phase.floor_space_ms))
 
 
 def main() -> int:
@@ -620,6 +654,12 @@ def main() -> int:
         "--x11",
         action="store_true",
         help="real key events through a private Xvfb: with the X key reader and without",
+    )
+    parser.add_argument(
+        "--floor",
+        action="store_true",
+        help="with --x11: also time the same X events through a process of their own "
+        "(key_floor.py: what a core out of the GUI's interpreter could reach at best)",
     )
     parser.add_argument(
         "--no-pad", action="store_true", help="no virtual game controller, no stick trials"
@@ -711,6 +751,7 @@ def run_x11(args: argparse.Namespace) -> int:
                 command += ["--trials", str(args.trials), "--hogs", str(args.hogs)]
                 command += ["--warmup", str(args.warmup), "--nice", str(args.nice)]
                 command += ["--reader-times"] if args.reader_times and switch == "1" else []
+                command += ["--floor"] if args.floor and switch == "1" else []
                 subprocess.run([*command, "--json", str(target)], env=env, check=True)
                 results[label] = [Phase(**p) for p in json.loads(target.read_text("utf-8"))]
     finally:
