@@ -13,7 +13,7 @@ believable reading on. From a command (docs/xarm.md "The link"):
   end go in one frame (one synchronized move of the board), which takes longer than that
   only when a joint would have to go faster than its top speed (a goal that came late);
 - a joint whose velocity went to zero while its setpoint moves: the stop move, the setpoint
-  held where it is now, within 0 ms (none when that is where the move ends: the same unit).
+  held where it is now, within 0 ms (none for a timed move already at its goal's unit).
 
 Targets are clamped to the joint's limits (a jog never carries a joint further out past
 one), velocities to its top speed. A joint never read is not moved.
@@ -87,14 +87,15 @@ class XarmMoves:
                     )
                 sent[joint.name] = command.velocity(joint.name)
                 continue
-            self._timed.pop(joint.servo, None)
+            was_timed = self._timed.pop(joint.servo, None) is not None
             limit = joint.max_speed_rad_s
             velocity = max(-limit, min(limit, command.velocity(joint.name)))
             if velocity == 0.0:
-                # A setpoint already at its target's unit (a timed move's last millisecond:
-                # its duration is rounded up to whole ms) needs no stop move: it would hold
-                # the servo where the board takes it anyway.
-                if ramp.moving(now) and _units(here) != _units(ramp.end):
+                # A timed move whose setpoint is already at its goal's unit (its last
+                # millisecond: its duration is rounded up to whole ms) needs no stop move: it
+                # would hold the servo where the move ends anyway. A jog always gets one.
+                ending = was_timed and _units(here) == _units(ramp.end)
+                if ramp.moving(now) and not ending:
                     stops[joint.servo] = self._hold(joint.servo, ramp, here, now)
                 continue
             step = joint.sign * velocity * self.arm.units_per_rad * move_s

@@ -220,6 +220,14 @@ def test_the_end_of_a_timed_move_sends_no_stop_move(arm: XarmProfile) -> None:
     assert moves.moving(1.2)
     frames, _ = moves.frames(Command(), 1.2)
     assert [decode_servo_move(f[4:]).duration_ms for f in frames] == [0]
+    # A jog released within its target's unit still gets its stop move (a jog's setpoint
+    # moves in fractions of a unit; the stop is what the release is).
+    frames, _ = moves.frames(Command({"elbow": 0.01}), 2.0)
+    assert [decode_servo_move(f[4:]).duration_ms for f in frames] == [150]
+    ramp = moves.targets()[4]
+    assert round(ramp.value(2.05)) == round(ramp.end)
+    frames, _ = moves.frames(Command(), 2.05)
+    assert [decode_servo_move(f[4:]).duration_ms for f in frames] == [0]
 
 
 def test_a_late_goal_is_never_run_faster_than_the_joints_top_speed(
