@@ -26,8 +26,10 @@ from ocu.sim.ur import UrSimulator
 log = logging.getLogger("ocu.hardware")
 
 UR_CAPABILITIES = frozenset({"arm"})
-#: On shutdown, how long the in-process simulator is given to run the link's last stopj.
-STOPJ_WAIT_S = 1.0
+#: On shutdown, how long the in-process simulator is given to run the link's last stopj (the
+#: wait ends as soon as it has; 1 s was too short beside two hogs and a loaded console: a hog
+#: run logged "its last command speedj" before the stopj was read).
+STOPJ_WAIT_S = 5.0
 STOPJ_POLL_S = 0.01
 #: Where the in-process simulator listens (any free ports there).
 SIM_HOST = "127.0.0.1"

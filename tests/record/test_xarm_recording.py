@@ -138,12 +138,21 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Session]:
         finally:
             link.shutdown()
             recorder.stop()
+        # The simulator reads the pseudo-terminal on its own thread: the last frames written
+        # (the shutdown's stop move) may still be on their way when the link has shut down
+        # (a hog run counted 10 moves run of 14 written). Wait for every move in the file.
+        topics, _ = read_finished(path)
+        written = sum(
+            1
+            for message in topics[s.RAW_XARM_TO_BOARD]
+            if frame_fields(bytes(message.decoded.data))[0] == 0x03
+        )
+        poll_until(lambda: sim.snapshot().moves >= written)
         snapshot = sim.snapshot()
         goal = {
             arm.joint(name).servo: round(arm.raw_units(arm.joint(name), angle))
             for name, angle in goals.items()
         }
-        topics, _ = read_finished(path)
         yield Session(path, arm, topics, live, snapshot.moves, link.bad_frames, goal)
     finally:
         sim.stop()
