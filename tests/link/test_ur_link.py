@@ -388,32 +388,37 @@ class GarbageProxy:
         selector = selectors.DefaultSelector()
         selector.register(self.listener, selectors.EVENT_READ, "accept")
         pairs: dict[socket.socket, socket.socket] = {}
-        while not self._stop.is_set():
-            for key, _ in selector.select(0.05):
-                if key.data == "accept":
-                    client, _ = self.listener.accept()
-                    server = socket.create_connection(self.upstream)
-                    pairs[client], pairs[server] = server, client
-                    selector.register(client, selectors.EVENT_READ, "up")
-                    selector.register(server, selectors.EVENT_READ, "down")
-                    with self._lock:
-                        self._client = client
-                    continue
-                sock = key.fileobj
-                assert isinstance(sock, socket.socket)
-                try:
-                    data = sock.recv(65536)
-                except OSError:
-                    data = b""
-                if not data:
-                    self._stop.set()
-                    break
-                with self._lock:
-                    pairs[sock].sendall(data)
-        for sock in pairs:
-            sock.close()
-        self.listener.close()
-        selector.close()
+        try:
+            while not self._stop.is_set():
+                for key, _ in selector.select(0.05):
+                    if key.data == "accept":
+                        client, _ = self.listener.accept()
+                        server = socket.create_connection(self.upstream)
+                        pairs[client], pairs[server] = server, client
+                        selector.register(client, selectors.EVENT_READ, "up")
+                        selector.register(server, selectors.EVENT_READ, "down")
+                        with self._lock:
+                            self._client = client
+                        continue
+                    sock = key.fileobj
+                    assert isinstance(sock, socket.socket)
+                    try:
+                        data = sock.recv(65536)
+                        if data:
+                            with self._lock:
+                                pairs[sock].sendall(data)
+                    except OSError:
+                        # One end gone (the link shut down while bytes were on their way: a
+                        # hog run saw "connection reset by peer" here): the proxy ends.
+                        data = b""
+                    if not data:
+                        self._stop.set()
+                        break
+        finally:
+            for sock in pairs:
+                sock.close()
+            self.listener.close()
+            selector.close()
 
     def inject(self, data: bytes) -> None:
         with self._lock:
