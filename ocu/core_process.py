@@ -1,0 +1,276 @@
+"""The control core in a process of its own (docs/core-process.md).
+
+`CoreProcess` starts `python -m ocu.core_process FD` with one end of a socket pair and sends it
+a `CoreSpec`: the robot's profile, the hardware plug-in to connect (ocu.hardware.registry:
+"engineer" at "HOST:PORT", "ur", "xarm" ...), the model's settings and the control rate. The
+child builds the `ConsoleModel` and the `ControllerManager` (ocu.core.manager) and answers the
+GUI's `RemoteModel` (ocu.core.remote) under the model's lock:
+
+- "" is the model; "@core" is the `Core` below (connect and disconnect the hardware, the
+  GUI's heartbeat, the control thread's timing); "@link" the current link (what the GUI's
+  `RemoteLink` asks); each of `CoreSpec.parts` ("NAME=module:function", the function called
+  with the `Core`) is a root of its own: the X key reader ("keys") is one;
+- while connected, every event of the link except the raw datagrams goes to the GUI (the
+  video's compressed frames are decoded there);
+- the GUI's end closes (the window closed, the GUI process died): the model is halted, the
+  hardware shut down (zeros last) and the process ends. The GUI silent but alive: the
+  manager's "GUI silent" lock, fed by the GUI's heartbeat posts;
+- the core gone: the robot stops by itself (its link's watchdog), the GUI shows it.
+
+It runs at `CoreSpec.nice` (-10 by default, where the user may raise priority) so that two
+CPU-bound processes beside the console do not delay a key.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ocu.console.model import ConsoleModel
+from ocu.core.hardware import HardwareComponent
+from ocu.core.manager import DEFAULT_RATE_HZ, ControllerManager, ControlTiming
+from ocu.core.remote import CoreConnection, CoreGoneError, ModelServer, pack, receive, remote_root
+from ocu.core.remote_link import forward_link_events
+from ocu.profile import RobotProfile
+
+log = logging.getLogger("ocu.core")
+
+# The child's priority: above the desktop's CPU-bound jobs where the user may ask for it.
+CORE_NICE = -10
+START_TIMEOUT_S = 20.0
+STOP_TIMEOUT_S = 5.0
+
+
+class CoreProcessError(RuntimeError):
+    """The core process could not be started or did not answer."""
+
+
+@dataclass(frozen=True)
+class CoreSpec:
+    """What the core process builds (it pickles: the child gets it on its pipe)."""
+
+    profile: RobotProfile
+    hardware: str = "engineer"  # a plug-in of ocu.hardware.registry
+    target: str = ""
+    options: dict[str, Any] = field(default_factory=dict)
+    fine_factor: float = 0.25
+    arm_poses_path: Path | None = None
+    control_hz: float = DEFAULT_RATE_HZ
+    gui_timeout_s: float | None = None
+    parts: tuple[str, ...] = ()  # "NAME=module:function", called with the Core
+    nice: int = CORE_NICE
+    log_level: int = logging.INFO
+
+
+def load_function(text: str) -> Callable[..., Any]:
+    """ "module:function" to the function."""
+    module, _, name = text.partition(":")
+    if not module or not name:
+        raise CoreProcessError(f"not module:function: {text!r}")
+    function = getattr(importlib.import_module(module), name, None)
+    if not callable(function):
+        raise CoreProcessError(f"{text!r} is not a function")
+    return function  # type: ignore[no-any-return]
+
+
+class Core:
+    """The child's side: the model, its control thread, the hardware and the GUI's server."""
+
+    def __init__(self, spec: CoreSpec, sock: socket.socket) -> None:
+        self.spec = spec
+        self.model = ConsoleModel(
+            spec.profile, fine_factor=spec.fine_factor, arm_poses_path=spec.arm_poses_path
+        )
+        self.lock = threading.RLock()
+        alive = spec.profile.link.gui_alive_timeout_s
+        self.manager = ControllerManager(
+            self.model,
+            self.lock,
+            rate_hz=spec.control_hz,
+            alive_timeout_s=alive,
+            gui_timeout_s=spec.gui_timeout_s if spec.gui_timeout_s is not None else alive,
+        )
+        self.hardware: HardwareComponent | None = None
+        self.gone = threading.Event()
+        self.server = ModelServer(
+            sock,
+            {"": self.model, "@core": self},
+            self.lock,
+            touched=self.manager.gui_alive,
+            on_closed=self.gone.set,
+        )
+        self._unsubscribe: Callable[[], None] | None = None
+        self.parts: dict[str, object] = {}
+        for text in spec.parts:
+            name, _, where = text.partition("=")
+            part = load_function(where)(self)
+            self.parts[name] = part
+            self.server.add_root(name, part)
+
+    # ---- what the GUI calls (under the model's lock) ----------------------------------------
+
+    def connect(self) -> str:
+        """Build the hardware, read and write it from now on, start it; its description."""
+        self.disconnect()
+        from ocu.hardware.registry import HARDWARE
+
+        spec = self.spec
+        hardware = HARDWARE.create(spec.hardware, spec.profile, spec.target, **spec.options)
+        self.hardware = hardware
+        self.manager.attach(hardware)  # subscribed before any datagram flows
+        self._unsubscribe = forward_link_events(hardware.link, self.server.send)
+        self.server.add_root("@link", hardware.link)
+        hardware.start()
+        return hardware.description
+
+    def disconnect(self) -> None:
+        """Stop reading and writing the hardware; shut it down (zeros last); idempotent."""
+        hardware, self.hardware = self.hardware, None
+        if hardware is None:
+            return
+        self.manager.detach()
+        hardware.shutdown()
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        hardware.feed.close()
+
+    def gui_alive(self) -> None:
+        """The GUI thread's heartbeat."""
+        self.manager.gui_alive()
+
+    def timing(self) -> ControlTiming:
+        """The control thread's timing."""
+        return self.manager.timing()
+
+    def ping(self, value: object = None) -> object:
+        """A round trip (tests and benchmarks)."""
+        return value
+
+    def pid(self) -> int:
+        """This process's id."""
+        return os.getpid()
+
+    # ---- life -----------------------------------------------------------------------------
+
+    def run(self) -> None:
+        """Serve until the GUI's end closes (or SIGTERM), then halt and shut down."""
+        self.manager.gui_alive()
+        self.manager.start()
+        self.server.start()
+        self.gone.wait()
+        self.stop("the console's window is gone")
+
+    def stop(self, reason: str) -> None:
+        """Halt the model, stop the parts and the control thread, the zeros last."""
+        log.info("control core stopping: %s", reason)
+        with self.lock:
+            self.model.halt(reason)
+        for part in self.parts.values():
+            stop = getattr(part, "stop", None)
+            if callable(stop):
+                stop()
+        self.manager.stop()
+        with self.lock:
+            self.disconnect()
+        self.server.close()
+
+
+class CoreProcess:
+    """The GUI's side: starts the child, hands out its model (`model`), stops it.
+
+    `post(fn)` hands a call to the GUI thread (events and callbacks are dispatched there);
+    `on_closed()` is called once if the core ends on its own.
+    """
+
+    def __init__(
+        self,
+        spec: CoreSpec,
+        *,
+        post: Callable[[Callable[[], None]], None] | None = None,
+        on_closed: Callable[[], None] | None = None,
+        timeout_s: float = START_TIMEOUT_S,
+    ) -> None:
+        self.spec = spec
+        ours, theirs = socket.socketpair()
+        try:
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", "ocu.core_process", str(theirs.fileno())],
+                pass_fds=(theirs.fileno(),),
+            )
+        finally:
+            theirs.close()
+        ours.sendall(pack(("spec", spec)))
+        self._stopping = False
+        self._on_closed = on_closed
+        self.connection = CoreConnection(
+            ours, post=post, on_closed=self._closed, timeout_s=timeout_s
+        )
+        self.model: Any = remote_root(self.connection)
+        self.core: Any = remote_root(self.connection, "@core")
+        try:
+            self.pid = int(self.core.pid())  # the first answer: the core is built
+        except CoreGoneError as error:
+            self.stop()
+            raise CoreProcessError(f"the control core did not start: {error}") from error
+        self.connection.timeout_s = timeout_s if timeout_s < 5.0 else 5.0
+
+    def part(self, name: str) -> Any:
+        """The GUI's handle on one of the spec's parts."""
+        return remote_root(self.connection, name)
+
+    @property
+    def alive(self) -> bool:
+        """Whether the child still runs and answers."""
+        return self.process.poll() is None and not self.connection.closed.is_set()
+
+    def _closed(self) -> None:
+        if not self._stopping and self._on_closed is not None:
+            self._on_closed()
+
+    def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> int | None:
+        """Close the pipe (the core halts, zeros last, and ends); its exit code."""
+        self._stopping = True
+        self.connection.close()
+        try:
+            return self.process.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            log.warning("the control core did not end in %.0f s: killed", timeout_s)
+            self.process.kill()
+            return self.process.wait(timeout_s)
+
+
+def child_main(fd: int) -> int:
+    """The child process: read the spec, build the core, serve until the GUI's end closes."""
+    sock = socket.socket(fileno=fd)
+    message = receive(sock)
+    if message is None or message[0] != "spec":
+        return 2
+    spec: CoreSpec = message[1]
+    logging.basicConfig(
+        level=spec.log_level, format="%(asctime)s core %(name)s %(levelname)s: %(message)s"
+    )
+    if spec.nice:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, os.getpriority(os.PRIO_PROCESS, 0) + spec.nice)
+        except OSError:
+            log.info("control core: priority not raised (not allowed)")
+    core = Core(spec, sock)
+    signal.signal(signal.SIGTERM, lambda *_: core.gone.set())
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl+C in the terminal is the GUI's
+    core.run()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(child_main(int(sys.argv[1])))
