@@ -68,6 +68,7 @@ class CoreSpec:
     control_hz: float = DEFAULT_RATE_HZ
     gui_timeout_s: float | None = None
     parts: tuple[str, ...] = ()  # "NAME=module:function", called with the Core
+    key_map: Any = None  # ocu.hotkeys.KeyMap: what the X key reader acts on
     nice: int = CORE_NICE
     log_level: int = logging.INFO
 
@@ -119,8 +120,9 @@ class Core:
 
     # ---- what the GUI calls (under the model's lock) ----------------------------------------
 
-    def connect(self) -> str:
-        """Build the hardware, read and write it from now on, start it; its description."""
+    def prepare(self) -> str:
+        """Build the hardware and read and write it from now on, not started yet (as a link
+        is made before it starts: its rate, its listeners); its description."""
         self.disconnect()
         from ocu.hardware.registry import HARDWARE
 
@@ -130,8 +132,15 @@ class Core:
         self.manager.attach(hardware)  # subscribed before any datagram flows
         self._unsubscribe = forward_link_events(hardware.link, self.server.send)
         self.server.add_root("@link", hardware.link)
-        hardware.start()
         return hardware.description
+
+    def connect(self) -> str:
+        """Start the hardware (prepared first if it was not); its description."""
+        if self.hardware is None:
+            self.prepare()
+        assert self.hardware is not None
+        self.hardware.start()
+        return self.hardware.description
 
     def disconnect(self) -> None:
         """Stop reading and writing the hardware; shut it down (zeros last); idempotent."""

@@ -421,6 +421,9 @@ class CoreConnection:
         self.kinds: dict[tuple[Path, str], tuple[str, Any]] = {}
         self.last_values: dict[tuple[Path, str], Any] = {}
         self.closed = threading.Event()
+        # Once the core is gone, the model's reads and calls go to this one (a model of the
+        # GUI's own, halted, commanding nothing), so the views still have answers.
+        self.fallback: object | None = None
         self.round_trips = 0
         self.round_trip_s = 0.0
         self._told_closed = False
@@ -575,6 +578,19 @@ class CoreConnection:
             except Exception:
                 log.exception("callback %r of the core's %s failed", callback, message[0])
 
+    def local(self, path: Path) -> object:
+        """The fallback's object at `path` (the core is gone); CoreGoneError if none."""
+        if self.fallback is None or path[0] != "":
+            raise CoreGoneError(f"the control core is gone: no {'.'.join(path)}")
+        value = self.fallback
+        for name in path[1:]:
+            value = getattr(value, name)
+        return value
+
+    def inject(self, path: Path, name: str, *args: Any) -> None:
+        """Dispatch an event here as if the core had emitted it (the core is gone)."""
+        self._queue(("event", path, name, args, {}))
+
     def close(self) -> None:
         """Close the pipe: the core halts the robot and ends."""
         self.closed.set()
@@ -624,8 +640,7 @@ class RemoteMethod:
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         connection = self._connection
         if connection.closed.is_set():
-            log.debug("%s.%s: the control core is gone", self._path, self.__name__)
-            return None
+            return getattr(connection.local(self._path), self.__name__)(*args, **kwargs)
         values = connection.arguments(kwargs.values())
         _, value = connection.request(
             "call",
@@ -659,9 +674,9 @@ class RemotePart:
         connection: CoreConnection = self._connection
         key = (self._path, name)
         if connection.closed.is_set():
-            if key in connection.last_values:
+            if connection.fallback is None and key in connection.last_values:
                 return connection.last_values[key]
-            raise CoreGoneError(f"the control core is gone: no {'.'.join((*self._path, name))}")
+            return getattr(connection.local(self._path), name)
         kind, value = connection.request("get", self._path, name)
         if kind == "value":
             connection.last_values[key] = value
@@ -677,7 +692,11 @@ class RemotePart:
         return handle
 
     def __setattr__(self, name: str, value: object) -> None:
-        self._connection.request("set", self._path, name, value)
+        connection: CoreConnection = self._connection
+        if connection.closed.is_set():
+            setattr(connection.local(self._path), name, value)
+        else:
+            connection.request("set", self._path, name, value)
 
     def __repr__(self) -> str:
         return f"RemotePart({'.'.join(self._path) or 'model'})"

@@ -53,12 +53,32 @@ class RemoteLink(Link):
         super().__init__(profile, description)
         self.connection = connection
         self._started = False
+        self._open = True
+        self._last: dict[str, Any] = {}
+        # The core builds its hardware now (not started): the window sets the link's rate
+        # and subscribes its listeners before it starts, as with a link of its own.
+        connection.on_link = self.emit
+        connection.request("call", CORE_ROOT, "prepare", (), {})
 
     def _get(self, name: str) -> Any:
-        return self.connection.request("get", LINK_ROOT, name)[1]
+        return self._ask("get", name)
 
     def _call(self, name: str, *args: Any) -> Any:
-        return self.connection.request("call", LINK_ROOT, name, args, {})[1]
+        return self._ask("call", name, args, {})
+
+    def _ask(self, kind: str, name: str, *rest: Any) -> Any:
+        # Once the core is gone: the last answer (the views show what was last known), and
+        # commands go nowhere (the robot's own watchdog has stopped it).
+        try:
+            value = self.connection.request(kind, LINK_ROOT, name, *rest)[1]
+        except CoreGoneError:
+            if name.startswith("set_") or name == "emergency_stop":
+                return None
+            if name in self._last:
+                return self._last[name]
+            raise
+        self._last[name] = value
+        return value
 
     @property
     def command(self) -> Command:
@@ -71,8 +91,7 @@ class RemoteLink(Link):
 
     def emergency_stop(self, reason: str = "operator") -> None:
         """Zero all motion at once, in the core."""
-        if not self.connection.closed.is_set():
-            self._call("emergency_stop", reason)
+        self._call("emergency_stop", reason)
 
     def heartbeat(self) -> None:
         """Nothing: the core's control thread is the link's commander."""
@@ -118,18 +137,17 @@ class RemoteLink(Link):
 
     def start(self) -> None:
         """The core builds its hardware and starts it; its events come here from now on."""
-        if self._started:
+        if self._started or not self._open:
             return
         self._started = True
-        self.connection.on_link = self.emit
         self.connection.request("call", CORE_ROOT, "connect", (), {})
 
     def shutdown(self, timeout_s: float = 2.0) -> None:
         """The core shuts its hardware down (zeros last); idempotent."""
         del timeout_s
-        if not self._started:
+        if not self._open:
             return
-        self._started = False
+        self._open = self._started = False
         if self.connection.on_link == self.emit:
             self.connection.on_link = None
         if not self.connection.closed.is_set():

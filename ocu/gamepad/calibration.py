@@ -12,6 +12,7 @@ one, so a killed console leaves either the old file or the new one.
 from __future__ import annotations
 
 import json
+import logging
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -19,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ocu.files import write_text_atomically
-from ocu.gamepad.pad import AXES, RAW_MAX, RAW_MIN, TRIGGERS
+from ocu.gamepad.pad import AXES, RAW_MAX, RAW_MIN, TRIGGERS, PadInfo
 
 CALIBRATION_FILE_NAME = "gamepad-calibration.toml"
 # A calibrated axis must have travelled at least this share of SDL's half range (a stick) or
@@ -212,3 +213,14 @@ class CalibrationStore:
                         f"{axis} = {{ min = {a.minimum}, centre = {a.centre}, max = {a.maximum} }}"
                     )
         write_text_atomically(self.path, "\n".join(lines) + "\n")
+
+
+def saved_or_default(store: CalibrationStore | None, info: PadInfo) -> PadCalibration:
+    """A pad's saved calibration; SDL's ranges if none (or the file is unreadable)."""
+    if store is None:
+        return PadCalibration()
+    try:
+        return store.get(info.guid)
+    except CalibrationError as err:
+        logging.getLogger("ocu.console").warning("%s; using SDL's ranges", err)
+        return PadCalibration()

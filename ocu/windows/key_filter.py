@@ -50,7 +50,7 @@ from ocu.console.model import ConsoleModel
 from ocu.core.guard import Guarded
 from ocu.hotkeys import KeyMap
 from ocu.windows.held_keys import XKeymapProbe
-from ocu.windows.x_keys import XKeyReader
+from ocu.windows.x_keys import RemoteReader, XKeyReader
 
 log = logging.getLogger("ocu.keys")
 
@@ -308,13 +308,19 @@ class KeyFilter(QObject):
         self._told: set[str] = set()  # keys the operator was told are ignored until released
         # The motion keys and Space off the GUI thread, under X11 (ocu.windows.x_keys). Its
         # handle on the model takes the lock but is no sign of the GUI thread's life.
-        self.x_reader: XKeyReader | None = None
+        self.x_reader: XKeyReader | RemoteReader | None = None
         if lock is not None and self.platform == "xcb":
             self.x_reader = XKeyReader.open()
             if self.x_reader is not None:
                 own = Guarded(cast(Guarded, model).unguarded, lock)
                 self.x_reader.start(own, key_map, lock)
                 QApplication.instance().focusChanged.connect(self._on_focus_widget)  # type: ignore[union-attr]
+
+    def use_reader(self, reader: RemoteReader) -> None:
+        """The X key reader of a control core in another process (ocu.windows.x_keys)."""
+        self.x_reader = reader
+        QApplication.instance().focusChanged.connect(self._on_focus_widget)  # type: ignore[union-attr]
+        self._publish_windows()
 
     def shutdown(self) -> None:
         """No key acts from now on: the X key reader stopped, the filter removed."""

@@ -44,9 +44,9 @@ from ocu.console.model import ConsoleModel
 from ocu.console.poses import ARM_POSES_NAME, PoseError
 from ocu.core.hardware import HardwareComponent
 from ocu.core.manager import DEFAULT_RATE_HZ
-from ocu.gamepad.calibration import CalibrationError, CalibrationStore, PadCalibration
+from ocu.core_process import CoreSpec
+from ocu.gamepad.calibration import CalibrationStore, saved_or_default
 from ocu.gamepad.mapping import PadMapping, load_pad_mapping
-from ocu.gamepad.pad import PadInfo
 from ocu.gamepad.teleop import GamepadTeleop, Stopper
 from ocu.hardware.engineer import engineer_capabilities, engineer_component
 from ocu.hotkeys import KeyMap
@@ -72,7 +72,6 @@ from ocu.widgets.robot_mode import RobotModeIndicator
 from ocu.widgets.video import VideoPanel
 from ocu.windows.arm import ArmModeIndicator, ArmPanel
 from ocu.windows.calibration import CalibrationLinkFactory, CalibrationPanel
-from ocu.windows.control import ConsoleControl
 from ocu.windows.focus import FocusStops
 from ocu.windows.help_overlay import HelpOverlay
 from ocu.windows.joint_position import JointPositionPanel
@@ -84,9 +83,11 @@ from ocu.windows.layout import (
     parse_stream_setting,
 )
 from ocu.windows.max_velocity import MaxVelocityPanel
+from ocu.windows.remote_control import RemoteControl, control_for
 from ocu.windows.ros_control import RosControl
 from ocu.windows.settings_file import SettingsStatus
 from ocu.windows.velocity import VelocityPanel
+from ocu.windows.x_keys import RemoteReader
 
 # The stream settings are ocu.windows.layout's, still importable from here.
 __all__ = [
@@ -167,13 +168,14 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         control_hz: float = DEFAULT_RATE_HZ,
         hardware_for: HardwareFor = engineer_component,
         capabilities: frozenset[str] | None = None,
+        core: CoreSpec | None = None,
         parent: QWidget | None = None,
     ) -> None:
         sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_INTERVAL_S))
         # Closed panels and dialogs are cyclic garbage holding QObjects: collected here only.
         pin_garbage_collection()
         super().__init__(parent)
-        if (link_factory is None) == (replay is None):
+        if (link_factory is None and core is None) == (replay is None):
             raise ValueError("a console needs either a link factory or a replay source")
         self.setObjectName("ocu_main_window")
         self.profile = profile
@@ -196,16 +198,16 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         # The operator's stored arm poses sit beside the hotkey file and the settings.
         if arm_poses_path is None:
             arm_poses_path = Path(settings.fileName()).parent / ARM_POSES_NAME
-        # The model runs on the control thread (ocu.windows.control, ocu.core); the window
-        # and its views touch it through a guarded handle and are called on this thread.
-        self.control = ConsoleControl(
-            ConsoleModel(
-                profile, fine_factor=self.key_map.fine_factor, arm_poses_path=arm_poses_path
-            ),
-            profile,
-            control_hz=control_hz,
-            parent=self,
+        # The model runs on the control thread (ocu.windows.control, ocu.core), or in a process
+        # of its own (`core`: ocu.windows.remote_control); the window and its views touch it
+        # through a handle and are called on this thread.
+        self.control = control_for(
+            core, profile, self.key_map, arm_poses_path, control_hz=control_hz, parent=self
         )
+        if isinstance(self.control, RemoteControl):
+            self.link_factory = self.control.link_factory(address_text)
+            self.hardware_for = self.control.hardware_for  # type: ignore[assignment]
+            self.control.core_ended.connect(self.log_event)
         self.core = self.control.manager
         self.model: ConsoleModel = self.control.model
         self.link: QtLink | None = None
@@ -227,7 +229,7 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             GamepadTeleop(
                 self.model,
                 pad_mapping or load_pad_mapping(profile),
-                calibration_for=lambda info: _calibration(pad_calibrations, info),
+                calibration_for=lambda info: saved_or_default(pad_calibrations, info),
             )
         )
         self._log_from_any_thread = to_gui(self.log_event)
@@ -335,6 +337,8 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             self.key_filter = KeyFilter(
                 self.model, self.key_map, self.owns, parent=self, lock=self.control.lock
             )
+            if isinstance(self.control, RemoteControl) and self.control.keys is not None:
+                self.key_filter.use_reader(RemoteReader(self.control.keys))
             app.installEventFilter(self.key_filter)
         app.applicationStateChanged.connect(self._on_application_state)
         app.focusWindowChanged.connect(self._on_focus_window)
@@ -687,14 +691,3 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             self.event_log.takeItem(0)
         self.event_log.scrollToBottom()
         log.info("%s", text)
-
-
-def _calibration(store: CalibrationStore | None, info: PadInfo) -> PadCalibration:
-    """A pad's saved calibration; SDL's ranges if none (or the file is unreadable)."""
-    if store is None:
-        return PadCalibration()
-    try:
-        return store.get(info.guid)
-    except CalibrationError as err:
-        log.warning("%s; using SDL's ranges", err)
-        return PadCalibration()

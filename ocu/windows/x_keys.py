@@ -555,3 +555,79 @@ class RawKeys:
             "%s %s at %d (X key reader)", name, "pressed" if pressed else "released", server_ms
         )
         return True
+
+
+class CoreKeys:
+    """The X key reader in the control core's process (ocu.core_process), as the GUI reaches
+    it: the window tells it its top-level windows and whether a text box has the keyboard
+    focus; Qt's key filter asks `take` (the reader's bookkeeping of who acted first)."""
+
+    def __init__(self, reader: XKeyReader | None) -> None:
+        self.reader = reader
+
+    def running(self) -> bool:
+        """Whether raw key events are read (an X server with XInput 2.2 on $DISPLAY)."""
+        return self.reader is not None
+
+    def set_windows(self, windows: frozenset[int]) -> None:
+        """The console's top-level X windows."""
+        if self.reader is not None:
+            self.reader.set_windows(frozenset(windows))
+
+    def set_typing(self, typing: bool) -> None:
+        """Whether a text box has the keyboard focus."""
+        if self.reader is not None:
+            self.reader.set_typing(typing)
+
+    def take(self, key: str, pressed: bool, server_ms: int) -> bool:
+        """True if the event is Qt's to act on (the reader did not act on it first)."""
+        return self.reader is None or self.reader.taken.take(key, pressed, server_ms)
+
+    def acted(self) -> int:
+        """Events the reader acted on."""
+        return 0 if self.reader is None or self.reader.keys is None else self.reader.keys.acted
+
+    def stop(self) -> None:
+        """Stop the reader (the core ends)."""
+        reader, self.reader = self.reader, None
+        if reader is not None:
+            reader.stop()
+
+
+def core_keys(core: Any) -> CoreKeys:
+    """The "keys" part of a control core process: the reader on $DISPLAY, acting on the
+    core's model under its lock (ocu.core_process.Core)."""
+    from ocu.core.guard import Guarded
+
+    reader = XKeyReader.open()
+    if reader is not None:
+        key_map = core.spec.key_map or hotkeys.load_key_map(core.spec.profile)
+        reader.start(Guarded(core.model, core.lock), key_map, core.lock)
+    return CoreKeys(reader)
+
+
+class RemoteReader:
+    """The GUI's handle on the core's `CoreKeys`, with the surface the key filter uses of an
+    `XKeyReader` (`taken.take`, `set_windows`, `set_typing`, `stop`)."""
+
+    def __init__(self, part: Any) -> None:
+        self.part = part
+        self.taken = self
+
+    def take(self, key: str, pressed: bool, server_ms: int) -> bool:
+        """True if Qt's filter is first (a round trip to the core; the core gone: Qt's)."""
+        try:
+            return bool(self.part.take(key, pressed, server_ms))
+        except ConnectionError:
+            return True
+
+    def set_windows(self, windows: frozenset[int]) -> None:
+        """Tell the core's reader (without waiting)."""
+        self.part.set_windows.post(windows)
+
+    def set_typing(self, typing: bool) -> None:
+        """Tell the core's reader (without waiting)."""
+        self.part.set_typing.post(typing)
+
+    def stop(self) -> None:
+        """Nothing: the core stops its reader when it ends."""

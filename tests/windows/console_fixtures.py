@@ -21,6 +21,7 @@ from ocu.profile import RobotProfile
 from ocu.record.recorder import Recorder
 from ocu.records import LinkState
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator, SimState
+from ocu.core_process import CoreSpec
 from ocu.windows.main_window import MainWindow
 
 DEADLINE_MS = 5000
@@ -58,13 +59,23 @@ def make_console(
         *,
         connected: bool = True,
         recorder: Recorder | None = None,
+        core: bool = False,
         **link_kwargs: Any,
     ) -> MainWindow:
         def link_factory() -> Link:
             return UdpLink(profile, sim.address, **link_kwargs)
 
+        # core: the control core in a child process (ocu.core_process), on UDP to `sim`.
+        host, port = sim.address
+        spec = CoreSpec(profile, "engineer", f"{host}:{port}", options=link_kwargs)
         window = MainWindow(
-            profile, link_factory, "simulator", settings, connect=connected, recorder=recorder
+            profile,
+            None if core else link_factory,
+            "simulator",
+            settings,
+            connect=connected,
+            recorder=recorder,
+            core=spec if core else None,
         )
         qtbot.addWidget(window)
         windows.append(window)

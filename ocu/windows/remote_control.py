@@ -1,0 +1,194 @@
+"""The window's control core in a process of its own (`ocu --core-process`, docs/core-process.md).
+
+`RemoteControl` has the surface of `ConsoleControl` (ocu.windows.control) for a core that runs
+in a child process (ocu.core_process): `model` is the `RemoteModel`, `link_factory()` makes
+the `RemoteLink`s the window connects (the core builds and commands the hardware itself),
+`attach`/`detach` have nothing to do (the core attaches its hardware when the link starts),
+the GUI's heartbeat is a post to the core, and the status bar shows the core's control timing.
+The X key reader runs in the core ("keys", ocu.windows.x_keys.core_keys) where the window is
+on X11: `keys` is the key filter's handle on it.
+
+The core ending on its own (killed, crashed) shows as LINK LOST, "the control core ended";
+the robot stops by itself (its link's watchdog); nothing restarts it without the operator.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar, cast
+
+from PySide6.QtCore import QObject, QTimer, Signal
+from PySide6.QtGui import QGuiApplication
+
+from ocu.console.events import hand_over
+from ocu.console.model import ConsoleModel
+from ocu.core.guard import Guarded
+from ocu.core.hardware import HardwareComponent
+from ocu.core.manager import DEFAULT_RATE_HZ, TIMING_WINDOW_S
+from ocu.core.remote import CoreGoneError
+from ocu.core.remote_link import RemoteLink
+from ocu.core_process import CoreProcess, CoreSpec
+from ocu.hotkeys import KeyMap
+from ocu.link.base import Link
+from ocu.profile import RobotProfile
+from ocu.qt.inbox import gui_inbox
+from ocu.qt.link import HEARTBEAT_PERIOD_MS
+from ocu.records import LinkState
+from ocu.widgets.elided_label import ElidedLabel
+from ocu.windows.control import LATE_STYLE, TIMING_PERIOD_MS, ConsoleControl
+
+T = TypeVar("T")
+
+CORE_ENDED = "the control core ended"
+KEYS_PART = "keys=ocu.windows.x_keys:core_keys"
+
+
+class RemoteControl(QObject):
+    """The core process and the window's side of it (module docstring)."""
+
+    core_ended = Signal(str)
+
+    def __init__(self, spec: CoreSpec, parent: QObject | None = None) -> None:
+        super().__init__(parent)
+        inbox = gui_inbox()
+        self.profile = spec.profile
+        self.process = CoreProcess(
+            spec,
+            post=inbox.post,
+            on_closed=lambda: inbox.post(self._on_core_gone),
+        )
+        self.connection = self.process.connection
+        # What the views read and call once the core is gone: a model of this process's own,
+        # connected to nothing, halted and LINK LOST.
+        self.connection.fallback = ConsoleModel(
+            spec.profile, fine_factor=spec.fine_factor, arm_poses_path=spec.arm_poses_path
+        )
+        self.model: ConsoleModel = cast(ConsoleModel, self.process.model)
+        self.manager: Any = self.process.core  # timing(), as ControllerManager has
+        self.keys: Any = (
+            self.process.part("keys") if any(p.startswith("keys=") for p in spec.parts) else None
+        )
+        self.lock: threading.RLock | None = None  # the model's lock is in the core
+        self.hardware: HardwareComponent | None = None  # and so is the hardware
+        self._local_lock = threading.RLock()  # for the window's own parts (the pad's teleop)
+        self._ended = False
+        self._alive_timer = QTimer(self)
+        self._alive_timer.setInterval(HEARTBEAT_PERIOD_MS)
+        self._alive_timer.timeout.connect(self._beat)
+        self.label = ElidedLabel(floor_text="ctl")
+        self.label.setObjectName("control_timing")
+        self._overruns_shown = 0
+        self._timing_timer = QTimer(self)
+        self._timing_timer.setInterval(TIMING_PERIOD_MS)
+        self._timing_timer.timeout.connect(self.show_timing)
+
+    def link_factory(self, description: str) -> Callable[[], Link]:
+        """Links for the window to connect: the core's link, one per Connect."""
+        return lambda: RemoteLink(self.connection, self.profile, description)
+
+    @staticmethod
+    def hardware_for(_link: Link) -> None:
+        """Nothing in this process: the core builds the hardware when the link starts."""
+        return None
+
+    def adopt(self, part: T) -> T:
+        """A part of the window's own (the pad's teleop) on the remote model: its events on
+        the GUI thread, its calls under a lock of the window's."""
+        hand_over(part.events)  # type: ignore[attr-defined]
+        return cast(T, Guarded(part, self._local_lock))
+
+    def start(self) -> None:
+        """The heartbeat and the timing label (the core's control thread runs already)."""
+        self._beat()
+        self._alive_timer.start()
+        self._timing_timer.start()
+        self.show_timing()
+
+    def shutdown(self) -> None:
+        """Close the core's pipe: it halts the model, shuts the hardware down (zeros last),
+        ends; idempotent."""
+        self._alive_timer.stop()
+        self._timing_timer.stop()
+        self._ended = True
+        self.process.stop()
+
+    def attach(self, _hardware: object) -> None:
+        """Nothing: the core attached its hardware when the link started."""
+
+    def detach(self) -> None:
+        """Nothing: the core detaches its hardware when the link shuts down."""
+
+    def _beat(self) -> None:
+        if not self.connection.closed.is_set():
+            self.connection.tell("post", ("@core",), "gui_alive", (), {})
+
+    def _on_core_gone(self) -> None:
+        """The core ended without being asked: LINK LOST, said once."""
+        if self._ended:
+            return
+        self._ended = True
+        self._alive_timer.stop()
+        self._timing_timer.stop()
+        fallback = self.connection.fallback
+        assert isinstance(fallback, ConsoleModel)
+        fallback.robot.on_link_state(LinkState.LOST, CORE_ENDED)
+        fallback.halt(CORE_ENDED)
+        robot = ("", "robot", "events")
+        self.connection.inject(robot, "link_state_changed", LinkState.LOST, CORE_ENDED)
+        self.label.setText("ctl: core ended")
+        self.label.setStyleSheet(LATE_STYLE)
+        self.core_ended.emit(CORE_ENDED)
+
+    def show_timing(self) -> None:
+        """The core's control thread: rate, worst period and overruns in the status bar."""
+        try:
+            timing = self.manager.timing()
+        except CoreGoneError:
+            return
+        if timing is None:
+            return
+        overran = timing.overruns > self._overruns_shown
+        self._overruns_shown = timing.overruns
+        self.label.setText(
+            f"ctl {timing.measured_hz:.0f} Hz, {1000 * timing.worst_period_s:.0f} ms (core)"
+        )
+        self.label.setToolTip(
+            "The control core, in a process of its own (position control, arm moves, assisted\n"
+            f"modes, tracking, the zones, the keys and the command to the robot): {timing.text}\n"
+            f"in the last {TIMING_WINDOW_S:.0f} s."
+        )
+        self.label.setStyleSheet(LATE_STYLE if overran else "")
+
+
+def control_for(
+    core: CoreSpec | None,
+    profile: RobotProfile,
+    key_map: KeyMap,
+    arm_poses_path: Path | None,
+    *,
+    control_hz: float = DEFAULT_RATE_HZ,
+    parent: QObject | None = None,
+) -> ConsoleControl | RemoteControl:
+    """The window's control: in this process (`core` None), or in a child process built from
+    `core` (the X key reader in it where the window is on X11)."""
+    if core is None:
+        model = ConsoleModel(
+            profile, fine_factor=key_map.fine_factor, arm_poses_path=arm_poses_path
+        )
+        return ConsoleControl(model, profile, control_hz=control_hz, parent=parent)
+    x11 = QGuiApplication.platformName() == "xcb"
+    gui_limit_s = profile.link.gui_alive_timeout_s - HEARTBEAT_PERIOD_MS / 1000.0
+    spec = dataclasses.replace(
+        core,
+        profile=profile,
+        fine_factor=key_map.fine_factor,
+        arm_poses_path=arm_poses_path,
+        control_hz=control_hz,
+        gui_timeout_s=max(gui_limit_s, HEARTBEAT_PERIOD_MS / 1000.0),
+        key_map=key_map,
+        parts=(*core.parts, KEYS_PART) if x11 and KEYS_PART not in core.parts else core.parts,
+    )
+    return RemoteControl(spec, parent=parent)

@@ -1,0 +1,95 @@
+"""The console with its control core in a process of its own (`ocu --core-process`).
+
+The window is real (offscreen Qt), the core is a real child process (ocu.core_process) on a
+real UDP socket to the simulator in this process; what is checked is what the simulator
+received.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+
+from PySide6.QtCore import Qt
+from PySide6.QtTest import QTest
+from pytestqt.qtbot import QtBot
+
+from ocu.records import LinkState
+from ocu.sim.simulator import RobotSimulator
+from ocu.windows.main_window import MainWindow
+from ocu.windows.remote_control import CORE_ENDED, RemoteControl
+from tests.windows.console_fixtures import DEADLINE_MS, ConsoleFactory, wait_sim, wait_zeros
+
+# The simulator's watchdog zeroes the motors after 1 s without a command.
+WATCHDOG_MS = 3000
+
+
+def test_keys_drive_and_space_stops_through_the_core_process(
+    qtbot: QtBot, make_console: ConsoleFactory, sim: RobotSimulator
+) -> None:
+    console: MainWindow = make_console(sim, core=True)
+    assert isinstance(console.control, RemoteControl)
+    assert console.control.process.pid != os.getpid()
+    QTest.keyPress(console, Qt.Key.Key_Y)
+    state = wait_sim(qtbot, sim, lambda s: s.velocities["shoulder"] > 0, "the shoulder moving")
+    assert state.velocities["shoulder"] == console.model.hotkey_speed("shoulder")
+    QTest.keyRelease(console, Qt.Key.Key_Y)
+    wait_zeros(qtbot, sim, "zeros after the release")
+    QTest.keyPress(console, Qt.Key.Key_W)
+    wait_sim(qtbot, sim, lambda s: not s.all_stopped, "driving")
+    QTest.keyPress(console, Qt.Key.Key_Space)
+    wait_zeros(qtbot, sim, "zeros after Space")
+    qtbot.waitUntil(lambda: console.model.estopped, timeout=DEADLINE_MS)
+    QTest.keyRelease(console, Qt.Key.Key_W)
+    QTest.keyRelease(console, Qt.Key.Key_Space)
+
+
+def test_a_position_target_is_reached_by_the_core(
+    qtbot: QtBot, make_console: ConsoleFactory, sim: RobotSimulator
+) -> None:
+    console: MainWindow = make_console(sim, core=True)
+    qtbot.waitUntil(lambda: console.model.robot.last_telemetry_at is not None, timeout=DEADLINE_MS)
+    targets_seen: list[dict[str, float]] = []
+    console.model.events.targets_changed.connect(targets_seen.append)
+    target = sim.state().joints_rad["neck"] + math.radians(20.0)
+    console.model.set_target("neck", target)
+    assert targets_seen and "neck" in targets_seen[-1], "the call's event came before it returned"
+    wait_sim(qtbot, sim, lambda s: s.velocities["neck"] > 0.0, "the neck moving")
+    wait_zeros(qtbot, sim, "the neck stopped at its target", timeout_ms=3 * DEADLINE_MS)
+    error_deg = math.degrees(sim.state().joints_rad["neck"] - target)
+    assert abs(error_deg) <= 1.0, f"stopped {error_deg:+.2f} deg from its target"
+    qtbot.waitUntil(lambda: not console.model.targets, timeout=DEADLINE_MS)
+    # The views' reads answer from the core: the timing label shows its control thread.
+    console.control.show_timing()
+    assert "(core)" in console.control.label.text()
+
+
+def test_closing_the_window_ends_the_core_with_zeros_last(
+    qtbot: QtBot, make_console: ConsoleFactory, sim: RobotSimulator
+) -> None:
+    console: MainWindow = make_console(sim, core=True)
+    control = console.control
+    assert isinstance(control, RemoteControl)
+    QTest.keyPress(console, Qt.Key.Key_U)
+    wait_sim(qtbot, sim, lambda s: s.velocities["elbow"] > 0, "the elbow moving")
+    console.close()
+    assert control.process.process.wait(10) == 0
+    wait_zeros(qtbot, sim, "zeros last", more=0)
+
+
+def test_a_killed_core_shows_link_lost_and_the_robot_stops_by_itself(
+    qtbot: QtBot, make_console: ConsoleFactory, sim: RobotSimulator
+) -> None:
+    console: MainWindow = make_console(sim, core=True)
+    control = console.control
+    assert isinstance(control, RemoteControl)
+    QTest.keyPress(console, Qt.Key.Key_W)
+    wait_sim(qtbot, sim, lambda s: not s.all_stopped, "driving")
+    os.kill(control.process.pid, signal.SIGKILL)
+    qtbot.waitUntil(lambda: console.link_status.state == LinkState.LOST, timeout=DEADLINE_MS)
+    assert CORE_ENDED in console.event_log.item(console.event_log.count() - 1).text()
+    # Nobody commands the robot any more: its own watchdog stops it.
+    wait_sim(qtbot, sim, lambda s: s.all_stopped, "the robot stopped", timeout_ms=WATCHDOG_MS)
+    QTest.keyRelease(console, Qt.Key.Key_W)
+    console.close()  # the window still closes cleanly
