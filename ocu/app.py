@@ -19,6 +19,7 @@ from ocu.console.poses import CONFIG_DIR_ENV, default_config_dir
 from ocu.core.manager import DEFAULT_RATE_HZ as DEFAULT_CONTROL_HZ
 from ocu.core.manager import MAX_RATE_HZ as MAX_CONTROL_HZ
 from ocu.core.manager import MIN_RATE_HZ as MIN_CONTROL_HZ
+from ocu.core.manager import control_rate
 from ocu.lifecycle import STOP, last_zeros_guard, run_window
 from ocu.live.options import (
     LiveError,
@@ -31,9 +32,8 @@ from ocu.live.options import (
 from ocu.priority import (
     DEFAULT_NICE,
     NICE_ENV,
-    NICE_MAX,
-    NICE_MIN,
     nice_from_env,
+    nice_value,
     raise_priority,
 )
 from ocu.profile import ProfileError, RobotProfile, load_profile
@@ -156,33 +156,15 @@ def build_parser() -> argparse.ArgumentParser:
         "index (0), a video file, or `scene` (the xArm simulator's gripper camera); on the "
         "xArm the first rides on the gripper and click-to-track moves the arm (docs/xarm.md)",
     )
+    parser.add_argument(
+        "--core-process",
+        action="store_true",
+        help="run the control core (model, control thread, link, X key reader) in a process "
+        "of its own, out of the GUI's interpreter (the Engineer; docs/core-process.md)",
+    )
     parser.add_argument("--log-level", default="INFO")
     add_live_options(parser)
     return parser
-
-
-def nice_value(text: str) -> int:
-    """--nice: a nice value, -20 to 19."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if not NICE_MIN <= value <= NICE_MAX:
-        raise argparse.ArgumentTypeError(f"{value} is outside {NICE_MIN}..{NICE_MAX}")
-    return value
-
-
-def control_rate(text: str) -> float:
-    """--control-hz: a rate the control thread can keep, in Hz."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not MIN_CONTROL_HZ <= value <= MAX_CONTROL_HZ:
-        raise argparse.ArgumentTypeError(
-            f"{text} Hz is outside {MIN_CONTROL_HZ:g}-{MAX_CONTROL_HZ:g} Hz"
-        )
-    return value
 
 
 def refuse_file(message: str) -> int:
@@ -399,6 +381,7 @@ def run_other(
         control_hz=args.control_hz,
         live=live,
         cameras=cameras,
+        core_process=args.core_process,
     )
 
 
@@ -416,10 +399,12 @@ def run_console(
     control_hz: float = DEFAULT_CONTROL_HZ,
     live: LiveServer | None = None,
     cameras: LocalCameras | None = None,
+    core_process: bool = False,
 ) -> int:
     """Start simulator (if no robot), link and window; run the Qt event loop."""
     from PySide6.QtWidgets import QApplication
 
+    from ocu.core_process import CoreSpec
     from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
     from ocu.link.base import LinkError
     from ocu.link.live import UdpLink
@@ -468,6 +453,9 @@ def run_console(
         settings, settings_status = open_settings(config_dir)
         guard = contextlib.ExitStack()
         guard.enter_context(last_zeros_guard())  # the window starts the link
+        # --core-process: the child builds its link to the same address (ocu.core_process).
+        target = f"{robot_address[0]}:{robot_address[1]}"
+        core = CoreSpec(profile, "engineer", target, options={"description": address_text})
         window = MainWindow(
             profile,
             serving(live, make_link),
@@ -482,6 +470,7 @@ def run_console(
                 raw, robot_address, extension=False, description=address_text
             ),
             control_hz=control_hz,
+            core=core if core_process else None,
         )
         show_live(live, window)
         if cameras is not None:

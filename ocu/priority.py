@@ -18,6 +18,7 @@ session; docs/console.md says what that means for jobs started in another termin
 
 from __future__ import annotations
 
+import argparse
 import logging
 import os
 import resource
@@ -126,3 +127,14 @@ def behind(argv: list[str], steps: int) -> list[str]:
     if steps <= 0:
         return argv
     return ["nice", "-n", str(steps), *argv]
+
+
+def nice_value(text: str) -> int:
+    """--nice: a nice value, -20 to 19."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if not NICE_MIN <= value <= NICE_MAX:
+        raise argparse.ArgumentTypeError(f"{value} is outside {NICE_MIN}..{NICE_MAX}")
+    return value

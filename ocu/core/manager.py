@@ -36,6 +36,7 @@ Timing is measured: cycles per second, the worst period and the worst cycle time
 
 from __future__ import annotations
 
+import argparse
 import logging
 import threading
 import time
@@ -320,3 +321,14 @@ class ControllerManager:
             overruns=overruns,
             nice=self._nice,
         )
+
+
+def control_rate(text: str) -> float:
+    """--control-hz: a rate the control thread can keep, in Hz."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not MIN_RATE_HZ <= value <= MAX_RATE_HZ:
+        raise argparse.ArgumentTypeError(f"{text} Hz is outside {MIN_RATE_HZ:g}-{MAX_RATE_HZ:g} Hz")
+    return value

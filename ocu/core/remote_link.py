@@ -1,9 +1,9 @@
 """The link of a control core in another process, as the GUI's views hold it.
 
 In the core's process, `forward_link_events` sends each event of the link to the GUI
-(ocu.core.remote: ("link", event)); the raw datagrams stay (they are the link's business and
-come at the wire's rate), the video's compressed frames go as video (dropped first when the
-GUI does not keep up). In the GUI, `RemoteLink` is a `Link` (ocu.link.base) whose events are
+(ocu.core.remote: ("link", event)), the raw datagrams too (the recorder keeps them) except
+the video's fragments; the video's compressed frames go as video (dropped first when the GUI
+does not keep up). In the GUI, `RemoteLink` is a `Link` (ocu.link.base) whose events are
 those forwarded, and whose questions and commands are round trips to the core's link
 ("@link"): QtLink, the video panel, the robot check and the link graphs take it as they take
 a link of their own. `start()` asks the core to connect its hardware, `shutdown()` to shut it
@@ -19,6 +19,8 @@ from ocu.core.remote import CoreConnection, CoreGoneError
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.records import (
+    VIDEO,
+    VIDEO_FRAGMENT,
     CameraRequest,
     Command,
     DatagramReceived,
@@ -30,6 +32,8 @@ from ocu.records import (
     VideoStats,
 )
 
+# The video's raw datagrams stay in the core: the GUI gets each frame whole (VideoFrame).
+RAW_VIDEO_KINDS = frozenset({VIDEO, VIDEO_FRAGMENT})
 LINK_ROOT = ("@link",)
 CORE_ROOT = ("@core",)
 
@@ -38,7 +42,7 @@ def forward_link_events(link: Link, send: Callable[..., bool]) -> Callable[[], N
     """Send `link`'s events with `send(("link", event), video=...)`; the unsubscriber."""
 
     def forward(event: LinkEvent) -> None:
-        if isinstance(event, DatagramReceived):
+        if isinstance(event, DatagramReceived) and event.kind in RAW_VIDEO_KINDS:
             return
         send(("link", event), video=isinstance(event, VideoFrame))
 
