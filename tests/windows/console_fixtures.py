@@ -15,13 +15,13 @@ from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
 
+from ocu.core_process import CoreSpec
 from ocu.link.base import Link
 from ocu.link.live import UdpLink
 from ocu.profile import RobotProfile
 from ocu.record.recorder import Recorder
 from ocu.records import LinkState
 from ocu.sim.simulator import ReceivedRcp, RobotSimulator, SimState
-from ocu.core_process import CoreSpec
 from ocu.windows.main_window import MainWindow
 
 DEADLINE_MS = 5000

@@ -54,7 +54,8 @@ def test_a_position_target_is_reached_by_the_core(
     console.model.events.targets_changed.connect(targets_seen.append)
     target = sim.state().joints_rad["neck"] + math.radians(20.0)
     console.model.set_target("neck", target)
-    assert targets_seen and "neck" in targets_seen[-1], "the call's event came before it returned"
+    assert targets_seen, "the call's event came before it returned"
+    assert "neck" in targets_seen[-1]
     wait_sim(qtbot, sim, lambda s: s.velocities["neck"] > 0.0, "the neck moving")
     wait_zeros(qtbot, sim, "the neck stopped at its target", timeout_ms=3 * DEADLINE_MS)
     error_deg = math.degrees(sim.state().joints_rad["neck"] - target)
