@@ -38,7 +38,7 @@ import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
@@ -51,6 +51,7 @@ from PySide6.QtCore import QCoreApplication, QEvent, QObject, QSettings, Qt, QTi
 from PySide6.QtGui import QKeyEvent
 from PySide6.QtWidgets import QApplication
 
+from ocu.core_process import CoreSpec
 from ocu.gamepad.mapping import load_pad_mapping
 from ocu.gamepad.virtual import VirtualPad
 from ocu.link.live import UdpLink
@@ -507,11 +508,25 @@ def measure(args: argparse.Namespace) -> list[Phase]:
             return link
 
         extra: dict[str, object] = {"control_hz": args.control_hz} if args.control_hz else {}
-        pad = VirtualPad() if not args.no_pad else None
+        pad: Any = VirtualPad() if not args.no_pad and not args.core_process else None
         if pad is not None:
             pad.__enter__()
+        if not args.no_pad:
             extra["pad_mapping"] = load_pad_mapping(profile)
+        if args.core_process:
+            # The core (model, control thread, link, X key reader) in a child process; the
+            # probe hears the datagrams it sent through the window's RemoteLink, timed by the
+            # core's own stamp (CLOCK_MONOTONIC is the machine's, not the process's).
+            # The virtual pad is plugged in there: SDL's virtual pads are the process's own.
+            host, port = sim.address
+            parts = () if args.no_pad else ("vpad=ocu.gamepad.virtual:core_virtual_pad",)
+            extra["core"] = CoreSpec(profile, "engineer", f"{host}:{port}", parts=parts)
         window = MainWindow(profile, make_link, "simulator", settings, **extra)  # type: ignore[arg-type]
+        if args.core_process:
+            assert window.link is not None
+            window.link.link.subscribe(probe.on_event)
+            if not args.no_pad:
+                pad = window.control.process.part("vpad")  # type: ignore[union-attr]
         window.resize(*WINDOW_SIZE)
         window.show()
         window.activateWindow()
@@ -553,7 +568,9 @@ def measure(args: argparse.Namespace) -> list[Phase]:
             window.activateWindow()
             QApplication.setActiveWindow(window)
             wait(app, 1.0)
-            print(f"X key reader: {window.key_filter.x_reader is not None}")  # type: ignore[union-attr]
+            reader = window.key_filter.x_reader  # type: ignore[union-attr]
+            where = "in the core process" if args.core_process else "in this process"
+            print(f"X key reader: {reader is not None} ({where})")
         sampler = GuiSampler() if args.sample_gui else None
         phases.append(
             run_phase(
@@ -598,7 +615,7 @@ def measure(args: argparse.Namespace) -> list[Phase]:
         window.close()
         window.shutdown()
         app.processEvents()
-        if pad is not None:
+        if pad is not None and not args.core_process:
             pad.__exit__(None, None, None)
     return phases
 
@@ -663,6 +680,12 @@ def main() -> int:
     )
     parser.add_argument(
         "--no-pad", action="store_true", help="no virtual game controller, no stick trials"
+    )
+    parser.add_argument(
+        "--core-process",
+        action="store_true",
+        help="the console with its control core in a child process (ocu --core-process); "
+        "with --x11 against the in-process console",
     )
     parser.add_argument("--json", help="write the phases here (the baseline's child run)")
     parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
@@ -744,14 +767,22 @@ def run_x11(args: argparse.Namespace) -> int:
     results: dict[str, list[Phase]] = {}
     try:
         with tempfile.TemporaryDirectory() as out:
-            for label, switch in (("the X key reader", "1"), ("Qt's key events only", "0")):
-                target = Path(out) / f"{switch}.json"
+            variants = [("the X key reader", "1", ""), ("Qt's key events only", "0", "")]
+            if args.core_process:
+                variants = [
+                    ("the core process (its X key reader)", "1", "--core-process"),
+                    ("the X key reader in the GUI's process", "1", ""),
+                ]
+            for label, switch, core in variants:
+                target = Path(out) / f"{switch}{core}.json"
                 env = dict(os.environ, DISPLAY=display, QT_QPA_PLATFORM="xcb", OCU_X_KEYS=switch)
                 command = [sys.executable, os.path.abspath(__file__), "--x11"]
+                command += [core] if core else []
+                command += ["--no-pad"] if args.no_pad else []
                 command += ["--trials", str(args.trials), "--hogs", str(args.hogs)]
                 command += ["--warmup", str(args.warmup), "--nice", str(args.nice)]
                 command += ["--reader-times"] if args.reader_times and switch == "1" else []
-                command += ["--floor"] if args.floor and switch == "1" else []
+                command += ["--floor"] if args.floor and label == variants[0][0] else []
                 subprocess.run([*command, "--json", str(target)], env=env, check=True)
                 results[label] = [Phase(**p) for p in json.loads(target.read_text("utf-8"))]
     finally:
@@ -760,7 +791,7 @@ def run_x11(args: argparse.Namespace) -> int:
     for label, phases in results.items():
         report(f"real X key events, {label}", phases)
     ours, theirs = results.values()
-    print("p99 ratios Qt's key events only / the X key reader:")
+    print(f"p99 ratios {' / '.join(reversed(results))}:")
     for a_phase, b_phase in zip(ours, theirs, strict=True):
         ratios = []
         for name in ("press_ms", "release_ms", "space_ms", "stick_ms", "stick_release_ms"):

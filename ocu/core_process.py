@@ -17,8 +17,8 @@ GUI's `RemoteModel` (ocu.core.remote) under the model's lock:
   manager's "GUI silent" lock, fed by the GUI's heartbeat posts;
 - the core gone: the robot stops by itself (its link's watchdog), the GUI shows it.
 
-It runs at `CoreSpec.nice` (-10 by default, where the user may raise priority) so that two
-CPU-bound processes beside the console do not delay a key.
+It runs at `CoreSpec.nice` (-10 by default, as `ocu` asks for itself; where the user may raise
+priority) so that CPU-bound processes beside the console do not delay a key.
 """
 
 from __future__ import annotations
@@ -69,6 +69,8 @@ class CoreSpec:
     gui_timeout_s: float | None = None
     parts: tuple[str, ...] = ()  # "NAME=module:function", called with the Core
     key_map: Any = None  # ocu.hotkeys.KeyMap: what the X key reader acts on
+    pad_mapping: Any = None  # ocu.gamepad.mapping.PadMapping: the "pad" part's
+    pad_calibrations: Path | None = None  # the pads' calibration file
     nice: int = CORE_NICE
     log_level: int = logging.INFO
 
@@ -185,8 +187,8 @@ class Core:
         log.info("control core stopping: %s", reason)
         with self.lock:
             self.model.halt(reason)
-        for part in self.parts.values():
-            stop = getattr(part, "stop", None)
+        for part in reversed(self.parts.values()):
+            stop = getattr(part, "stop", None) or getattr(part, "close", None)
             if callable(stop):
                 stop()
         self.manager.stop()
@@ -269,11 +271,11 @@ def child_main(fd: int) -> int:
     logging.basicConfig(
         level=spec.log_level, format="%(asctime)s core %(name)s %(levelname)s: %(message)s"
     )
-    if spec.nice:
+    if spec.nice < os.getpriority(os.PRIO_PROCESS, 0):
         try:
-            os.setpriority(os.PRIO_PROCESS, 0, os.getpriority(os.PRIO_PROCESS, 0) + spec.nice)
+            os.setpriority(os.PRIO_PROCESS, 0, spec.nice)
         except OSError:
-            log.info("control core: priority not raised (not allowed)")
+            log.info("control core: priority not raised to nice %d (not allowed)", spec.nice)
     core = Core(spec, sock)
     signal.signal(signal.SIGTERM, lambda *_: core.gone.set())
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl+C in the terminal is the GUI's

@@ -421,9 +421,9 @@ class CoreConnection:
         self.kinds: dict[tuple[Path, str], tuple[str, Any]] = {}
         self.last_values: dict[tuple[Path, str], Any] = {}
         self.closed = threading.Event()
-        # Once the core is gone, the model's reads and calls go to this one (a model of the
-        # GUI's own, halted, commanding nothing), so the views still have answers.
-        self.fallback: object | None = None
+        # Once the core is gone, reads and calls go to these, by root ("" the model: one of
+        # the GUI's own, halted, commanding nothing), so the views still have answers.
+        self.fallbacks: dict[str, object] = {}
         self.round_trips = 0
         self.round_trip_s = 0.0
         self._told_closed = False
@@ -580,9 +580,9 @@ class CoreConnection:
 
     def local(self, path: Path) -> object:
         """The fallback's object at `path` (the core is gone); CoreGoneError if none."""
-        if self.fallback is None or path[0] != "":
+        value = self.fallbacks.get(path[0])
+        if value is None:
             raise CoreGoneError(f"the control core is gone: no {'.'.join(path)}")
-        value = self.fallback
         for name in path[1:]:
             value = getattr(value, name)
         return value
@@ -642,13 +642,18 @@ class RemoteMethod:
         if connection.closed.is_set():
             return getattr(connection.local(self._path), self.__name__)(*args, **kwargs)
         values = connection.arguments(kwargs.values())
-        _, value = connection.request(
-            "call",
-            self._path,
-            self.__name__,
-            tuple(connection.arguments(args)),
-            dict(zip(kwargs, values, strict=True)),
-        )
+        try:
+            _, value = connection.request(
+                "call",
+                self._path,
+                self.__name__,
+                tuple(connection.arguments(args)),
+                dict(zip(kwargs, values, strict=True)),
+            )
+        except CoreGoneError:
+            if self._path[0] not in connection.fallbacks:
+                raise
+            return getattr(connection.local(self._path), self.__name__)(*args, **kwargs)
         return value
 
     def post(self, *args: Any, **kwargs: Any) -> None:
@@ -674,10 +679,15 @@ class RemotePart:
         connection: CoreConnection = self._connection
         key = (self._path, name)
         if connection.closed.is_set():
-            if connection.fallback is None and key in connection.last_values:
+            if self._path[0] not in connection.fallbacks and key in connection.last_values:
                 return connection.last_values[key]
             return getattr(connection.local(self._path), name)
-        kind, value = connection.request("get", self._path, name)
+        try:
+            kind, value = connection.request("get", self._path, name)
+        except CoreGoneError:
+            if self._path[0] not in connection.fallbacks:
+                raise
+            return getattr(connection.local(self._path), name)
         if kind == "value":
             connection.last_values[key] = value
             return value

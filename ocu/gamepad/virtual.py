@@ -128,3 +128,13 @@ class VirtualPad:
         if self._sdl is None or self._joystick is None:
             raise VirtualPadError("the virtual pad is not attached")
         return self._sdl
+
+
+def core_virtual_pad(core: Any) -> VirtualPad:
+    """A virtual pad plugged into a control core's process (ocu.core_process), as the part
+    "vpad" before its "pad": tests and benchmarks move its sticks through the core's pipe,
+    where the core's own poller reads them (SDL's virtual pads are the process's own)."""
+    del core
+    pad = VirtualPad()
+    pad.attach()
+    return pad

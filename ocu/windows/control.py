@@ -19,6 +19,7 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from typing import TypeVar, cast
 
 from PySide6.QtCore import QObject, QTimer
@@ -83,6 +84,10 @@ class ConsoleControl(QObject):
         lock, and its events (`part.events`) call the GUI's callbacks on the GUI thread."""
         hand_over(part.events)  # type: ignore[attr-defined]
         return cast(T, Guarded(part, self.lock, self.manager.gui_alive))
+
+    def teleop_for(self, make: Callable[[], T]) -> T:
+        """The pad's teleop (made here, adopted as a part of the model)."""
+        return self.adopt(make())
 
     def start(self) -> None:
         """Start the control thread and the GUI's heartbeat."""

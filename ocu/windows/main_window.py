@@ -41,21 +41,20 @@ from PySide6.QtWidgets import (
 from ocu import hotkeys
 from ocu.console.arm import ArmGoal
 from ocu.console.model import ConsoleModel
-from ocu.console.poses import ARM_POSES_NAME, PoseError
+from ocu.console.poses import ARM_POSES_NAME
 from ocu.core.hardware import HardwareComponent
 from ocu.core.manager import DEFAULT_RATE_HZ
 from ocu.core_process import CoreSpec
 from ocu.gamepad.calibration import CalibrationStore, saved_or_default
+from ocu.gamepad.core_pad import pose_hook
 from ocu.gamepad.mapping import PadMapping, load_pad_mapping
-from ocu.gamepad.teleop import GamepadTeleop, Stopper
+from ocu.gamepad.teleop import GamepadTeleop
 from ocu.hardware.engineer import engineer_capabilities, engineer_component
 from ocu.hotkeys import KeyMap
-from ocu.kinematics.arm import ArmError
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
 from ocu.qt.collector import pin_garbage_collection
 from ocu.qt.gamepad import QtGamepad
-from ocu.qt.inbox import to_gui
 from ocu.qt.link import QtLink
 from ocu.qt.record import RecordButton
 from ocu.qt.replay import ReplayController
@@ -202,7 +201,14 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         # of its own (`core`: ocu.windows.remote_control); the window and its views touch it
         # through a handle and are called on this thread.
         self.control = control_for(
-            core, profile, self.key_map, arm_poses_path, control_hz=control_hz, parent=self
+            core,
+            profile,
+            self.key_map,
+            arm_poses_path,
+            control_hz=control_hz,
+            pad_mapping=pad_mapping if replay is None else None,
+            pad_calibrations=None if pad_calibrations is None else pad_calibrations.path,
+            parent=self,
         )
         if isinstance(self.control, RemoteControl):
             self.link_factory = self.control.link_factory(address_text)
@@ -224,16 +230,18 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self.max_panel = MaxVelocityPanel(self.model)
         self.joint_panel = JointPositionPanel(self.model)
         self._video_panel = VideoPanel(self.model) if "cameras" in self.capabilities else None
-        # The pad's teleop is a part of the model: under its lock, its events on this thread.
-        self.teleop = self.control.adopt(
-            GamepadTeleop(
+        # The pad's teleop is a part of the model: under its lock, its events on this thread
+        # (a core process reads the pad itself: its teleop, and its pose hook).
+        self.teleop = self.control.teleop_for(
+            lambda: GamepadTeleop(
                 self.model,
                 pad_mapping or load_pad_mapping(profile),
                 calibration_for=lambda info: saved_or_default(pad_calibrations, info),
             )
         )
-        self._log_from_any_thread = to_gui(self.log_event)
-        self.teleop.register_hook("pose", self._pad_pose)
+        if self.teleop is not getattr(self.control, "teleop", None):
+            # The pad's "pose NAME" button; its word reaches the Events dock on this thread.
+            self.teleop.register_hook("pose", lambda name: pose_hook(self.model, name))
         self.gamepad_panel = GamepadPanel(self.teleop, pad_calibrations)
         self._map_panel = MapPanel(self.model) if "drive" in self.capabilities else None
         self.event_log = QListWidget()
@@ -322,7 +330,11 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self.teleop.events.message.connect(self.log_event)
         # The pad is read only on a live console: a replay commands nothing.
         self.gamepad: QtGamepad | None = None
-        if pad_mapping is not None and replay is None:
+        if (
+            pad_mapping is not None
+            and replay is None
+            and not isinstance(self.control, RemoteControl)
+        ):
             # The poll thread feeds the guarded teleop itself (ocu.windows.control).
             self.gamepad = QtGamepad(self.teleop, self, direct=True)
         self.help_overlay = HelpOverlay(
@@ -655,21 +667,6 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
         self._shut = True
 
     # ---- messages --------------------------------------------------------------------------
-
-    def _pad_pose(self, name: str) -> Stopper | None:
-        """The pad's "pose NAME" button: the arm's stored pose, stopped when the pad lets go."""
-        # The pad's poll thread calls this: the Events dock hears of it on the GUI thread.
-        log = self._log_from_any_thread
-        arm = self.model.arm
-        if arm is None:
-            log(self.model.arm_error or "this robot has no arm profile")
-            return None
-        try:
-            arm.go_to(name)
-        except (ArmError, PoseError) as err:
-            log(f"arm: {err}")
-            return None
-        return lambda reason: self.model.stop_arm(f"stored pose {name} stopped ({reason})")
 
     def log_event(self, text: str) -> None:
         """A line in the Events dock and the status bar (and the log)."""

@@ -28,9 +28,11 @@ from ocu.console.model import ConsoleModel
 from ocu.core.guard import Guarded
 from ocu.core.hardware import HardwareComponent
 from ocu.core.manager import DEFAULT_RATE_HZ, TIMING_WINDOW_S
-from ocu.core.remote import CoreGoneError
+from ocu.core.remote import CoreGoneError, remote_root
 from ocu.core.remote_link import RemoteLink
 from ocu.core_process import CoreProcess, CoreSpec
+from ocu.gamepad.mapping import PadMapping
+from ocu.gamepad.teleop import GamepadTeleop
 from ocu.hotkeys import KeyMap
 from ocu.link.base import Link
 from ocu.profile import RobotProfile
@@ -44,6 +46,7 @@ T = TypeVar("T")
 
 CORE_ENDED = "the control core ended"
 KEYS_PART = "keys=ocu.windows.x_keys:core_keys"
+PAD_PART = "pad=ocu.gamepad.core_pad:core_pad"
 
 
 class RemoteControl(QObject):
@@ -63,13 +66,20 @@ class RemoteControl(QObject):
         self.connection = self.process.connection
         # What the views read and call once the core is gone: a model of this process's own,
         # connected to nothing, halted and LINK LOST.
-        self.connection.fallback = ConsoleModel(
+        fallback = ConsoleModel(
             spec.profile, fine_factor=spec.fine_factor, arm_poses_path=spec.arm_poses_path
         )
+        self.connection.fallbacks[""] = fallback
+        if spec.pad_mapping is not None:
+            self.connection.fallbacks["teleop"] = GamepadTeleop(fallback, spec.pad_mapping)
         self.model: ConsoleModel = cast(ConsoleModel, self.process.model)
         self.manager: Any = self.process.core  # timing(), as ControllerManager has
         self.keys: Any = (
             self.process.part("keys") if any(p.startswith("keys=") for p in spec.parts) else None
+        )
+        # The pad's teleop where the core reads the pad (its "pad" part), else None.
+        self.teleop: Any = (
+            remote_root(self.connection, "teleop") if PAD_PART in spec.parts else None
         )
         self.lock: threading.RLock | None = None  # the model's lock is in the core
         self.hardware: HardwareComponent | None = None  # and so is the hardware
@@ -99,6 +109,10 @@ class RemoteControl(QObject):
         the GUI thread, its calls under a lock of the window's."""
         hand_over(part.events)  # type: ignore[attr-defined]
         return cast(T, Guarded(part, self._local_lock))
+
+    def teleop_for(self, make: Callable[[], T]) -> T:
+        """The core's teleop where it reads the pad; else one of the window's own."""
+        return cast(T, self.teleop) if self.teleop is not None else self.adopt(make())
 
     def start(self) -> None:
         """The heartbeat and the timing label (the core's control thread runs already)."""
@@ -132,7 +146,7 @@ class RemoteControl(QObject):
         self._ended = True
         self._alive_timer.stop()
         self._timing_timer.stop()
-        fallback = self.connection.fallback
+        fallback = self.connection.fallbacks[""]
         assert isinstance(fallback, ConsoleModel)
         fallback.robot.on_link_state(LinkState.LOST, CORE_ENDED)
         fallback.halt(CORE_ENDED)
@@ -170,16 +184,23 @@ def control_for(
     arm_poses_path: Path | None,
     *,
     control_hz: float = DEFAULT_RATE_HZ,
+    pad_mapping: PadMapping | None = None,
+    pad_calibrations: Path | None = None,
     parent: QObject | None = None,
 ) -> ConsoleControl | RemoteControl:
     """The window's control: in this process (`core` None), or in a child process built from
-    `core` (the X key reader in it where the window is on X11)."""
+    `core` (the X key reader in it where the window is on X11; the pad read there with
+    `pad_mapping`)."""
     if core is None:
         model = ConsoleModel(
             profile, fine_factor=key_map.fine_factor, arm_poses_path=arm_poses_path
         )
         return ConsoleControl(model, profile, control_hz=control_hz, parent=parent)
-    x11 = QGuiApplication.platformName() == "xcb"
+    parts = list(core.parts)
+    if QGuiApplication.platformName() == "xcb" and KEYS_PART not in parts:
+        parts.append(KEYS_PART)
+    if pad_mapping is not None and PAD_PART not in parts:
+        parts.append(PAD_PART)
     gui_limit_s = profile.link.gui_alive_timeout_s - HEARTBEAT_PERIOD_MS / 1000.0
     spec = dataclasses.replace(
         core,
@@ -189,6 +210,8 @@ def control_for(
         control_hz=control_hz,
         gui_timeout_s=max(gui_limit_s, HEARTBEAT_PERIOD_MS / 1000.0),
         key_map=key_map,
-        parts=(*core.parts, KEYS_PART) if x11 and KEYS_PART not in core.parts else core.parts,
+        pad_mapping=pad_mapping,
+        pad_calibrations=pad_calibrations,
+        parts=tuple(parts),
     )
     return RemoteControl(spec, parent=parent)

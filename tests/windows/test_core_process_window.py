@@ -10,11 +10,17 @@ from __future__ import annotations
 import math
 import os
 import signal
+from pathlib import Path
 
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QSettings, Qt
 from PySide6.QtTest import QTest
 from pytestqt.qtbot import QtBot
 
+from ocu.core_process import CoreSpec
+from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
+from ocu.gamepad.mapping import load_pad_mapping, parse_pad_mapping
+from ocu.gamepad.teleop import PadStatus
+from ocu.profile import RobotProfile
 from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
 from ocu.windows.main_window import MainWindow
@@ -94,3 +100,54 @@ def test_a_killed_core_shows_link_lost_and_the_robot_stops_by_itself(
     wait_sim(qtbot, sim, lambda s: s.all_stopped, "the robot stopped", timeout_ms=WATCHDOG_MS)
     QTest.keyRelease(console, Qt.Key.Key_W)
     console.close()  # the window still closes cleanly
+
+
+VIRTUAL_PAD = "vpad=ocu.gamepad.virtual:core_virtual_pad"
+STICK_UP = -32768
+
+
+def test_the_pad_read_in_the_core_drives_and_space_stops_it(
+    qtbot: QtBot, profile: RobotProfile, settings: QSettings, tmp_path: Path, sim: RobotSimulator
+) -> None:
+    # The core reads the pad itself (its "pad" part); SDL's virtual pads are a process's own,
+    # so the virtual pad is plugged into the core too, and moved through its pipe.
+    host, port = sim.address
+    mapping = parse_pad_mapping(
+        {"options": {"stall_timeout_ms": 400}}, profile, load_pad_mapping(profile), "test"
+    )
+    window = MainWindow(
+        profile,
+        None,
+        "simulator",
+        settings,
+        pad_mapping=mapping,
+        pad_calibrations=CalibrationStore(tmp_path / CALIBRATION_FILE_NAME),
+        core=CoreSpec(profile, "engineer", f"{host}:{port}", parts=(VIRTUAL_PAD,)),
+    )
+    qtbot.addWidget(window)
+    try:
+        window.show()
+        window.activateWindow()
+        qtbot.waitUntil(window.isActiveWindow, timeout=DEADLINE_MS)
+        qtbot.waitUntil(
+            lambda: window.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS
+        )
+        assert isinstance(window.control, RemoteControl)
+        assert window.gamepad is None  # no poller in the GUI's process
+        pad = window.control.process.part("vpad")
+        qtbot.waitUntil(lambda: window.teleop.status is PadStatus.READY, timeout=DEADLINE_MS)
+        qtbot.waitUntil(lambda: window.pad_indicator.text() == "PAD ready", timeout=DEADLINE_MS)
+        pad.set_axis("lefty", STICK_UP)
+        pad.set_button("leftshoulder", True)
+        qtbot.waitUntil(lambda: window.teleop.engaged, timeout=DEADLINE_MS)
+        # The deadman pressed with the stick already forward: nothing moves until it rests.
+        pad.set_axis("lefty", 0)
+        qtbot.waitUntil(lambda: window.teleop.value("lefty") == 0.0, timeout=DEADLINE_MS)
+        pad.set_axis("lefty", STICK_UP)
+        wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving on the pad")
+        QTest.keyPress(window, Qt.Key.Key_Space)
+        wait_zeros(qtbot, sim, "zeros after Space, the stick still forward", more=5)
+        QTest.keyRelease(window, Qt.Key.Key_Space)
+        pad.set_button("leftshoulder", False)
+    finally:
+        window.shutdown()
