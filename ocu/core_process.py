@@ -48,6 +48,10 @@ log = logging.getLogger("ocu.core")
 # The child's priority: above the desktop's CPU-bound jobs where the user may ask for it.
 CORE_NICE = -10
 START_TIMEOUT_S = 20.0
+# The core's threads share its GIL (the link's receiver reassembling video, the GUI's server,
+# the control thread, the key reader): at Python's default 5 ms switch interval a key waits
+# up to that long behind the video's reassembly; the window's process uses the same 1 ms.
+GIL_SWITCH_INTERVAL_S = 0.001
 STOP_TIMEOUT_S = 5.0
 
 
@@ -276,6 +280,7 @@ def child_main(fd: int) -> int:
             os.setpriority(os.PRIO_PROCESS, 0, spec.nice)
         except OSError:
             log.info("control core: priority not raised to nice %d (not allowed)", spec.nice)
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     core = Core(spec, sock)
     signal.signal(signal.SIGTERM, lambda *_: core.gone.set())
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl+C in the terminal is the GUI's
