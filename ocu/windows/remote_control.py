@@ -15,6 +15,7 @@ the robot stops by itself (its link's watchdog); nothing restarts it without the
 from __future__ import annotations
 
 import dataclasses
+import logging
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -213,5 +214,6 @@ def control_for(
         pad_mapping=pad_mapping,
         pad_calibrations=pad_calibrations,
         parts=tuple(parts),
+        log_level=logging.getLogger().getEffectiveLevel(),
     )
     return RemoteControl(spec, parent=parent)

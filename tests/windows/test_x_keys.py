@@ -182,9 +182,11 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
+@pytest.mark.parametrize("core", [False, True], ids=["in-process", "core-process"])
 def test_keys_drive_and_stop_the_robot_while_the_gui_thread_is_busy(
-    xvfb: str, sim: RobotSimulator, tmp_path: Path
+    xvfb: str, sim: RobotSimulator, tmp_path: Path, core: bool
 ) -> None:
+    # core: `ocu --core-process`, the reader in the control core's process (it logs there).
     env = x_env(xvfb, tmp_path)
     env["PYTHONPATH"] = str(Path(__file__).resolve().parents[2])
     log_path = tmp_path / "ocu.log"
@@ -195,6 +197,7 @@ def test_keys_drive_and_stop_the_robot_while_the_gui_thread_is_busy(
             [
                 *(sys.executable, "-c", BUSY_GUI, str(release)),
                 *("--robot", f"{host}:{port}", "--quit-after", "120", "--log-level", "DEBUG"),
+                *(["--core-process"] if core else []),
             ],
             env=env,
             stdout=subprocess.DEVNULL,
