@@ -10,10 +10,12 @@ from __future__ import annotations
 import math
 import os
 import signal
+import time
 from pathlib import Path
 
-from PySide6.QtCore import QSettings, Qt
+from PySide6.QtCore import QSettings, Qt, QTimer
 from PySide6.QtTest import QTest
+from PySide6.QtWidgets import QWidget
 from pytestqt.qtbot import QtBot
 
 from ocu.core_process import CoreSpec
@@ -25,7 +27,13 @@ from ocu.records import LinkState
 from ocu.sim.simulator import RobotSimulator
 from ocu.windows.main_window import MainWindow
 from ocu.windows.remote_control import CORE_ENDED, RemoteControl
-from tests.windows.console_fixtures import DEADLINE_MS, ConsoleFactory, wait_sim, wait_zeros
+from tests.windows.console_fixtures import (
+    DEADLINE_MS,
+    ConsoleFactory,
+    is_zero,
+    wait_sim,
+    wait_zeros,
+)
 
 # The simulator's watchdog zeroes the motors after 1 s without a command.
 WATCHDOG_MS = 3000
@@ -151,3 +159,44 @@ def test_the_pad_read_in_the_core_drives_and_space_stops_it(
         pad.set_button("leftshoulder", False)
     finally:
         window.shutdown()
+
+
+def test_a_stalled_gui_thread_stops_what_it_fed_in_the_core(
+    qtbot: QtBot, make_console: ConsoleFactory, sim: RobotSimulator, profile: RobotProfile
+) -> None:
+    console: MainWindow = make_console(sim, core=True)
+    QTest.keyPress(console, Qt.Key.Key_W)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving forward")
+    stall_s = profile.link.gui_alive_timeout_s * 2.4
+    stalled: list[float] = []
+
+    def stall() -> None:
+        # The GUI's thread runs no event and posts no heartbeat (a long computation).
+        stalled.append(time.monotonic())
+        time.sleep(stall_s)
+        stalled.append(time.monotonic())
+
+    QTimer.singleShot(0, stall)
+    qtbot.waitUntil(lambda: len(stalled) == 2, timeout=DEADLINE_MS)
+    start, end = stalled
+    zeros = [r for r in sim.received_commands() if r.time_s >= start and is_zero(r)]
+    assert zeros, "no zeros during the stall"
+    assert zeros[0].time_s < end, "zeros only after the stall"
+    assert not sim.state().watchdog_stopped, "the robot's watchdog stopped it, not the core"
+    wait_zeros(qtbot, sim, "nothing resumes after the stall, W still held")
+    QTest.keyRelease(console, Qt.Key.Key_W)
+
+
+def test_focus_loss_stops_through_the_core(
+    qtbot: QtBot, make_console: ConsoleFactory, sim: RobotSimulator
+) -> None:
+    console: MainWindow = make_console(sim, core=True)
+    QTest.keyPress(console, Qt.Key.Key_W)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving forward")
+    other = QWidget()
+    qtbot.addWidget(other)
+    other.show()
+    other.activateWindow()
+    qtbot.waitUntil(other.isActiveWindow, timeout=DEADLINE_MS)
+    wait_zeros(qtbot, sim, "another window took the focus")
+    assert console.model.held_keys == frozenset()
