@@ -236,6 +236,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         from ocu.record.ur_replay import recorded_profile
 
         profile = recorded_profile(args.replay, profile)  # a UR's keys for a UR's recording
+    if args.core_process and (ur_arm or xarm or args.replay or args.live or args.camera):
+        return refuse_file(
+            "--core-process runs the Engineer's console only, not yet with a UR or xArm "
+            "profile, --replay, --live or --camera (docs/core-process.md)"
+        )
     robot = None
     if args.robot and ur_arm is None and xarm is None:
         try:

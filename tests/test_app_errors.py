@@ -196,3 +196,19 @@ def test_a_control_rate_it_cannot_keep_is_refused(value: str, expected: str) -> 
     assert done.returncode == 2
     assert "Traceback" not in done.stderr
     assert f"argument --control-hz: {expected}" in done.stderr
+
+
+@pytest.mark.parametrize(
+    "extra", [["--profile", "ur5e"], ["--profile", "xarm1s"], ["--live", "127.0.0.1:0"]]
+)
+def test_the_core_process_refuses_what_it_does_not_run_yet(extra: list[str]) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "ocu", "--core-process", *extra, "--quit-after", "5"],
+        capture_output=True,
+        text=True,
+        timeout=RUN_TIMEOUT_S,
+        check=False,
+    )
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    assert "--core-process runs the Engineer's console only" in done.stderr
