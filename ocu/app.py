@@ -409,7 +409,7 @@ def run_console(
     """Start simulator (if no robot), link and window; run the Qt event loop."""
     from PySide6.QtWidgets import QApplication
 
-    from ocu.core_process import CoreSpec
+    from ocu.core_process import CoreProcessError, CoreSpec
     from ocu.gamepad.calibration import CALIBRATION_FILE_NAME, CalibrationStore
     from ocu.link.base import LinkError
     from ocu.link.live import UdpLink
@@ -461,22 +461,27 @@ def run_console(
         # --core-process: the child builds its link to the same address (ocu.core_process).
         target = f"{robot_address[0]}:{robot_address[1]}"
         core = CoreSpec(profile, "engineer", target, options={"description": address_text})
-        window = MainWindow(
-            profile,
-            serving(live, make_link),
-            address_text,
-            settings,
-            key_map,
-            settings_status=settings_status,
-            recorder=recorder,
-            pad_mapping=pad_mapping,
-            pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
-            calibration_link=lambda raw: UdpLink(
-                raw, robot_address, extension=False, description=address_text
-            ),
-            control_hz=control_hz,
-            core=core if core_process else None,
-        )
+        try:
+            window = MainWindow(
+                profile,
+                serving(live, make_link),
+                address_text,
+                settings,
+                key_map,
+                settings_status=settings_status,
+                recorder=recorder,
+                pad_mapping=pad_mapping,
+                pad_calibrations=CalibrationStore(config_dir / CALIBRATION_FILE_NAME),
+                calibration_link=lambda raw: UdpLink(
+                    raw, robot_address, extension=False, description=address_text
+                ),
+                control_hz=control_hz,
+                core=core if core_process else None,
+            )
+        except CoreProcessError as err:  # the core's process did not start or answer
+            guard.close()
+            log.error("%s", err)
+            return 1
         show_live(live, window)
         if cameras is not None:
             cameras.attach(window)

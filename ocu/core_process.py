@@ -236,8 +236,10 @@ class CoreProcess:
         try:
             self.pid = int(self.core.pid())  # the first answer: the core is built
         except CoreGoneError as error:
-            self.stop()
-            raise CoreProcessError(f"the control core did not start: {error}") from error
+            code = self.stop()
+            raise CoreProcessError(
+                f"the control core did not start: {error} (exit code {code}; its error above)"
+            ) from error
         self.connection.timeout_s = timeout_s if timeout_s < 5.0 else 5.0
 
     def part(self, name: str) -> Any:

@@ -21,7 +21,7 @@ import pytest
 from ocu.control.position import PositionError
 from ocu.core.remote import CoreGoneError, RemoteError
 from ocu.core.remote_link import RemoteLink
-from ocu.core_process import CoreProcess, CoreSpec
+from ocu.core_process import CoreProcess, CoreProcessError, CoreSpec
 from ocu.profile import RobotProfile
 from ocu.records import LinkState, TelemetryFrame
 from ocu.sim.simulator import RobotSimulator
@@ -156,7 +156,7 @@ def test_a_killed_gui_process_leaves_no_core_and_a_robot_at_rest(
         textwrap.dedent(
             f"""
             import sys, time
-            from ocu.core_process import CoreProcess, CoreSpec
+            from ocu.core_process import CoreProcess, CoreProcessError, CoreSpec
             from ocu.core.remote_link import RemoteLink
             from ocu.profile import load_profile
             profile = load_profile()
@@ -219,3 +219,12 @@ def test_a_killed_core_says_so_here_and_the_robot_stops_by_itself(
     # Nobody commands the robot: its own watchdog (1 s without a command) stops it.
     until(lambda: sim.state().all_stopped, "the robot stopped by its watchdog")
     assert sim.state().watchdog_stopped
+
+
+def test_a_core_that_cannot_start_is_an_error_naming_why(
+    profile: RobotProfile, capfd: pytest.CaptureFixture[str]
+) -> None:
+    spec = CoreSpec(profile, "engineer", "127.0.0.1:9", parts=("x=tests.core.no_such:part",))
+    with pytest.raises(CoreProcessError, match="did not start"):
+        CoreProcess(spec)
+    assert "No module named 'tests.core.no_such'" in capfd.readouterr().err
