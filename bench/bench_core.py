@@ -259,6 +259,8 @@ def run_phase(
     waits = _lock_waits()
     if waits is not None:
         waits.reset()
+    connection = getattr(window.control, "connection", None)  # a core process's pipe
+    trips0 = (connection.round_trips, connection.round_trip_s) if connection else (0, 0.0)
     cpu0, t0 = cpu_s(), time.monotonic()
     for trial in range(trials):
         wait(app, rng.uniform(0.005, 0.15))
@@ -315,7 +317,14 @@ def run_phase(
     core = getattr(window, "core", None)
     if core is not None:
         phase.control = core.timing().text
-    if waits is not None:
+    if connection is not None:
+        trips = connection.round_trips - trips0[0]
+        spent = connection.round_trip_s - trips0[1]
+        phase.control += (
+            f"; GUI round trips to the core: {trips / elapsed:.0f}/s, "
+            f"{1000 * spent / max(trips, 1):.2f} ms each, {100 * spent / elapsed:.1f} % of the time"
+        )
+    elif waits is not None:
         phase.control += (
             f"; GUI calls into the model: {waits.calls}, {waits.slow} waited > 5 ms for the "
             f"lock, the longest {1000 * waits.worst_s:.1f} ms"
