@@ -23,7 +23,15 @@ from ocu.core.remote import CoreGoneError, RemoteError
 from ocu.core.remote_link import RemoteLink
 from ocu.core_process import CoreProcess, CoreProcessError, CoreSpec
 from ocu.profile import RobotProfile
-from ocu.records import LinkState, TelemetryFrame
+from ocu.records import (
+    TELEMETRY,
+    VIDEO,
+    VIDEO_FRAGMENT,
+    DatagramReceived,
+    LinkState,
+    TelemetryFrame,
+    VideoFrame,
+)
 from ocu.sim.simulator import RobotSimulator
 from tests.core.core_parts import ProbeError
 
@@ -228,3 +236,32 @@ def test_a_core_that_cannot_start_is_an_error_naming_why(
     with pytest.raises(CoreProcessError, match="did not start"):
         CoreProcess(spec)
     assert "No module named 'tests.core.no_such'" in capfd.readouterr().err
+
+
+def test_video_frames_come_whole_and_the_raw_fragments_stay_in_the_core(
+    profile: RobotProfile,
+) -> None:
+    simulator = RobotSimulator(profile, telemetry_hz=10.0, video_fps=10.0, extended=True)
+    simulator.start()
+    host, port = simulator.address
+    core = CoreProcess(CoreSpec(profile, "engineer", f"{host}:{port}"))
+    try:
+        link = connect(core, profile)
+        kinds: list[str] = []
+        frames: list[VideoFrame] = []
+
+        def heard(event: object) -> None:
+            if isinstance(event, DatagramReceived):
+                kinds.append(event.kind)
+            elif isinstance(event, VideoFrame):
+                frames.append(event)
+
+        link.subscribe(heard)
+        until(lambda: len(frames) >= 8 and TELEMETRY in kinds, "frames and raw telemetry")
+        assert VIDEO_FRAGMENT not in kinds
+        assert VIDEO not in kinds
+        assert all(frame.jpeg.startswith(b"\xff\xd8") for frame in frames)
+        link.shutdown()
+    finally:
+        core.stop()
+        simulator.stop()
