@@ -89,22 +89,8 @@ class CorePad:
                 self.teleop.on_state(state)
 
     def _on_event(self, event: PadEvent) -> None:
-        if not self._started:
-            return
-        teleop = self.teleop
-        if isinstance(event, PadConnected):
-            teleop.on_connected(event.info)
-        elif isinstance(event, PadDisconnected):
-            teleop.on_disconnected(event.reason)
-        elif isinstance(event, PadError):
-            teleop.on_error(event.message)
-        elif isinstance(event, PadUnavailable):
-            teleop.on_unavailable(event.message)
-        elif isinstance(event, PadUnsupported):
-            teleop.events.message.emit(
-                f"joystick '{event.name}' is not a game controller SDL knows: it is not used "
-                "(give SDL its mapping in SDL_GAMECONTROLLERCONFIG)"
-            )
+        if self._started:
+            deliver(self.teleop, event)
 
     def _watch(self) -> None:
         period = max(0.005, self.stall_timeout_s / WATCHDOG_CHECKS)
@@ -114,19 +100,42 @@ class CorePad:
 
     def check_stall(self) -> None:
         """A poll thread silent too long stops the pad's motion (the model's lock held)."""
-        teleop = self.teleop
-        if not self.poller.running:
-            if teleop.status is not PadStatus.UNAVAILABLE and self._started:
-                teleop.on_stalled("the gamepad poll thread ended")
-            return
-        last = self.poller.last_poll_at
-        if last is None or teleop.info is None:
-            return
-        silent_s = time.monotonic() - last
-        if silent_s > self.stall_timeout_s:
-            teleop.on_stalled(f"gamepad poll thread silent for {1000 * silent_s:.0f} ms")
-        else:
-            teleop.on_polling()
+        if self._started:
+            watch_poller(self.teleop, self.poller, self.stall_timeout_s)
+
+
+def deliver(teleop: GamepadTeleop, event: PadEvent) -> None:
+    """One of the poller's events to the teleop (QtGamepad's and CorePad's)."""
+    if isinstance(event, PadConnected):
+        teleop.on_connected(event.info)
+    elif isinstance(event, PadDisconnected):
+        teleop.on_disconnected(event.reason)
+    elif isinstance(event, PadError):
+        teleop.on_error(event.message)
+    elif isinstance(event, PadUnavailable):
+        teleop.on_unavailable(event.message)
+    elif isinstance(event, PadUnsupported):
+        teleop.events.message.emit(
+            f"joystick '{event.name}' is not a game controller SDL knows: it is not used "
+            "(give SDL its mapping in SDL_GAMECONTROLLERCONFIG)"
+        )
+
+
+def watch_poller(teleop: GamepadTeleop, poller: PadPoller, stall_timeout_s: float) -> None:
+    """The stall watchdog's look: a poll thread ended, or silent past `stall_timeout_s` while a
+    pad is in use, stops the pad's motion; else it is polling (QtGamepad's and CorePad's)."""
+    if not poller.running:
+        if teleop.status is not PadStatus.UNAVAILABLE:
+            teleop.on_stalled("the gamepad poll thread ended")
+        return
+    last = poller.last_poll_at
+    if last is None or teleop.info is None:  # no pad in use: nothing to stop
+        return
+    silent_s = time.monotonic() - last
+    if silent_s > stall_timeout_s:
+        teleop.on_stalled(f"gamepad poll thread silent for {1000 * silent_s:.0f} ms")
+    else:
+        teleop.on_polling()
 
 
 def pose_hook(model: Any, name: str) -> Stopper | None:

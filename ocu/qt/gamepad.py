@@ -13,24 +13,15 @@ mapping's `stall_timeout_ms` while a pad is in use, and the pad's motion stops.
 from __future__ import annotations
 
 import threading
-import time
 from collections import deque
 
 from PySide6.QtCore import QCoreApplication, QEvent, QObject, Qt, QTimer
 
-from ocu.gamepad.pad import (
-    PadConnected,
-    PadDisconnected,
-    PadError,
-    PadEvent,
-    PadUnavailable,
-    PadUnsupported,
-)
+from ocu.gamepad.core_pad import WATCHDOG_CHECKS, deliver, watch_poller
+from ocu.gamepad.pad import PadEvent
 from ocu.gamepad.poller import PadPoller
-from ocu.gamepad.teleop import GamepadTeleop, PadStatus
+from ocu.gamepad.teleop import GamepadTeleop
 
-# The watchdog looks this many times per stall timeout.
-WATCHDOG_CHECKS = 4
 # "The poll thread has something new": posted at high priority, so it is handled before the
 # other events that wait (telemetry, repaints) as soon as the GUI thread is free.
 READY = QEvent.Type(QEvent.registerEventType())
@@ -126,34 +117,9 @@ class QtGamepad(QObject):
             self.teleop.on_state(state)
 
     def _on_event(self, event: PadEvent) -> None:
-        if not self._started:
-            return
-        teleop = self.teleop
-        if isinstance(event, PadConnected):
-            teleop.on_connected(event.info)
-        elif isinstance(event, PadDisconnected):
-            teleop.on_disconnected(event.reason)
-        elif isinstance(event, PadError):
-            teleop.on_error(event.message)
-        elif isinstance(event, PadUnavailable):
-            teleop.on_unavailable(event.message)
-        elif isinstance(event, PadUnsupported):
-            teleop.events.message.emit(
-                f"joystick '{event.name}' is not a game controller SDL knows: it is not used "
-                "(give SDL its mapping in SDL_GAMECONTROLLERCONFIG)"
-            )
+        if self._started:
+            deliver(self.teleop, event)
 
     def check_stall(self) -> None:
         """The watchdog: a poll thread silent too long stops the pad's motion."""
-        if not self.poller.running:
-            if self.teleop.status is not PadStatus.UNAVAILABLE:
-                self.teleop.on_stalled("the gamepad poll thread ended")
-            return
-        last = self.poller.last_poll_at
-        if last is None or self.teleop.info is None:  # no pad in use: nothing to stop
-            return
-        silent_s = time.monotonic() - last
-        if silent_s > self.stall_timeout_s:
-            self.teleop.on_stalled(f"gamepad poll thread silent for {1000 * silent_s:.0f} ms")
-        else:
-            self.teleop.on_polling()
+        watch_poller(self.teleop, self.poller, self.stall_timeout_s)

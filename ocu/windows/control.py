@@ -28,7 +28,7 @@ from ocu.console.events import hand_over
 from ocu.console.model import ConsoleModel
 from ocu.core.guard import Guarded
 from ocu.core.hardware import HardwareComponent
-from ocu.core.manager import DEFAULT_RATE_HZ, TIMING_WINDOW_S, ControllerManager
+from ocu.core.manager import DEFAULT_RATE_HZ, TIMING_WINDOW_S, ControllerManager, ControlTiming
 from ocu.profile import RobotProfile
 from ocu.qt.link import HEARTBEAT_PERIOD_MS
 from ocu.widgets.elided_label import ElidedLabel
@@ -123,16 +123,21 @@ class ConsoleControl(QObject):
 
     def show_timing(self) -> None:
         """The control thread's rate, worst period and overruns in the status bar."""
-        timing = self.manager.timing()
-        overran = timing.overruns > self._overruns_shown
-        self._overruns_shown = timing.overruns
-        self.label.setText(
-            f"ctl {timing.measured_hz:.0f} Hz, {1000 * timing.worst_period_s:.0f} ms"
-        )
-        self.label.setToolTip(
+        self._overruns_shown = show_timing(
+            self.label,
+            self.manager.timing(),
+            self._overruns_shown,
             "The control thread (position control, arm moves, assisted modes, tracking, the\n"
-            f"zones and the command to the robot): {timing.text} in the last "
-            f"{TIMING_WINDOW_S:.0f} s."
+            "zones and the command to the robot)",
         )
-        # Orange while cycles came late in the last second.
-        self.label.setStyleSheet(LATE_STYLE if overran else "")
+
+
+def show_timing(
+    label: ElidedLabel, timing: ControlTiming, shown: int, what: str, suffix: str = ""
+) -> int:
+    """A control thread's rate and worst period on `label` (then `suffix`), its timing in the
+    tool tip, orange while cycles came late since the last look; the overruns seen now."""
+    label.setText(f"ctl {timing.measured_hz:.0f} Hz, {1000 * timing.worst_period_s:.0f} ms{suffix}")
+    label.setToolTip(f"{what}: {timing.text} in the last {TIMING_WINDOW_S:.0f} s.")
+    label.setStyleSheet(LATE_STYLE if timing.overruns > shown else "")
+    return timing.overruns

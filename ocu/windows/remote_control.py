@@ -28,7 +28,7 @@ from ocu.console.events import hand_over
 from ocu.console.model import ConsoleModel
 from ocu.core.guard import Guarded
 from ocu.core.hardware import HardwareComponent
-from ocu.core.manager import DEFAULT_RATE_HZ, TIMING_WINDOW_S
+from ocu.core.manager import DEFAULT_RATE_HZ
 from ocu.core.remote import CoreGoneError, remote_root
 from ocu.core.remote_link import RemoteLink
 from ocu.core_process import CoreProcess, CoreSpec
@@ -41,7 +41,7 @@ from ocu.qt.inbox import gui_inbox
 from ocu.qt.link import HEARTBEAT_PERIOD_MS
 from ocu.records import LinkState
 from ocu.widgets.elided_label import ElidedLabel
-from ocu.windows.control import LATE_STYLE, TIMING_PERIOD_MS, ConsoleControl
+from ocu.windows.control import LATE_STYLE, TIMING_PERIOD_MS, ConsoleControl, show_timing
 
 T = TypeVar("T")
 
@@ -165,17 +165,14 @@ class RemoteControl(QObject):
             return
         if timing is None:
             return
-        overran = timing.overruns > self._overruns_shown
-        self._overruns_shown = timing.overruns
-        self.label.setText(
-            f"ctl {timing.measured_hz:.0f} Hz, {1000 * timing.worst_period_s:.0f} ms (core)"
-        )
-        self.label.setToolTip(
+        self._overruns_shown = show_timing(
+            self.label,
+            timing,
+            self._overruns_shown,
             "The control core, in a process of its own (position control, arm moves, assisted\n"
-            f"modes, tracking, the zones, the keys and the command to the robot): {timing.text}\n"
-            f"in the last {TIMING_WINDOW_S:.0f} s."
+            "modes, tracking, the zones, the keys and the command to the robot)",
+            " (core)",
         )
-        self.label.setStyleSheet(LATE_STYLE if overran else "")
 
 
 def control_for(
