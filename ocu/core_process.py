@@ -39,8 +39,9 @@ from typing import Any
 from ocu.console.model import ConsoleModel
 from ocu.core.hardware import HardwareComponent
 from ocu.core.manager import DEFAULT_RATE_HZ, ControllerManager, ControlTiming
-from ocu.core.remote import CoreConnection, CoreGoneError, ModelServer, pack, receive, remote_root
+from ocu.core.remote import CoreConnection, CoreGoneError, pack, receive, remote_root
 from ocu.core.remote_link import forward_link_events
+from ocu.core.remote_server import ModelServer
 from ocu.profile import RobotProfile
 
 log = logging.getLogger("ocu.core")
