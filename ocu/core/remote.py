@@ -3,7 +3,8 @@
 `ocu.core.guard.Guarded` is how the GUI thread touches a model that the control thread runs:
 attribute reads, method calls, parts (`guarded = True` classes) and event groups, each under
 the model's lock. `RemoteModel` is the same interface over a socket pair to another process,
-where `ModelServer` (ocu.core.remote_server) answers it under the same lock (docs/core-process.md):
+where `ModelServer` (ocu.core.remote_server) answers it under the same lock
+(docs/core-process.md):
 
 - a read or a call is one round trip: ("get" | "call" | "set", id, path, name, ...) answered
   by ("ok", id, kind, value) or ("err", id, exception). `kind` says what the attribute is:
