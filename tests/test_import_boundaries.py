@@ -122,3 +122,29 @@ def test_core_and_views_import_nothing_of_the_protocol() -> None:
 def test_protocol_check_would_see_an_import() -> None:
     # The check must be able to fail: the live link does speak the protocol.
     assert _protocol_imports(REPO_ROOT / "ocu" / "link" / "live.py")
+
+
+# Issue 21: no module of the program over this many lines (split along a line a newcomer can
+# see from the folder names).
+MAX_MODULE_LINES = 700
+
+
+def module_lengths(root: Path) -> dict[str, int]:
+    """Each .py file below `root` (relative to it) and its number of lines."""
+    return {
+        str(path.relative_to(root)): len(path.read_text(encoding="utf-8").splitlines())
+        for path in sorted(root.rglob("*.py"))
+    }
+
+
+def test_no_module_of_the_program_is_over_700_lines() -> None:
+    lengths = module_lengths(REPO_ROOT / "ocu")
+    assert len(lengths) > 100  # the walk found the program
+    too_long = {name: count for name, count in lengths.items() if count > MAX_MODULE_LINES}
+    assert not too_long, f"over {MAX_MODULE_LINES} lines: {too_long}"
+
+
+def test_the_length_check_would_see_a_long_module(tmp_path: Path) -> None:
+    (tmp_path / "long.py").write_text("x = 1\n" * (MAX_MODULE_LINES + 1), encoding="utf-8")
+    (tmp_path / "short.py").write_text("x = 1\n", encoding="utf-8")
+    assert module_lengths(tmp_path) == {"long.py": MAX_MODULE_LINES + 1, "short.py": 1}
