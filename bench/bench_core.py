@@ -318,6 +318,8 @@ def run_phase(
     if core is not None:
         phase.control = core.timing().text
     if connection is not None:
+        heavy = window.control.manager.answered(5)  # type: ignore[union-attr]
+        print(f"{label}: the GUI's costliest reads: {heavy}")
         trips = connection.round_trips - trips0[0]
         spent = connection.round_trip_s - trips0[1]
         phase.control += (

@@ -169,6 +169,11 @@ class Core:
         """The control thread's timing."""
         return self.manager.timing()
 
+    def answered(self, top: int = 12) -> list[tuple[str, int, int]]:
+        """What the GUI asked most, by bytes: ("path.name", answers, bytes)."""
+        rows = [(key, count, size) for key, (count, size) in self.server.answered.items()]
+        return sorted(rows, key=lambda row: -row[2])[:top]
+
     def ping(self, value: object = None) -> object:
         """A round trip (tests and benchmarks)."""
         return value

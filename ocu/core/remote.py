@@ -123,25 +123,28 @@ class Sender:
         self._closed = False
         self.dropped = 0
         self.sent = 0
+        self._video = 0  # video frames queued
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
-    def send(self, message: tuple[Any, ...], *, video: bool = False) -> bool:
-        """Queue one message (pickled here, so later changes to its values do not show)."""
+    def send(self, message: tuple[Any, ...], *, video: bool = False) -> int:
+        """Queue one message (pickled here, so later changes to its values do not show); its
+        size in bytes, 0 if it was dropped."""
         data = pack(message)
         with self._ready:
             if self._closed:
                 return False
             queue = self._queue
-            if video and sum(1 for _, is_video in queue if is_video) >= MAX_QUEUED_VIDEO:
+            if video and self._video >= MAX_QUEUED_VIDEO:
                 self.dropped += 1
-                return False
+                return 0
             if len(queue) >= MAX_QUEUED:
                 self.dropped += 1
-                return False
+                return 0
             queue.append((data, video))
+            self._video += video
             self._ready.notify()
-        return True
+        return len(data)
 
     def close(self) -> None:
         """Send what is queued, then stop (the socket stays open)."""
@@ -160,6 +163,7 @@ class Sender:
                     return
                 batch = list(self._queue)
                 self._queue.clear()
+                self._video = 0
             try:
                 self._sock.sendall(b"".join(data for data, _ in batch))
             except OSError:

@@ -72,6 +72,7 @@ class ModelServer:
         self._forwarders: dict[tuple[Path, str], Callable[..., None]] = {}
         self._callbacks: dict[int, _Forward] = {}
         self.requests = 0
+        self.answered: dict[str, tuple[int, int]] = {}  # "path.name" -> (answers, bytes)
         self.closed = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -93,7 +94,7 @@ class ModelServer:
     def send(self, message: tuple[Any, ...], *, video: bool = False) -> bool:
         """Send a message to the GUI (any thread, never waits for the GUI)."""
         try:
-            return self.sender.send(message, video=video)
+            return self.sender.send(message, video=video) > 0
         except Exception:  # a value that does not pickle must not break the emitter
             log.exception("could not send %s to the GUI", message[0])
             return False
@@ -154,7 +155,7 @@ class ModelServer:
             self._send_error(request_id, error)
             return
         try:
-            data_ok = self.sender.send(("ok", request_id, *reply))
+            size = self.sender.send(("ok", request_id, *reply))
         except Exception as error:  # the value does not pickle
             path, name = message[2], message[3]
             self._send_error(
@@ -162,7 +163,12 @@ class ModelServer:
                 RemoteError(f"{'.'.join((*path, name))} cannot cross to the GUI: {error}"),
             )
             return
-        if not data_ok:
+        if kind in ("get", "call"):
+            # What the GUI asks for, and how much it costs (bench/bench_core.py prints it).
+            key = ".".join((*message[2], message[3]))
+            count, total = self.answered.get(key, (0, 0))
+            self.answered[key] = (count + 1, total + size)
+        if not size:
             log.warning("the answer to %s was dropped (the GUI is not reading)", kind)
 
     def _send_error(self, request_id: int, error: BaseException) -> None:

@@ -29,6 +29,11 @@ FREE_REACH_M = 4.0
 class OccupancyGrid:
     """Log-odds occupancy around the odometry origin (see the module docstring)."""
 
+    # A part of the console model (the navigator's): the GUI reaches it under the model's
+    # lock (ocu.core.guard) - a core in another process sends what the view asks of it (the
+    # scan count, the display image), never the whole grid (3.8 MB a pickle).
+    guarded = True
+
     def __init__(
         self,
         resolution_m: float = DEFAULT_RESOLUTION_M,
