@@ -17,8 +17,9 @@ GUI's `RemoteModel` (ocu.core.remote) under the model's lock:
   manager's "GUI silent" lock, fed by the GUI's heartbeat posts;
 - the core gone: the robot stops by itself (its link's watchdog), the GUI shows it.
 
-It runs at `CoreSpec.nice` (-10 by default, as `ocu` asks for itself; where the user may raise
-priority) so that CPU-bound processes beside the console do not delay a key.
+It runs at `CoreSpec.nice` (-15 by default, above the -10 `ocu` asks for itself; where the
+user may raise priority) so that neither CPU-bound processes beside the console nor the GUI's
+own paints delay a key.
 """
 
 from __future__ import annotations
@@ -46,8 +47,10 @@ from ocu.profile import RobotProfile
 
 log = logging.getLogger("ocu.core")
 
-# The child's priority: above the desktop's CPU-bound jobs where the user may ask for it.
-CORE_NICE = -10
+# The child's priority, where the user may ask for it: above the desktop's CPU-bound jobs, and
+# above the GUI's process (nice -10, ocu.priority): when the CPU is short, a paint in the GUI
+# never delays the core's threads (a key, a control cycle, the command to the robot).
+CORE_NICE = -15
 START_TIMEOUT_S = 20.0
 # The core's threads share its GIL (the link's receiver reassembling video, the GUI's server,
 # the control thread, the key reader): at Python's default 5 ms switch interval a key waits
