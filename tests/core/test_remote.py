@@ -21,7 +21,7 @@ import pytest
 from ocu.control.position import PositionError
 from ocu.core.remote import CoreGoneError, RemoteError
 from ocu.core.remote_link import RemoteLink
-from ocu.core_process import CoreProcess, CoreProcessError, CoreSpec
+from ocu.core_process import CORE_NICE, CoreProcess, CoreProcessError, CoreSpec
 from ocu.profile import RobotProfile
 from ocu.records import (
     TELEMETRY,
@@ -164,7 +164,7 @@ def test_a_killed_gui_process_leaves_no_core_and_a_robot_at_rest(
         textwrap.dedent(
             f"""
             import sys, time
-            from ocu.core_process import CoreProcess, CoreProcessError, CoreSpec
+            from ocu.core_process import CORE_NICE, CoreProcess, CoreProcessError, CoreSpec
             from ocu.core.remote_link import RemoteLink
             from ocu.profile import load_profile
             profile = load_profile()
@@ -265,3 +265,12 @@ def test_video_frames_come_whole_and_the_raw_fragments_stay_in_the_core(
     finally:
         core.stop()
         simulator.stop()
+
+
+def test_the_core_runs_above_the_guis_priority_where_allowed(core: CoreProcess) -> None:
+    ours = os.getpriority(os.PRIO_PROCESS, 0)
+    theirs = os.getpriority(os.PRIO_PROCESS, core.pid)
+    if os.geteuid() == 0:  # CI and this machine: root may raise priority
+        assert theirs == min(ours, CORE_NICE)
+    else:  # where the user may not, the core stays where it was started
+        assert theirs in (ours, min(ours, CORE_NICE))
