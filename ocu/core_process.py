@@ -40,7 +40,14 @@ from typing import Any
 from ocu.console.model import ConsoleModel
 from ocu.core.hardware import HardwareComponent
 from ocu.core.manager import DEFAULT_RATE_HZ, ControllerManager, ControlTiming
-from ocu.core.remote import CoreConnection, CoreGoneError, pack, receive, remote_root
+from ocu.core.remote import (
+    CALL_TIMEOUT_S,
+    CoreConnection,
+    CoreGoneError,
+    pack,
+    receive,
+    remote_root,
+)
 from ocu.core.remote_link import forward_link_events
 from ocu.core.remote_server import ModelServer
 from ocu.profile import RobotProfile
@@ -249,7 +256,7 @@ class CoreProcess:
             raise CoreProcessError(
                 f"the control core did not start: {error} (exit code {code}; its error above)"
             ) from error
-        self.connection.timeout_s = timeout_s if timeout_s < 5.0 else 5.0
+        self.connection.timeout_s = min(timeout_s, CALL_TIMEOUT_S)
 
     def part(self, name: str) -> Any:
         """The GUI's handle on one of the spec's parts."""

@@ -50,8 +50,9 @@ log = logging.getLogger("ocu.core")
 
 HEADER: Final = struct.Struct(">I")
 MAX_MESSAGE_BYTES: Final = 64 * 1024 * 1024
-# A round trip the core did not answer in this long raises (the core is gone or stuck).
-CALL_TIMEOUT_S: Final = 5.0
+# A round trip the core did not answer in this long raises (the core is stuck: a core that
+# ended is seen at once, its pipe closes). Long: a loaded machine must not make it fire.
+CALL_TIMEOUT_S: Final = 10.0
 # Messages waiting for the sender thread; the newest video frames go first past it.
 MAX_QUEUED: Final = 2000
 MAX_QUEUED_VIDEO: Final = 16
