@@ -200,3 +200,20 @@ def test_focus_loss_stops_through_the_core(
     qtbot.waitUntil(other.isActiveWindow, timeout=DEADLINE_MS)
     wait_zeros(qtbot, sim, "another window took the focus")
     assert console.model.held_keys == frozenset()
+
+
+def test_disconnect_and_connect_again_through_the_core(
+    qtbot: QtBot, make_console: ConsoleFactory, sim: RobotSimulator
+) -> None:
+    console: MainWindow = make_console(sim, core=True)
+    first = sim.state().client
+    console.model.set_connected(False)
+    qtbot.waitUntil(lambda: console.link is None, timeout=DEADLINE_MS)
+    wait_zeros(qtbot, sim, "zeros when the link stopped", more=0)
+    console.model.set_connected(True)
+    qtbot.waitUntil(lambda: console.link_status.state == LinkState.CONNECTED, timeout=DEADLINE_MS)
+    assert sim.state().client != first  # a new link: a new socket
+    QTest.keyPress(console, Qt.Key.Key_W)
+    wait_sim(qtbot, sim, lambda s: s.velocities["drive_linear"] > 0, "driving after reconnecting")
+    QTest.keyRelease(console, Qt.Key.Key_W)
+    wait_zeros(qtbot, sim, "zeros after the release")
