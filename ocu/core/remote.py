@@ -218,7 +218,6 @@ class CoreConnection:
         self._listeners: dict[tuple[Path, str], list[Callable[..., None]]] = {}
         self._callbacks: dict[int, Callable[..., Any]] = {}
         self._tokens: dict[Callable[..., Any], int] = {}
-        self.kinds: dict[tuple[Path, str], tuple[str, Any]] = {}
         self.last_values: dict[tuple[Path, str], Any] = {}
         self.closed = threading.Event()
         # Once the core is gone, reads and calls go to these, by root ("" the model: one of
@@ -226,7 +225,6 @@ class CoreConnection:
         self.fallbacks: dict[str, object] = {}
         self.round_trips = 0
         self.round_trip_s = 0.0
-        self._told_closed = False
         self._reader = threading.Thread(target=self._read, name="ocu-core-reader", daemon=True)
         self._reader.start()
 
