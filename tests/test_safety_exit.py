@@ -209,11 +209,11 @@ def test_an_unhandled_exception_in_the_main_thread_ends_with_zeros(
 
 
 # Xlib's own path, made certain: a display of our own notices the lost server, and Xlib calls
-# its fatal I/O error handler (ocu.app's hook, then Qt's or the default) and then exit().
+# its fatal I/O error handler (ocu.lifecycle's hook, then Qt's or the default) and then exit().
 XLIB_LOSS = """
 import ctypes, sys
 from PySide6.QtWidgets import QApplication
-from ocu.app import last_zeros_guard
+from ocu.lifecycle import last_zeros_guard
 from ocu.link.live import UdpLink
 from ocu.profile import load_profile
 

@@ -26,6 +26,7 @@ from PySide6.QtWidgets import QApplication, QCheckBox, QDockWidget
 from pytestqt.qtbot import QtBot
 
 from ocu.core.hardware import HardwareComponent
+from ocu.core_process import CoreSpec
 from ocu.gamepad.mapping import load_pad_mapping
 from ocu.hardware.ur import UR_CAPABILITIES, ur_component
 from ocu.hotkeys import HoldBinding, load_key_map
@@ -57,12 +58,19 @@ def ur_sim(arm: UrArmProfile) -> Iterator[UrSimulator]:
     simulator.stop()
 
 
-@pytest.fixture
+@pytest.fixture(params=[False, True], ids=["in-process", "core-process"])
 def ur_console(
-    arm: UrArmProfile, ur_sim: UrSimulator, settings: QSettings, qtbot: QtBot
+    arm: UrArmProfile,
+    ur_sim: UrSimulator,
+    settings: QSettings,
+    qtbot: QtBot,
+    request: pytest.FixtureRequest,
 ) -> Iterator[MainWindow]:
+    """The console on the UR simulator; in its core-process form the "ur" plug-in runs in
+    the core's process (ocu.core_process) and talks to the simulator over TCP from there."""
     profile = ur_robot_profile(arm)
     ports = (ur_sim.ports["primary"], ur_sim.ports["secondary"], ur_sim.ports["realtime"])
+    core = CoreSpec(profile, "ur", "127.0.0.1", options={"arm": arm, "ports": ports})
 
     def make_link() -> Link:
         return UrLink(arm, "127.0.0.1", profile=profile, ports=ports)
@@ -80,6 +88,7 @@ def ur_console(
         pad_mapping=load_pad_mapping(profile),
         hardware_for=hardware_for,
         capabilities=UR_CAPABILITIES,
+        core=core if request.param else None,
     )
     qtbot.addWidget(window)
     window.show()
@@ -253,14 +262,17 @@ def test_a_sigterm_while_the_console_starts_quits_it_in_order(tmp_path: Path) ->
     assert "link stopped (zeros sent last)" in rest
 
 
-def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(tmp_path: Path) -> None:
+@pytest.mark.parametrize("core", [[], ["--core-process"]], ids=["in-process", "core-process"])
+def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(
+    tmp_path: Path, core: list[str]
+) -> None:
     env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "PYTHONPATH": str(ROOT)}
     # Until it says it is connected (however long a loaded machine takes), then SIGTERM: it
     # quits with zeros last.
     with subprocess.Popen(
         [
             *(sys.executable, "-m", "ocu", "--profile", "ur5e"),
-            *("--config-dir", str(tmp_path), "--no-gamepad"),
+            *("--config-dir", str(tmp_path), "--no-gamepad", *core),
         ],
         stderr=subprocess.PIPE,
         text=True,
