@@ -151,8 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--core-process",
         action="store_true",
         help="run the control core (model, control thread, link, X key reader, pad) in a "
-        "process of its own, out of the GUI's interpreter (the Engineer, a UR; "
-        "docs/core-process.md)",
+        "process of its own, out of the GUI's interpreter (docs/core-process.md)",
     )
     parser.add_argument("--log-level", default="INFO")
     add_live_options(parser)
@@ -228,10 +227,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from ocu.record.ur_replay import recorded_profile
 
         profile = recorded_profile(args.replay, profile)  # a UR's keys for a UR's recording
-    if args.core_process and (xarm or args.replay or args.live or args.camera):
+    if args.core_process and (args.replay or args.live or args.camera):
         return refuse_file(
-            "--core-process runs the Engineer's and a UR's console, not yet the xArm's, "
-            "--replay, --live or --camera (docs/core-process.md)"
+            "--core-process runs the Engineer's, a UR's and the xArm's consoles, not yet "
+            "with --replay, --live or --camera (docs/core-process.md)"
         )
     robot = None
     if args.robot and ur_arm is None and xarm is None:
@@ -274,6 +273,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     log.info("scheduling priority: %s", raise_priority(nice).text)
     if xarm is not None and args.replay is None:
         from ocu.control.reach_tracking import ServoModel
+        from ocu.core_process import CoreSpec
         from ocu.hardware.xarm import XARM_CAPABILITIES, ConsoleLinks
         from ocu.record.errors import RecordingError
         from ocu.record.recorder import Recorder
@@ -311,6 +311,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 control_hz=args.control_hz,
                 recorder=recorder,
                 cameras=cameras,
+                core=CoreSpec(profile, "xarm", links.path, options={"arm": xarm})
+                if args.core_process
+                else None,
             )
         finally:
             cameras.stop()

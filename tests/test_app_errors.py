@@ -199,7 +199,7 @@ def test_a_control_rate_it_cannot_keep_is_refused(value: str, expected: str) -> 
 
 
 @pytest.mark.parametrize(
-    "extra", [["--profile", "xarm1s"], ["--live", "127.0.0.1:0"], ["--camera", "0"]]
+    "extra", [["--replay", "x.mcap"], ["--live", "127.0.0.1:0"], ["--camera", "0"]]
 )
 def test_the_core_process_refuses_what_it_does_not_run_yet(extra: list[str]) -> None:
     done = subprocess.run(
@@ -211,4 +211,4 @@ def test_the_core_process_refuses_what_it_does_not_run_yet(extra: list[str]) -> 
     )
     assert done.returncode == 2, done.stderr
     assert "Traceback" not in done.stderr
-    assert "--core-process runs the Engineer's and a UR's console, not yet" in done.stderr
+    assert "--core-process runs the Engineer's, a UR's and the xArm's consoles" in done.stderr

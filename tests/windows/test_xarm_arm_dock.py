@@ -70,9 +70,10 @@ def move_and_rest(
     readings flow, as an operator would."""
     arm = window.model.arm
     assert arm is not None
-    position = arm.controller.position
 
     def fresh() -> bool:
+        # Read each time: with the core in a process of its own the controller comes as a copy.
+        position = arm.controller.position
         now = window.model.clock()
         return all(
             (at := position.predictors[j].last_received_at) is not None and now - at < 0.1

@@ -23,6 +23,7 @@ from PySide6.QtTest import QTest
 from PySide6.QtWidgets import QApplication, QDockWidget
 from pytestqt.qtbot import QtBot
 
+from ocu.core_process import CoreSpec
 from ocu.gamepad.mapping import load_pad_mapping
 from ocu.hardware.xarm import XARM_CAPABILITIES, ConsoleLinks
 from ocu.hotkeys import HoldBinding, load_key_map
@@ -49,9 +50,14 @@ def links(arm: XarmProfile) -> Iterator[ConsoleLinks]:
     console_links.close()
 
 
-@pytest.fixture
-def xarm_console(links: ConsoleLinks, settings: QSettings, qtbot: QtBot) -> Iterator[MainWindow]:
+@pytest.fixture(params=[False, True], ids=["in-process", "core-process"])
+def xarm_console(
+    links: ConsoleLinks, settings: QSettings, qtbot: QtBot, request: pytest.FixtureRequest
+) -> Iterator[MainWindow]:
+    """The console on the xArm simulator's pseudo-terminal; in its core-process form the
+    "xarm" plug-in opens it from the core's process (ocu.core_process)."""
     profile = links.profile
+    core = CoreSpec(profile, "xarm", links.path, options={"arm": links.arm})
     window = MainWindow(
         profile,
         links.make_link,
@@ -61,6 +67,7 @@ def xarm_console(links: ConsoleLinks, settings: QSettings, qtbot: QtBot) -> Iter
         pad_mapping=load_pad_mapping(profile),
         hardware_for=links.hardware_for,
         capabilities=XARM_CAPABILITIES,
+        core=core if request.param else None,
     )
     qtbot.addWidget(window)
     window.show()
@@ -139,12 +146,15 @@ def test_the_window_shows_what_an_xarm_has(xarm_console: MainWindow) -> None:
     )
 
 
-def test_ocu_profile_xarm1s_opens_the_console_on_the_xarm_simulator(tmp_path: Path) -> None:
+@pytest.mark.parametrize("core", [[], ["--core-process"]], ids=["in-process", "core-process"])
+def test_ocu_profile_xarm1s_opens_the_console_on_the_xarm_simulator(
+    tmp_path: Path, core: list[str]
+) -> None:
     env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "PYTHONPATH": str(ROOT)}
     with subprocess.Popen(
         [
             *(sys.executable, "-m", "ocu", "--profile", "xarm1s"),
-            *("--config-dir", str(tmp_path), "--no-gamepad"),
+            *("--config-dir", str(tmp_path), "--no-gamepad", *core),
         ],
         stderr=subprocess.PIPE,
         text=True,
