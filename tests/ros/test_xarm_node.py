@@ -27,6 +27,7 @@ pytestmark = [pytest.mark.slow, *ROSPY_WARNINGS]
 
 XARM_JOINTS = ["base", "shoulder", "elbow", "wrist_pitch", "wrist_roll", "gripper"]
 BASE = 6  # the base's servo
+HALTED = "ROS motion halted"  # the node's log line when a safety stop took ROS's motion
 
 
 @pytest.fixture
@@ -65,16 +66,30 @@ def test_the_xarm_in_ros_moves_on_a_joint_goal_and_stops_last(
         assert list(message.position) == pytest.approx([0.0] * 6, abs=1e-9)
         diagnostics.wait_connected(node.name)
         diagnostics.wait(battery_shown, 10.0)
-        goals.publish(JointState(name=["base"], position=[math.radians(20.0)]))
         arm = load_xarm_profile("xarm1s")
         target_units = arm.raw_units(arm.joint("base"), math.radians(20.0))
-        assert wait_for(
-            lambda: (
-                abs(board.snapshot().positions[BASE] - target_units) < 3.0
-                and abs(board.snapshot().velocities[BASE]) < 1.0
-            ),
-            30.0,
-        ), board.snapshot()
+
+        def arrived() -> bool:
+            snapshot = board.snapshot()
+            return (
+                abs(snapshot.positions[BASE] - target_units) < 3.0
+                and abs(snapshot.velocities[BASE]) < 1.0
+            )
+
+        # The node halts ROS's motion when a reading or its link loop comes too late (a
+        # machine loaded past its limits: "link loop frozen"); a client that sees the halt
+        # sends its goal again. Each halt is a safety action, not a failure.
+        for _ in range(3):
+            halts = node.output().count(HALTED)
+
+            def arrived_or_halted(before: int = halts) -> bool:
+                return arrived() or node.output().count(HALTED) > before
+
+            goals.publish(JointState(name=["base"], position=[math.radians(20.0)]))
+            wait_for(arrived_or_halted, 30.0)
+            if arrived():
+                break
+        assert arrived(), (board.snapshot(), node.output())
         # The other servos were not told to move.
         assert all(board.snapshot().targets[s] == 500 for s in (1, 2, 3, 4, 5))
         code = node.stop()
