@@ -59,6 +59,14 @@ log = logging.getLogger("ocu.core")
 # never delays the core's threads (a key, a control cycle, the command to the robot).
 CORE_NICE = -15
 START_TIMEOUT_S = 20.0
+# A real-time policy (SCHED_RR) where the user may have one (root, CAP_SYS_NICE, an
+# RLIMIT_RTPRIO allowance): every thread of the core then runs as soon as it wakes, ahead of
+# any CPU-bound job, and a thread holding the core's GIL is never preempted by one (with the
+# nice value alone, a hog beside the console still delayed a key by up to 8 ms at the p99,
+# as much as a process doing nothing but reading the key: bench_core --x11 --floor). The
+# core needs about a fifth of a core; the kernel keeps 5 % of each second for the others
+# whatever it does.
+REALTIME_PRIORITY = 10
 # The core's threads share its GIL (the link's receiver reassembling video, the GUI's server,
 # the control thread, the key reader): at Python's default 5 ms switch interval a key waits
 # up to that long behind the video's reassembly; the window's process uses the same 1 ms.
@@ -87,6 +95,7 @@ class CoreSpec:
     pad_mapping: Any = None  # ocu.gamepad.mapping.PadMapping: the "pad" part's
     pad_calibrations: Path | None = None  # the pads' calibration file
     nice: int = CORE_NICE
+    realtime: bool = True  # SCHED_RR where allowed (REALTIME_PRIORITY)
     log_level: int = logging.INFO
 
 
@@ -298,6 +307,12 @@ def child_main(fd: int) -> int:
             os.setpriority(os.PRIO_PROCESS, 0, spec.nice)
         except OSError:
             log.info("control core: priority not raised to nice %d (not allowed)", spec.nice)
+    if spec.realtime:
+        # Before any thread starts: each inherits the policy of the thread that starts it.
+        try:
+            os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(REALTIME_PRIORITY))
+        except OSError:
+            log.info("control core: no real-time scheduling here (not allowed)")
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     core = Core(spec, sock)
     signal.signal(signal.SIGTERM, lambda *_: core.gone.set())

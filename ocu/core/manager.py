@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import threading
 import time
 from collections import deque
@@ -97,11 +98,14 @@ class ControlTiming:
     worst_wait_s: float  # the longest a cycle waited for the model's lock (the GUI held it)
     overruns: int  # since start
     nice: int | None = None  # the control thread's nice value (None: not started)
+    realtime: bool = False  # it runs under a real-time policy (a core process: SCHED_RR)
 
     @property
     def text(self) -> str:
         """One line for the status bar and the logs."""
         at = "" if self.nice is None else f" at nice {self.nice}"
+        if self.realtime:
+            at = " at real-time priority (SCHED_RR)"
         return (
             f"control {self.measured_hz:.0f}/{self.rate_hz:.0f} Hz{at}, worst period "
             f"{1000 * self.worst_period_s:.1f} ms, cycle {1000 * self.worst_cycle_s:.1f} ms "
@@ -149,6 +153,7 @@ class ControllerManager:
         self.failures = 0  # cycles that raised (logged; the thread goes on)
         self._last_wait_s = 0.0  # how long the last cycle waited for the model's lock
         self._nice: int | None = None  # the thread's, read when it starts (ocu.priority)
+        self._realtime = False
         if hardware is not None:
             self.attach(hardware)
 
@@ -221,6 +226,7 @@ class ControllerManager:
 
     def _run(self) -> None:
         self._nice = current_nice()
+        self._realtime = os.sched_getscheduler(0) in (os.SCHED_RR, os.SCHED_FIFO)
         next_at = self.clock()
         last_at: float | None = None
         try:
@@ -320,6 +326,7 @@ class ControllerManager:
             worst_wait_s=max((p[3] for p in periods), default=0.0),
             overruns=overruns,
             nice=self._nice,
+            realtime=self._realtime,
         )
 
 

@@ -132,10 +132,12 @@ class RosMaster:
 
     def _kill_leftovers(self) -> None:
         """A roscore that gave up may leave its rosmaster behind, in its group or (started
-        just before roscore was stopped, under load) on its own: found by its port."""
+        just before roscore was stopped, under load) on its own: found by its port; and its
+        rosout, which logs into this master's log folder (a test run once left one)."""
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.killpg(self.process.pid, signal.SIGKILL)
         wanted = f"rosmaster\0--core\0-p\0{self.port}\0".encode()
+        logs = f"__log:={self.env['ROS_LOG_DIR']}/".encode()
         for entry in Path("/proc").iterdir():
             if not entry.name.isdigit():
                 continue
@@ -143,7 +145,7 @@ class RosMaster:
                 command = (entry / "cmdline").read_bytes()
             except OSError:
                 continue
-            if wanted in command:
+            if wanted in command or logs in command:
                 with contextlib.suppress(ProcessLookupError, PermissionError):
                     os.kill(int(entry.name), signal.SIGKILL)
 

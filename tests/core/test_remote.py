@@ -21,7 +21,13 @@ import pytest
 from ocu.control.position import PositionError
 from ocu.core.remote import CoreGoneError, RemoteError
 from ocu.core.remote_link import RemoteLink
-from ocu.core_process import CORE_NICE, CoreProcess, CoreProcessError, CoreSpec
+from ocu.core_process import (
+    CORE_NICE,
+    REALTIME_PRIORITY,
+    CoreProcess,
+    CoreProcessError,
+    CoreSpec,
+)
 from ocu.profile import RobotProfile
 from ocu.records import (
     TELEMETRY,
@@ -164,7 +170,7 @@ def test_a_killed_gui_process_leaves_no_core_and_a_robot_at_rest(
         textwrap.dedent(
             f"""
             import sys, time
-            from ocu.core_process import CORE_NICE, CoreProcess, CoreProcessError, CoreSpec
+            from ocu.core_process import CoreProcess, CoreSpec
             from ocu.core.remote_link import RemoteLink
             from ocu.profile import load_profile
             profile = load_profile()
@@ -270,7 +276,13 @@ def test_video_frames_come_whole_and_the_raw_fragments_stay_in_the_core(
 def test_the_core_runs_above_the_guis_priority_where_allowed(core: CoreProcess) -> None:
     ours = os.getpriority(os.PRIO_PROCESS, 0)
     theirs = os.getpriority(os.PRIO_PROCESS, core.pid)
+    policy = os.sched_getscheduler(core.pid)
     if os.geteuid() == 0:  # CI and this machine: root may raise priority
         assert theirs == min(ours, CORE_NICE)
+        assert policy == os.SCHED_RR
+        assert os.sched_getparam(core.pid).sched_priority == REALTIME_PRIORITY
+        until(lambda: core.core.timing().realtime, "the control thread timed")
+        assert "real-time priority" in core.core.timing().text
     else:  # where the user may not, the core stays where it was started
         assert theirs in (ours, min(ours, CORE_NICE))
+        assert policy in (os.SCHED_OTHER, os.SCHED_RR)
