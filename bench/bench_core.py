@@ -698,6 +698,12 @@ def main() -> int:
         help="the console with its control core in a child process (ocu --core-process); "
         "with --x11 against the in-process console",
     )
+    parser.add_argument(
+        "--x-nice",
+        type=int,
+        default=0,
+        help="with --x11: the private X server's nice value (a diagnosis; default 0)",
+    )
     parser.add_argument("--json", help="write the phases here (the baseline's child run)")
     parser.add_argument("--baseline-tree", help="another checkout to run the same benchmark on")
     parser.add_argument(
@@ -766,8 +772,15 @@ def main() -> int:
 def run_x11(args: argparse.Namespace) -> int:
     """The --x11 parent: a private Xvfb, one child with the X key reader and one without."""
     read_fd, write_fd = os.pipe()
+    # --x-nice: the X server at another priority (a diagnosis: how much of a key's tail is
+    # the X server's own scheduling beside the hogs; a desktop's Xorg runs at nice 0).
+    nice = ["nice", "-n", str(args.x_nice)] if args.x_nice else []
     server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1920x1200x24", "-nolisten", "tcp"],
+        [
+            *nice,
+            *("Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1920x1200x24"),
+            *("-nolisten", "tcp"),
+        ],
         pass_fds=(write_fd,),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
