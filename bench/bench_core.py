@@ -185,8 +185,12 @@ class XTestKeys:
         import ctypes
         import ctypes.util
 
-        self.x11 = ctypes.CDLL(ctypes.util.find_library("X11") or "libX11.so.6")
-        self.xtst = ctypes.CDLL(ctypes.util.find_library("Xtst") or "libXtst.so.6")
+        # Called holding the GIL (PyDLL): between the time taken and the event's write to the
+        # server nothing waits for this busy process's GIL (a CDLL call lets it go and takes
+        # it back after each of the two calls, which put up to 5 ms of the benchmark's own
+        # process into a key's figure beside the hogs).
+        self.x11 = ctypes.PyDLL(ctypes.util.find_library("X11") or "libX11.so.6")
+        self.xtst = ctypes.PyDLL(ctypes.util.find_library("Xtst") or "libXtst.so.6")
         self.x11.XOpenDisplay.restype = ctypes.c_void_p
         self.x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
         self.x11.XFlush.argtypes = [ctypes.c_void_p]
@@ -203,10 +207,12 @@ class XTestKeys:
             raise RuntimeError("no X display for XTest")
 
     def send(self, key: Qt.Key, press: bool) -> float:
-        """Press or release `key`; the time the event left for the server."""
+        """Press or release `key`; the time the event left for the server (taken just before
+        the two calls that write it, which hold the GIL)."""
+        sent_at = time.monotonic()
         self.xtst.XTestFakeKeyEvent(self.display, X_KEYCODES[key], int(press), 0)
         self.x11.XFlush(self.display)
-        return time.monotonic()
+        return sent_at
 
     def close(self) -> None:
         self.x11.XCloseDisplay(self.display)
@@ -245,13 +251,15 @@ def run_phase(
 
     def post_key(
         window: MainWindow, key: Qt.Key, press: bool, text: str = "", label: str = "other"
-    ) -> None:
+    ) -> float | None:
+        """Post the key (Qt's queue) or send it (XTest); with XTest, the time it left."""
         if x11 is None:
             post_qt_key(window, key, press, text)
-        else:
-            sent_at = x11.send(key, press)
-            if floor is not None:
-                floor.expect(label, X_KEYCODES[key], press, sent_at)
+            return None
+        sent_at = x11.send(key, press)
+        if floor is not None:
+            floor.expect(label, X_KEYCODES[key], press, sent_at)
+        return sent_at
 
     phase = Phase(label)
     rng = random.Random(seed)
@@ -265,14 +273,14 @@ def run_phase(
     for trial in range(trials):
         wait(app, rng.uniform(0.005, 0.15))
         pressed = probe.arm("moving")
-        post_key(window, Qt.Key.Key_W, True, "w", "press")
+        pressed = post_key(window, Qt.Key.Key_W, True, "w", "press") or pressed
         at = until(app, probe, phase)
         if at is not None:
             phase.press_ms.append(1000 * (at - pressed))
         wait(app, rng.uniform(0.03, 0.12))
         if trial % 4 == 3:
             stopped = probe.arm("all zero")
-            post_key(window, Qt.Key.Key_Space, True, " ", "space")
+            stopped = post_key(window, Qt.Key.Key_Space, True, " ", "space") or stopped
             at = until(app, probe, phase)
             if at is not None:
                 phase.space_ms.append(1000 * (at - stopped))
@@ -289,7 +297,7 @@ def run_phase(
                     wait(app, 0.01)
             continue
         released = probe.arm("drive zero")
-        post_key(window, Qt.Key.Key_W, False, "w", "release")
+        released = post_key(window, Qt.Key.Key_W, False, "w", "release") or released
         at = until(app, probe, phase)
         if at is not None:
             phase.release_ms.append(1000 * (at - released))
