@@ -243,6 +243,10 @@ class CoreProcess:
     ) -> None:
         self.spec = spec
         ours, theirs = socket.socketpair()
+        # Blocking, whatever socket.setdefaulttimeout() says in this process (rospy sets one):
+        # with a timeout the fds are non-blocking, and the child inherits that flag.
+        ours.settimeout(None)
+        theirs.settimeout(None)
         try:
             self.process = subprocess.Popen(
                 [sys.executable, "-m", "ocu.core_process", str(theirs.fileno())],
@@ -295,6 +299,7 @@ class CoreProcess:
 def child_main(fd: int) -> int:
     """The child process: read the spec, build the core, serve until the GUI's end closes."""
     sock = socket.socket(fileno=fd)
+    sock.settimeout(None)  # blocking (the parent's default timeout may have made it not)
     message = receive(sock)
     if message is None or message[0] != "spec":
         return 2

@@ -89,7 +89,8 @@ def _read_exactly(sock: socket.socket, size: int) -> bytes | None:
     while len(chunks) < size:
         try:
             chunk = sock.recv(size - len(chunks))
-        except OSError:
+        except OSError as error:
+            log.warning("the core's pipe (fd %d) failed: %s", sock.fileno(), error)
             return None
         if not chunk:
             return None
@@ -389,11 +390,14 @@ class CoreConnection:
         """Dispatch an event here as if the core had emitted it (the core is gone)."""
         self._queue(("event", path, name, args, {}))
 
-    def close(self) -> None:
-        """Close the pipe: the core halts the robot and ends."""
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Close the pipe (the core halts the robot and ends); the reader thread has ended
+        when this returns (unless it is the caller)."""
         self.closed.set()
         with contextlib.suppress(OSError):
             self.sock.shutdown(socket.SHUT_RDWR)
+        if self._reader is not threading.current_thread():
+            self._reader.join(timeout_s)
         self.sock.close()
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import textwrap
@@ -286,3 +287,24 @@ def test_the_core_runs_above_the_guis_priority_where_allowed(core: CoreProcess) 
     else:  # where the user may not, the core stays where it was started
         assert theirs in (ours, min(ours, CORE_NICE))
         assert policy in (os.SCHED_OTHER, os.SCHED_RR)
+
+
+def test_a_default_socket_timeout_in_the_gui_does_not_break_the_pipe(
+    profile: RobotProfile,
+) -> None:
+    # rospy sets socket.setdefaulttimeout() in the process that imports it (the ROS dock, a
+    # test session): a socket pair made then is non-blocking, the child inherited that, read
+    # EAGAIN at once and ended; the GUI's reader would have timed out when the core was idle.
+    previous = socket.getdefaulttimeout()
+    socket.setdefaulttimeout(0.2)
+    try:
+        core = CoreProcess(CoreSpec(profile, "engineer", "127.0.0.1:9"))
+    finally:
+        socket.setdefaulttimeout(previous)
+    try:
+        idle_until = time.monotonic() + 0.5  # longer than the timeout: nothing is read
+        until(lambda: time.monotonic() > idle_until, "an idle half second")
+        assert core.alive
+        assert core.core.ping("still there") == "still there"
+    finally:
+        core.stop()
