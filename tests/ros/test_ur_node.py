@@ -518,6 +518,10 @@ def test_ur_controller_with_robot_moves_and_stops_with_stopj(
         controller_status(node, "ROBOT_EMERGENCY_STOP", DiagnosticStatus.ERROR)
         controller.emergency_stop(False)
         controller_status(node, "NORMAL", DiagnosticStatus.OK)
+        # /diagnostics can show the controller's NORMAL before the UR link has acted on it
+        # (it logs "ready, nothing resumed" then). A goal sent in between still met the stop
+        # (a hog run: the goal came 15 ms before the link's "ready"), so wait for that line.
+        assert wait_for(lambda: "safety NORMAL: ready" in node.output(), 10.0), node.output()
         # Moving again when the signal comes: stopj is the last thing the controller hears.
         goals.publish(JointState(name=["elbow_joint"], position=[start + 1.0]))
         assert wait_for(lambda: abs(controller.snapshot().qd[2]) > 0.2, 10.0), (
