@@ -147,11 +147,20 @@ def build_parser() -> argparse.ArgumentParser:
         "index (0), a video file, or `scene` (the xArm simulator's gripper camera); on the "
         "xArm the first rides on the gripper and click-to-track moves the arm (docs/xarm.md)",
     )
-    parser.add_argument(
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument(
         "--core-process",
         action="store_true",
         help="run the control core (model, control thread, link, X key reader, pad) in a "
-        "process of its own, out of the GUI's interpreter (docs/core-process.md)",
+        "process of its own, out of the GUI's interpreter: the default for the Engineer's, "
+        "a UR's and the xArm's consoles; refused with --replay, --live or --camera "
+        "(docs/core-process.md)",
+    )
+    where.add_argument(
+        "--in-process",
+        action="store_true",
+        help="run the control core on a thread of the window's own process (the default "
+        "with --replay, --live or --camera)",
     )
     parser.add_argument("--log-level", default="INFO")
     add_live_options(parser)
@@ -227,11 +236,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         from ocu.record.ur_replay import recorded_profile
 
         profile = recorded_profile(args.replay, profile)  # a UR's keys for a UR's recording
-    if args.core_process and (args.replay or args.live or args.camera):
+    in_process_only = bool(args.replay or args.live or args.camera)
+    if args.core_process and in_process_only:
         return refuse_file(
             "--core-process runs the Engineer's, a UR's and the xArm's consoles, not yet "
             "with --replay, --live or --camera (docs/core-process.md)"
         )
+    # The control core runs in a process of its own unless asked otherwise or not done yet.
+    args.core_process = not args.in_process and not in_process_only
     robot = None
     if args.robot and ur_arm is None and xarm is None:
         try:

@@ -304,9 +304,7 @@ def child_main(fd: int) -> int:
     if message is None or message[0] != "spec":
         return 2
     spec: CoreSpec = message[1]
-    logging.basicConfig(
-        level=spec.log_level, format="%(asctime)s core %(name)s %(levelname)s: %(message)s"
-    )
+    logging.basicConfig(level=spec.log_level, format="%(asctime)s core %(name)s %(message)s")
     if spec.nice < os.getpriority(os.PRIO_PROCESS, 0):
         try:
             os.setpriority(os.PRIO_PROCESS, 0, spec.nice)
@@ -319,6 +317,11 @@ def child_main(fd: int) -> int:
         except OSError:
             log.info("control core: no real-time scheduling here (not allowed)")
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    policy = "SCHED_RR" if os.sched_getscheduler(0) == os.SCHED_RR else "SCHED_OTHER"
+    log.info(
+        "control core: a process of its own (pid %d, %s, nice %d, hardware %r)",
+        os.getpid(), policy, os.getpriority(os.PRIO_PROCESS, 0), spec.hardware,
+    )  # fmt: skip
     core = Core(spec, sock)
     signal.signal(signal.SIGTERM, lambda *_: core.gone.set())
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl+C in the terminal is the GUI's

@@ -154,7 +154,9 @@ class RemoteLink(Link):
         if not self._open:
             return
         self._open = self._started = False
+        if not self.connection.closed.is_set():
+            # What the shutdown sends (the zeros, a UR's stopj) still comes here: a recorder
+            # keeps it (events a call emitted are dispatched before it returns).
+            self.connection.request("call", CORE_ROOT, "disconnect", (), {})
         if self.connection.on_link == self.emit:
             self.connection.on_link = None
-        if not self.connection.closed.is_set():
-            self.connection.request("call", CORE_ROOT, "disconnect", (), {})

@@ -106,6 +106,9 @@ class ConsoleControl(QObject):
 
     # ---- the hardware --------------------------------------------------------------------------
 
+    def end(self) -> None:
+        """After the link's shutdown: nothing left (the thread stopped in `shutdown`)."""
+
     def attach(self, hardware: HardwareComponent) -> None:
         """Read and write this hardware from now on (made before any datagram flows)."""
         self.detach()

@@ -660,6 +660,7 @@ class MainWindow(FocusStops, DockLayout, QMainWindow):
             app.applicationStateChanged.disconnect(self._on_application_state)
             app.focusWindowChanged.disconnect(self._on_focus_window)
         self._stop_link()  # the link's closing zeros land in a recording
+        self.control.end()  # a core process ends after its link's shutdown
         self.save_layout()  # after the link: a disk that stalls a sync delays no stop
         self.ros.shutdown()
         if self.record_button is not None:

@@ -123,10 +123,16 @@ class RemoteControl(QObject):
         self.show_timing()
 
     def shutdown(self) -> None:
-        """Close the core's pipe: it halts the model, shuts the hardware down (zeros last),
-        ends; idempotent."""
+        """The window is closing (the model halted first): no more heartbeats, and the core's
+        end is no LINK LOST from now on; the core lives on until `end()`, so that the link's
+        shutdown (zeros last, a UR's stopj) still reaches the window's recorder."""
         self._alive_timer.stop()
         self._timing_timer.stop()
+        self._ended = True
+
+    def end(self) -> None:
+        """Close the core's pipe: it halts the model, shuts the hardware down (if the link
+        did not already), ends; idempotent."""
         self._ended = True
         self.process.stop()
 

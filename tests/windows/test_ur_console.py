@@ -262,7 +262,9 @@ def test_a_sigterm_while_the_console_starts_quits_it_in_order(tmp_path: Path) ->
     assert "link stopped (zeros sent last)" in rest
 
 
-@pytest.mark.parametrize("core", [[], ["--core-process"]], ids=["in-process", "core-process"])
+@pytest.mark.parametrize(
+    "core", [["--in-process"], []], ids=["in-process", "core-process (the default)"]
+)
 def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(
     tmp_path: Path, core: list[str]
 ) -> None:
@@ -290,6 +292,8 @@ def test_ocu_profile_ur5e_opens_the_console_on_the_ur_simulator(
         _, rest = console.communicate(timeout=60)
     assert console.returncode == 0, "".join(lines) + rest
     assert "link stopped (zeros sent last)" in rest
+    own = "control core: a process of its own" in "".join(lines) + rest
+    assert own == (not core), "".join(lines) + rest
     refused = subprocess.run(
         [sys.executable, "-m", "ocu", "--profile", "ur5e", "--sim-arg=--latency-ms=50"],
         capture_output=True,

@@ -186,7 +186,8 @@ sys.exit(main(sys.argv[2:]))
 def test_keys_drive_and_stop_the_robot_while_the_gui_thread_is_busy(
     xvfb: str, sim: RobotSimulator, tmp_path: Path, core: bool
 ) -> None:
-    # core: `ocu --core-process`, the reader in the control core's process (it logs there).
+    # core: `ocu`'s default, the reader in the control core's process (it logs there);
+    # else `ocu --in-process`.
     env = x_env(xvfb, tmp_path)
     env["PYTHONPATH"] = str(Path(__file__).resolve().parents[2])
     log_path = tmp_path / "ocu.log"
@@ -197,7 +198,7 @@ def test_keys_drive_and_stop_the_robot_while_the_gui_thread_is_busy(
             [
                 *(sys.executable, "-c", BUSY_GUI, str(release)),
                 *("--robot", f"{host}:{port}", "--quit-after", "120", "--log-level", "DEBUG"),
-                *(["--core-process"] if core else []),
+                *([] if core else ["--in-process"]),
             ],
             env=env,
             stdout=subprocess.DEVNULL,
@@ -245,6 +246,8 @@ def test_keys_drive_and_stop_the_robot_while_the_gui_thread_is_busy(
             program.kill()
             program.wait()
     assert program.returncode == 0, log_path.read_text()
+    own = "control core: a process of its own" in log_path.read_text()
+    assert own == core, log_path.read_text()
 
 
 def test_no_reader_where_it_is_switched_off_or_there_is_no_x_server(
