@@ -703,7 +703,8 @@ def main() -> int:
     parser.add_argument(
         "--core-process",
         action="store_true",
-        help="the console with its control core in a child process (ocu --core-process); "
+        help="the console with its control core in a child process (`ocu`'s default; "
+        "without this flag the benchmark's console runs it in-process, as `ocu --in-process`); "
         "with --x11 against the in-process console",
     )
     parser.add_argument(
